@@ -1,0 +1,331 @@
+"""LogWriter: one MCAP file per simulation run (topics: docs/LOGS.md)."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.Log_pb2 import Log
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from fwsim.log.schema import spec_for
+
+STATE_TOPIC = "/uav/state"
+TF_TOPIC = "/tf"
+POSE_TOPIC = "/uav/pose"
+EVENTS_TOPIC = "/events"
+WORLD_FRAME = "world"
+UAV_FRAME = "uav"
+METADATA_NAME = "fwsim"
+STATUS_METADATA_NAME = "run_status"
+SCENARIO_ATTACHMENT = "scenario.yaml"
+
+#: Default uncompressed chunk size: at ~120 msg/s this is a chunk every few
+#: seconds of sim time, which bounds what a hard kill loses.
+DEFAULT_CHUNK_SIZE = 256 * 1024
+
+_LEVELS = {name: value for name, value in Log.Level.items()}
+_LEVELS.update({"WARN": _LEVELS["WARNING"], "CRITICAL": _LEVELS["FATAL"]})
+
+
+def _level_value(level: str | int) -> int:
+    if isinstance(level, int):
+        return level
+    try:
+        return _LEVELS[level.upper()]
+    except KeyError:
+        raise ValueError(f"unknown log level {level!r}; use one of {sorted(_LEVELS)}") from None
+
+
+def _ns(t_s: float) -> int:
+    """Sim time in seconds -> MCAP nanoseconds (MCAP times are unsigned)."""
+    ns = int(t_s * 1e9)
+    return ns if ns > 0 else 0
+
+
+class _FlushingFile:
+    """File wrapper that hands every write to the OS at once.
+
+    ``mcap.writer.Writer`` only writes whole records (a chunk and its message
+    indexes, a metadata record, ...), so this costs a few syscalls per chunk
+    and means a SIGKILL loses at most the chunk being built.
+    """
+
+    __slots__ = ("_f",)
+
+    def __init__(self, f):
+        self._f = f
+
+    def write(self, data: bytes) -> int:
+        n = self._f.write(data)
+        self._f.flush()
+        return n
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def describe_exception(exc: BaseException) -> str:
+    """``"ExcType: message (at file:line)"`` with the innermost traceback frame."""
+    text = f"{type(exc).__name__}: {exc}"
+    tb = traceback.extract_tb(exc.__traceback__) if exc.__traceback__ else None
+    if tb:
+        frame = tb[-1]
+        fname = frame.filename
+        try:
+            rel = os.path.relpath(fname)
+            if not rel.startswith(".."):
+                fname = rel
+        except ValueError:  # other drive on Windows
+            pass
+        text += f" (at {fname}:{frame.lineno})"
+    return text
+
+
+def status_for_exception(exc: BaseException) -> tuple[str, str]:
+    """The (status, reason) recorded when ``exc`` ends a run."""
+    if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+        return "interrupted", describe_exception(exc)
+    return "failed", describe_exception(exc)
+
+
+class LogWriter:
+    """Writes one run's MCAP log.
+
+    >>> with LogWriter(path, metadata={...}, scenario_text=text) as log:
+    ...     log.write_state(state)            # /uav/state, /tf, /uav/pose
+    ...     log.write("/autopilot/status", status_msg)
+    ...     log.write_event(t, "phase: terminal")
+
+    Leaving the with-block normally records status "completed"; an exception
+    records "failed" (or "interrupted" for KeyboardInterrupt/SystemExit) and
+    propagates. ``close()`` may be called any number of times.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        metadata: dict[str, str],
+        scenario_text: str,
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+    ):
+        self.path = Path(path)
+        self._file = open(self.path, "wb")
+        self._closed = False
+        try:
+            self._mcap = Writer(
+                _FlushingFile(self._file),
+                chunk_size=chunk_size,
+                compression=CompressionType.ZSTD,
+            )
+            from fwsim import __version__
+
+            self._mcap.start(profile="", library=f"fwsim/{__version__}")
+            self._mcap.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
+            self._mcap.add_attachment(
+                create_time=time.time_ns(),
+                log_time=0,
+                name=SCENARIO_ATTACHMENT,
+                media_type="application/yaml",
+                data=scenario_text.encode("utf-8"),
+            )
+        except BaseException:
+            self._file.close()
+            self._closed = True
+            raise
+        self.last_t_s = 0.0
+        # (topic, type) -> [channel_id, spec, sequence]
+        self._json_channels: dict[tuple[str, type], list] = {}
+        self._json_schemas: dict[type, int] = {}
+        self._proto_channels: dict[str, list] = {}  # topic -> [channel_id, sequence]
+        self._proto_schemas: dict[str, int] = {}
+        self._quat = None  # fwsim.frames.quat_enu_from_frd, imported on first use
+        # Reused protobuf messages (set fields, serialise; no per-call allocation).
+        self._tf = FrameTransform(parent_frame_id=WORLD_FRAME, child_frame_id=UAV_FRAME)
+        self._pose = PoseInFrame(frame_id=WORLD_FRAME)
+        self._log = Log()
+
+    # -- registration -----------------------------------------------------
+    def _json_channel(self, topic: str, cls: type) -> list:
+        spec = spec_for(cls)
+        schema_id = self._json_schemas.get(cls)
+        if schema_id is None:
+            schema_id = self._mcap.register_schema(
+                name=spec.schema_name, encoding="jsonschema", data=spec.schema_json
+            )
+            self._json_schemas[cls] = schema_id
+        channel_id = self._mcap.register_channel(
+            topic=topic, message_encoding="json", schema_id=schema_id
+        )
+        entry = [channel_id, spec, 0]
+        self._json_channels[(topic, cls)] = entry
+        return entry
+
+    def _proto_channel(self, topic: str, message_class: Any) -> list:
+        name = message_class.DESCRIPTOR.full_name
+        schema_id = self._proto_schemas.get(name)
+        if schema_id is None:
+            fds = build_file_descriptor_set(message_class)
+            schema_id = self._mcap.register_schema(
+                name=name, encoding="protobuf", data=fds.SerializeToString()
+            )
+            self._proto_schemas[name] = schema_id
+        channel_id = self._mcap.register_channel(
+            topic=topic, message_encoding="protobuf", schema_id=schema_id
+        )
+        entry = [channel_id, 0]
+        self._proto_channels[topic] = entry
+        return entry
+
+    def _write_proto(self, topic: str, msg: Any, log_time: int) -> None:
+        entry = self._proto_channels.get(topic) or self._proto_channel(topic, type(msg))
+        entry[1] += 1
+        self._mcap.add_message(
+            channel_id=entry[0],
+            log_time=log_time,
+            publish_time=log_time,
+            data=msg.SerializeToString(),
+            sequence=entry[1],
+        )
+
+    # -- writing ----------------------------------------------------------
+    def write(self, topic: str, msg: Any) -> None:
+        """Write a dataclass message (first field t_s) as JSON on ``topic``."""
+        if self._closed:
+            raise ValueError(f"LogWriter for {self.path} is closed")
+        entry = self._json_channels.get((topic, type(msg)))
+        if entry is None:
+            entry = self._json_channel(topic, type(msg))
+        entry[2] += 1
+        t_s = msg.t_s
+        if t_s > self.last_t_s:
+            self.last_t_s = t_s
+        ns = _ns(t_s)
+        self._mcap.add_message(
+            channel_id=entry[0],
+            log_time=ns,
+            publish_time=ns,
+            data=entry[1].encode(msg),
+            sequence=entry[2],
+        )
+
+    def write_state(self, state) -> None:
+        """Write an AirframeState on /uav/state (JSON), /tf and /uav/pose (Foxglove)."""
+        self.write(STATE_TOPIC, state)
+        quat = self._quat
+        if quat is None:
+            from fwsim.frames import quat_enu_from_frd
+
+            quat = self._quat = quat_enu_from_frd
+        w, x, y, z = (float(c) for c in quat(state.euler_ned_rad))
+        px, py, pz = (float(c) for c in state.pos_enu_m)
+        ns = _ns(state.t_s)
+        sec, nanos = divmod(ns, 1_000_000_000)
+
+        tf = self._tf
+        tf.timestamp.seconds = sec
+        tf.timestamp.nanos = nanos
+        tr, rot = tf.translation, tf.rotation
+        tr.x, tr.y, tr.z = px, py, pz
+        rot.w, rot.x, rot.y, rot.z = w, x, y, z
+        self._write_proto(TF_TOPIC, tf, ns)
+
+        pose = self._pose
+        pose.timestamp.seconds = sec
+        pose.timestamp.nanos = nanos
+        pos, ori = pose.pose.position, pose.pose.orientation
+        pos.x, pos.y, pos.z = px, py, pz
+        ori.w, ori.x, ori.y, ori.z = w, x, y, z
+        self._write_proto(POSE_TOPIC, pose, ns)
+
+    def write_event(
+        self, t_s: float | None, text: str, level: str | int = "INFO", name: str = "fwsim"
+    ) -> None:
+        """Write a foxglove.Log on /events (phase switches, warnings, end of run).
+
+        ``t_s=None`` stamps the event with the latest time written so far.
+        """
+        if self._closed:
+            raise ValueError(f"LogWriter for {self.path} is closed")
+        self._event(t_s, text, level, name)
+
+    def _event(self, t_s: float | None, text: str, level: str | int, name: str) -> None:
+        if t_s is None:
+            t_s = self.last_t_s
+        elif t_s > self.last_t_s:
+            self.last_t_s = t_s
+        ns = _ns(t_s)
+        log = self._log
+        log.timestamp.seconds, log.timestamp.nanos = divmod(ns, 1_000_000_000)
+        log.level = _level_value(level)
+        log.message = str(text)
+        log.name = name
+        self._write_proto(EVENTS_TOPIC, log, ns)
+
+    # -- closing ----------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self, status: str | None = None, reason: str = "") -> None:
+        """Record the run status and finish the file (summary + footer). Idempotent.
+
+        ``status=None`` (the default) means "completed" unless an exception is
+        being handled right now (a ``finally:`` or ``except:`` block), in
+        which case the status is derived from it as in ``__exit__``.
+        """
+        if self._closed:
+            return
+        if status is None:
+            exc = sys.exc_info()[1]
+            if exc is None:
+                status = "completed"
+            else:
+                status, exc_reason = status_for_exception(exc)
+                reason = reason or exc_reason
+        self._closed = True
+        try:
+            try:
+                level = "INFO" if status == "completed" else "ERROR"
+                text = f"run {status}" + (f": {reason}" if reason else "")
+                self._event(None, text, level, "fwsim")
+            finally:
+                self._mcap.add_metadata(
+                    STATUS_METADATA_NAME, {"status": str(status), "reason": str(reason)}
+                )
+                self._mcap.finish()
+        finally:
+            self._file.close()
+
+    def __enter__(self) -> "LogWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc is None:
+            self.close("completed")
+            return False
+        status, reason = status_for_exception(exc)
+        try:
+            self.close(status, reason)
+        except Exception as close_exc:  # never mask the run's own exception
+            exc.add_note(f"fwsim.log: closing {self.path} failed too: {close_exc!r}")
+        return False
+
+    def __del__(self):
+        # A writer dropped without close(): leave the file readable (status
+        # unknown is worse than "abandoned"); never raise from a finaliser.
+        try:
+            if not self._closed:
+                self.close("abandoned", "LogWriter garbage-collected without close()")
+        except Exception:
+            pass

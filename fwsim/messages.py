@@ -1,0 +1,114 @@
+"""Typed messages passed between the blocks of the loop.
+
+Every message is a frozen dataclass whose first field is ``t_s`` (simulation
+time in seconds). Vectors are numpy arrays of float64; field names carry their
+frame and unit (``pos_enu_m``, ``body_rates_frd_rad_s``). NaN marks a field
+that is not valid in this message (PX4's convention).
+
+Frames (DESIGN.md section 4):
+  * world: ENU, metres, origin on the sea surface where the target starts;
+  * body: FRD; Euler angles roll, pitch, yaw are the aerospace ones relative to
+    NED (yaw clockwise from North).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Literal
+
+import numpy as np
+
+_NAN3 = lambda: np.full(3, np.nan)  # noqa: E731
+
+
+@dataclass(frozen=True, slots=True)
+class AirframeState:
+    """Truth state of the UAV as JSBSim integrates it (harness side only)."""
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,) position in the world frame
+    vel_enu_m_s: np.ndarray  # (3,) inertial velocity in the world frame
+    euler_ned_rad: np.ndarray  # (3,) roll, pitch, yaw (yaw clockwise from North)
+    body_rates_frd_rad_s: np.ndarray  # (3,) p, q, r
+    airspeed_m_s: float  # true airspeed
+    alpha_rad: float  # angle of attack
+    beta_rad: float  # sideslip angle
+    specific_force_frd_m_s2: np.ndarray  # (3,) what an accelerometer at the CG reads
+    throttle_norm: float  # throttle position, 0..1
+    surfaces_rad: np.ndarray  # (3,) aileron, elevator, rudder positions
+    height_above_sea_m: float  # altitude above the sea surface (world z)
+
+
+@dataclass(frozen=True, slots=True)
+class RateCommand:
+    """Autopilot mode (a): what the NMPC sends (paper eq. NMPCinput).
+
+    ``roll_rate_rad_s`` and ``pitch_rate_rad_s`` are the paper's u_p and u_q:
+    body rates with the yaw rate neglected (eq. add_tran). The autopilot adds
+    the yaw-rate part of a coordinated turn itself (see fwsim.autopilot).
+    """
+
+    t_s: float
+    airspeed_m_s: float
+    roll_rate_rad_s: float
+    pitch_rate_rad_s: float
+    mode: Literal["rates"] = "rates"
+
+
+@dataclass(frozen=True, slots=True)
+class AccelCommand:
+    """Autopilot mode (b): what BPNG needs.
+
+    ``accel_enu_m_s2`` is the wanted acceleration of the UAV perpendicular to
+    its velocity, in the world frame, gravity not included (the autopilot
+    compensates gravity). A component along the velocity is ignored.
+    """
+
+    t_s: float
+    airspeed_m_s: float
+    accel_enu_m_s2: np.ndarray  # (3,)
+    mode: Literal["accel"] = "accel"
+
+
+AutopilotCommand = RateCommand | AccelCommand
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatorCommand:
+    """Normalised surface and throttle commands sent to JSBSim's FCS.
+
+    Signs follow JSBSim: positive aileron rolls right, positive elevator
+    pitches nose down (trailing edge down), positive rudder yaws nose left
+    (trailing edge left); throttle 0..1.
+    """
+
+    t_s: float
+    aileron_norm: float
+    elevator_norm: float
+    rudder_norm: float
+    throttle_norm: float
+
+
+@dataclass(frozen=True, slots=True)
+class AutopilotStatus:
+    """The inner loops' set-points and what they track, for the log and metrics."""
+
+    t_s: float
+    mode: str  # "rates" or "accel"
+    airspeed_sp_m_s: float
+    body_rates_sp_frd_rad_s: np.ndarray  # (3,) p, q, r set-points of the rate loops
+    bank_sp_rad: float  # accel mode: bank wanted about the velocity (NaN in rate mode)
+    accel_sp_enu_m_s2: np.ndarray = field(default_factory=_NAN3)  # accel mode: commanded accel
+    accel_enu_m_s2: np.ndarray = field(default_factory=_NAN3)  # accel mode: achieved accel (perp. part)
+
+
+def as_dict(msg) -> dict:
+    """A message as a plain dict (arrays become lists), for JSON logs."""
+    out = {}
+    for f in fields(msg):
+        v = getattr(msg, f.name)
+        if isinstance(v, np.ndarray):
+            v = [float(x) for x in v]
+        elif isinstance(v, (np.floating, np.integer)):
+            v = v.item()
+        out[f.name] = v
+    return out
