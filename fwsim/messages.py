@@ -12,6 +12,7 @@ Frames (DESIGN.md section 4):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Literal
 
@@ -95,10 +96,43 @@ class AutopilotStatus:
     t_s: float
     mode: str  # "rates" or "accel"
     airspeed_sp_m_s: float
+    airspeed_m_s: float  # what the airspeed loop saw
     body_rates_sp_frd_rad_s: np.ndarray  # (3,) p, q, r set-points of the rate loops
+    body_rates_frd_rad_s: np.ndarray  # (3,) what the rate loops saw
     bank_sp_rad: float  # accel mode: bank wanted about the velocity (NaN in rate mode)
     accel_sp_enu_m_s2: np.ndarray = field(default_factory=_NAN3)  # accel mode: commanded accel
     accel_enu_m_s2: np.ndarray = field(default_factory=_NAN3)  # accel mode: achieved accel (perp. part)
+
+
+@dataclass(frozen=True, slots=True)
+class Measurements:
+    """What the mission computer receives in one tick (flight software input).
+
+    Navigation fields come from the onboard sensors; fields of sensors that
+    do not exist yet in a scenario are NaN.
+    """
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,) GNSS/INS position
+    vel_enu_m_s: np.ndarray  # (3,) GNSS/INS velocity
+    euler_ned_rad: np.ndarray  # (3,) attitude
+    body_rates_frd_rad_s: np.ndarray  # (3,) gyroscopes
+    airspeed_m_s: float  # pitot
+    height_above_sea_m: float  # baro/altimeter
+
+
+@dataclass(frozen=True, slots=True)
+class FlightSoftwareStatus:
+    """The flight software's internal state for the log (never fed back)."""
+
+    t_s: float
+    phase: int  # 1 acquisition/initial path, 2 loiter, 3 terminal; 0 scripted
+    phase_name: str
+    command_mode: str  # "rates" or "accel"
+    course_sp_rad: float = math.nan  # initial path: course set-point (ENU, counter-clockwise from East)
+    bank_sp_rad: float = math.nan  # initial path: bank set-point
+    altitude_sp_m: float = math.nan  # initial path: altitude set-point
+    cross_track_m: float = math.nan  # initial path: signed distance right of the path
 
 
 def as_dict(msg) -> dict:

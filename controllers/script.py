@@ -1,0 +1,40 @@
+"""Scripted commands: a timed list of autopilot commands (for checkouts and tests).
+
+Accelerations are given perpendicular to the measured velocity, as ``right``
+and ``up`` components; they become a world-frame ``AccelCommand`` each step.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+
+import numpy as np
+
+from fwsim.messages import AccelCommand, AutopilotCommand, Measurements, RateCommand
+
+
+def perpendicular_axes(vel_enu_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit 'up' and 'right' vectors perpendicular to a velocity (world ENU)."""
+    v = np.asarray(vel_enu_m_s, dtype=float)
+    vhat = v / max(float(np.linalg.norm(v)), 1e-6)
+    up = np.array([0.0, 0.0, 1.0]) - vhat[2] * vhat
+    n = float(np.linalg.norm(up))
+    up = up / n if n > 1e-6 else np.array([1.0, 0.0, 0.0])
+    return up, np.cross(vhat, up)
+
+
+class ScriptedCommands:
+    """Holds each scripted command from its ``t_s`` until the next one."""
+
+    def __init__(self, steps):
+        self.steps = list(steps)
+        self._times = [s.t_s for s in self.steps]
+
+    def step(self, meas: Measurements) -> AutopilotCommand:
+        i = max(bisect.bisect_right(self._times, meas.t_s + 1e-9) - 1, 0)
+        s = self.steps[i]
+        if s.rates is not None:
+            return RateCommand(meas.t_s, s.rates.airspeed_m_s, math.radians(s.rates.roll_rate_deg_s),
+                               math.radians(s.rates.pitch_rate_deg_s))
+        up, right = perpendicular_axes(meas.vel_enu_m_s)
+        return AccelCommand(meas.t_s, s.accel.airspeed_m_s, s.accel.right_m_s2 * right + s.accel.up_m_s2 * up)

@@ -1,0 +1,201 @@
+"""JSBSim wrapper: the only module that touches ``fdm[...]``.
+
+It loads an aircraft from the project's ``aircraft/`` folder (whatever the
+working directory), sets initial conditions from the world ENU frame, trims
+with JSBSim's own trim, applies actuator commands and returns the truth state
+in the project's frames (DESIGN.md section 4).
+
+The world ENU frame maps to JSBSim's WGS84 geodetic coordinates through a
+``frames.GeoOrigin`` anchored on the sea surface: z is the altitude above sea
+level, so the sea is exactly z = 0.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fwsim import AIRCRAFT_DIR
+from fwsim.frames import GeoOrigin, enu_from_ned
+from fwsim.messages import ActuatorCommand, AirframeState
+
+# JSBSim prints a banner on construction unless told otherwise.
+os.environ.setdefault("JSBSIM_DEBUG", "0")
+import jsbsim  # noqa: E402
+
+FT = 0.3048  # metres per foot
+G0_M_S2 = 9.80665
+
+
+class AirframeError(RuntimeError):
+    """The aircraft cannot be loaded, trimmed or has diverged."""
+
+
+@dataclass(frozen=True, slots=True)
+class TrimResult:
+    """What JSBSim's trim found: surfaces (normalised) and throttle."""
+
+    ok: bool
+    throttle_norm: float
+    elevator_norm: float
+    aileron_norm: float
+    rudder_norm: float
+    alpha_rad: float
+    message: str = ""
+
+
+def aircraft_file(name: str, aircraft_dir: Path = AIRCRAFT_DIR) -> Path:
+    """Path of an aircraft's JSBSim XML; a clear error when it does not exist."""
+    path = Path(aircraft_dir) / name / f"{name}.xml"
+    if not path.is_file():
+        known = sorted(p.name for p in Path(aircraft_dir).iterdir() if (p / f"{p.name}.xml").is_file())
+        raise AirframeError(f"aircraft '{name}' not found in {aircraft_dir} (known: {', '.join(known)})")
+    return path
+
+
+def aircraft_hash(name: str, aircraft_dir: Path = AIRCRAFT_DIR) -> str:
+    """SHA-256 over the aircraft's folder (XML, engines, parameter file), for the log."""
+    folder = aircraft_file(name, aircraft_dir).parent
+    h = hashlib.sha256()
+    for p in sorted(folder.rglob("*")):
+        if p.is_file() and "__pycache__" not in p.parts:
+            h.update(p.relative_to(folder).as_posix().encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+class Airframe:
+    """One JSBSim aircraft flying in the world ENU frame."""
+
+    def __init__(self, aircraft: str = "fwuav", *, dt_s: float = 1.0 / 120.0,
+                 origin: GeoOrigin | None = None, wind_enu_m_s=(0.0, 0.0, 0.0),
+                 aircraft_dir: Path = AIRCRAFT_DIR):
+        self.name = aircraft
+        self.dt_s = float(dt_s)
+        self.origin = origin or GeoOrigin(0.0, 0.0)
+        xml = aircraft_file(aircraft, aircraft_dir)
+        fdm = jsbsim.FGFDMExec(None)
+        fdm.set_debug_level(0)
+        fdm.set_aircraft_path(str(Path(aircraft_dir)))
+        fdm.set_engine_path(str(xml.parent / "engine"))
+        fdm.set_systems_path(str(xml.parent / "systems"))
+        if not fdm.load_model(aircraft):
+            raise AirframeError(f"JSBSim could not load aircraft '{aircraft}' from {xml}")
+        fdm.set_dt(self.dt_s)
+        self._fdm = fdm
+        self._mass_kg = fdm["inertia/mass-slugs"] * 14.5939029
+        self._wind_enu = np.asarray(wind_enu_m_s, dtype=float)
+        self.trim: TrimResult | None = None
+        self.t_s = 0.0
+
+    # ------------------------------------------------------------------ set-up
+    @property
+    def mass_kg(self) -> float:
+        return self._mass_kg
+
+    @staticmethod
+    def jsbsim_version() -> str:
+        return jsbsim.__version__
+
+    def reset(self, pos_enu_m, airspeed_m_s: float, heading_ned_rad: float,
+              flight_path_rad: float = 0.0, trim: bool = True) -> AirframeState:
+        """Place the aircraft and (by default) trim it with JSBSim's trim.
+
+        Straight flight at ``airspeed_m_s`` along ``heading_ned_rad`` (true
+        heading, clockwise from North) on the flight-path angle
+        ``flight_path_rad`` (positive climbing). Raises AirframeError when the
+        trim fails (with JSBSim's reason) so a scenario never starts out of
+        balance without saying so.
+        """
+        fdm = self._fdm
+        lat, lon, alt = self.origin.geodetic_from_enu(np.asarray(pos_enu_m, dtype=float))
+        fdm["ic/lat-geod-rad"] = lat
+        fdm["ic/long-gc-rad"] = lon
+        fdm["ic/h-sl-ft"] = alt / FT
+        fdm["ic/terrain-elevation-ft"] = 0.0
+        wind_ned = np.array([self._wind_enu[1], self._wind_enu[0], -self._wind_enu[2]])
+        fdm["atmosphere/wind-north-fps"] = wind_ned[0] / FT
+        fdm["atmosphere/wind-east-fps"] = wind_ned[1] / FT
+        fdm["atmosphere/wind-down-fps"] = wind_ned[2] / FT
+        fdm["ic/vt-fps"] = airspeed_m_s / FT
+        fdm["ic/psi-true-rad"] = heading_ned_rad
+        fdm["ic/gamma-rad"] = flight_path_rad
+        for prop in ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm",
+                     "fcs/pitch-trim-cmd-norm", "fcs/roll-trim-cmd-norm", "fcs/yaw-trim-cmd-norm"):
+            fdm[prop] = 0.0
+        fdm["fcs/throttle-cmd-norm"] = 0.3
+        if not fdm.run_ic():
+            raise AirframeError("JSBSim rejected the initial conditions")
+        fdm["propulsion/set-running"] = -1
+        self.t_s = 0.0
+        if trim:
+            try:
+                fdm["simulation/do_simple_trim"] = 1  # full trim
+            except Exception as exc:  # JSBSim raises a generic error
+                raise AirframeError(
+                    f"JSBSim trim failed at {airspeed_m_s:.1f} m/s, flight path "
+                    f"{math.degrees(flight_path_rad):.1f} deg, altitude {alt:.0f} m: {exc}") from exc
+            self.trim = TrimResult(
+                ok=True,
+                throttle_norm=fdm["fcs/throttle-cmd-norm"],
+                elevator_norm=fdm["fcs/pitch-trim-cmd-norm"],
+                aileron_norm=fdm["fcs/roll-trim-cmd-norm"],
+                rudder_norm=fdm["fcs/yaw-trim-cmd-norm"],
+                alpha_rad=fdm["aero/alpha-rad"],
+            )
+        else:
+            self.trim = TrimResult(False, fdm["fcs/throttle-cmd-norm"], 0.0, 0.0, 0.0,
+                                   fdm["aero/alpha-rad"], "not trimmed")
+        return self.state()
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, act: ActuatorCommand) -> AirframeState:
+        """Apply actuator commands and advance JSBSim by one dt."""
+        fdm = self._fdm
+        fdm["fcs/aileron-cmd-norm"] = act.aileron_norm
+        fdm["fcs/elevator-cmd-norm"] = act.elevator_norm
+        fdm["fcs/rudder-cmd-norm"] = act.rudder_norm
+        fdm["fcs/throttle-cmd-norm"] = act.throttle_norm
+        if not fdm.run():
+            raise AirframeError("JSBSim stopped running")
+        self.t_s += self.dt_s
+        return self.state()
+
+    def state(self) -> AirframeState:
+        """The truth state in the project's frames."""
+        fdm = self._fdm
+        pos = self.origin.enu_from_geodetic(
+            fdm["position/lat-geod-rad"], fdm["position/long-gc-rad"], fdm["position/h-sl-meters"])
+        vel = enu_from_ned(np.array([fdm["velocities/v-north-fps"], fdm["velocities/v-east-fps"],
+                                     fdm["velocities/v-down-fps"]]) * FT)
+        euler = np.array([fdm["attitude/phi-rad"], fdm["attitude/theta-rad"], fdm["attitude/psi-rad"]])
+        pqr = np.array([fdm["velocities/p-rad_sec"], fdm["velocities/q-rad_sec"], fdm["velocities/r-rad_sec"]])
+        f_body = np.array([fdm["accelerations/a-pilot-x-ft_sec2"], fdm["accelerations/a-pilot-y-ft_sec2"],
+                           fdm["accelerations/a-pilot-z-ft_sec2"]]) * FT
+        surfaces = np.array([fdm["fcs/aileron-pos-rad"], fdm["fcs/elevator-pos-rad"], fdm["fcs/rudder-pos-rad"]])
+        airspeed = fdm["velocities/vt-fps"] * FT
+        st = AirframeState(
+            t_s=self.t_s,
+            pos_enu_m=pos,
+            vel_enu_m_s=vel,
+            euler_ned_rad=euler,
+            body_rates_frd_rad_s=pqr,
+            airspeed_m_s=airspeed,
+            alpha_rad=fdm["aero/alpha-rad"],
+            beta_rad=fdm["aero/beta-rad"],
+            specific_force_frd_m_s2=f_body,
+            throttle_norm=fdm["fcs/motor-throttle-norm"],
+            surfaces_rad=surfaces,
+            height_above_sea_m=float(pos[2]),
+        )
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(euler)) and math.isfinite(airspeed)):
+            raise AirframeError(f"JSBSim state diverged at t = {self.t_s:.3f} s (non-finite position or attitude)")
+        return st
+
+    def property(self, name: str) -> float:
+        """Read any JSBSim property (for diagnostics and tests)."""
+        return self._fdm[name]

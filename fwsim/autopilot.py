@@ -1,0 +1,242 @@
+"""Inner loops of a PX4-like fixed-wing autopilot: commands -> surfaces.
+
+Two command modes, both used by the paper:
+
+(a) ``RateCommand`` (what the NMPC sends, paper eq. NMPCinput): airspeed and the
+    body rates u_p, u_q with the yaw rate neglected (eq. add_tran). The paper's
+    model turns the aircraft through ``psi_dot = (g / V) tan(phi) cos(theta)``
+    (eq. dynamics, the turn of a coordinated bank), so the autopilot does what
+    PX4's rate controller does: it takes the Euler rates of the paper's model,
+
+        phi_dot   = u_p + u_q sin(phi) tan(theta)
+        theta_dot = u_q cos(phi)
+        psi_dot   = (g / V) tan(phi) cos(theta)        (NED, clockwise)
+
+    and tracks the body rates that realise them (exact kinematics, with the
+    yaw part going to the rudder). In wings-level flight p = u_p and q = u_q.
+
+(b) ``AccelCommand`` (what BPNG needs, DESIGN.md section 5): airspeed and an
+    acceleration perpendicular to the velocity. Bank-to-turn: the specific
+    force the wing must make is f = a_perp - g_perp (gravity compensated);
+    the bank about the velocity is chosen so the lift points along f (limited
+    to max_bank_rad), the pitch rate makes its size (feed-forward a/V plus a
+    loop on the accelerometer's normal specific force), and the rudder only
+    coordinates (sideslip to zero).
+
+Loops are named output_from_input (mavsim style). Gains come from the
+aircraft's ``autopilot.yaml``: feedback gains are scaled by (V_ref / V)^2,
+feed-forwards by V_ref / V.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict
+
+from fwsim import AIRCRAFT_DIR
+from fwsim.frames import dcm_enu_from_frd, wrap_pi
+from fwsim.messages import (AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand,
+                            AutopilotStatus, RateCommand)
+
+G_M_S2 = 9.80665
+_NAN3 = np.full(3, np.nan)
+
+
+class Gain(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    value: float
+    unit: str
+    min: float
+    max: float
+    description: str
+
+
+class AutopilotParams(BaseModel):
+    """Every gain with unit, range and description (aircraft/<name>/autopilot.yaml)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    ref_airspeed_m_s: Gain
+    airspeed_kp: Gain
+    airspeed_ki: Gain
+    airspeed_climb_ff: Gain
+    roll_rate_kp: Gain
+    roll_rate_ki: Gain
+    roll_rate_ff: Gain
+    pitch_rate_kp: Gain
+    pitch_rate_ki: Gain
+    pitch_rate_ff: Gain
+    yaw_rate_kp: Gain
+    sideslip_kp: Gain
+    sideslip_ki: Gain
+    bank_kp: Gain
+    normal_accel_kp: Gain
+    normal_accel_ki: Gain
+    max_bank_rad: Gain
+    max_roll_rate_rad_s: Gain
+    max_pitch_rate_rad_s: Gain
+    max_load_factor: Gain
+    min_load_factor: Gain
+
+    def v(self, name: str) -> float:
+        return getattr(self, name).value
+
+
+def load_autopilot_params(aircraft: str, aircraft_dir: Path = AIRCRAFT_DIR,
+                          overrides: dict[str, float] | None = None) -> AutopilotParams:
+    """Read and range-check the gains; ``overrides`` replaces values by name."""
+    path = Path(aircraft_dir) / aircraft / "autopilot.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the aircraft has no autopilot parameter file")
+    raw = yaml.safe_load(path.read_text())
+    for name, value in (overrides or {}).items():
+        if name not in raw:
+            raise ValueError(f"{path.name}: unknown autopilot gain '{name}'")
+        raw[name] = {**raw[name], "value": float(value)}
+    params = AutopilotParams.model_validate(raw)
+    for name in AutopilotParams.model_fields:
+        g = getattr(params, name)
+        if not (g.min <= g.value <= g.max):
+            raise ValueError(f"{path.name}: {name} = {g.value} outside its range [{g.min}, {g.max}] {g.unit}")
+    return params
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+@dataclass
+class _PI:
+    """PI with clamping anti-windup (the integrator freezes while the output saturates)."""
+
+    kp: float
+    ki: float
+    lo: float
+    hi: float
+    integ: float = 0.0
+
+    def step(self, err: float, dt: float, ff: float = 0.0, scale: float = 1.0) -> float:
+        out = ff + scale * (self.kp * err + self.integ)
+        if self.lo < out < self.hi or (out >= self.hi and err < 0) or (out <= self.lo and err > 0):
+            self.integ += self.ki * err * dt
+        return _clip(out, self.lo, self.hi)
+
+
+class Autopilot:
+    """Airspeed, body-rate and acceleration loops of a small fixed wing."""
+
+    def __init__(self, params: AutopilotParams, dt_s: float, trim_throttle: float = 0.3):
+        self.p = params
+        self.dt_s = dt_s
+        v = params.v
+        self.v_ref = v("ref_airspeed_m_s")
+        self._throttle_trim = trim_throttle
+        self.airspeed_from_throttle = _PI(v("airspeed_kp"), v("airspeed_ki"), 0.0, 1.0)
+        self.aileron_from_roll_rate = _PI(v("roll_rate_kp"), v("roll_rate_ki"), -1.0, 1.0)
+        self.elevator_from_pitch_rate = _PI(v("pitch_rate_kp"), v("pitch_rate_ki"), -1.0, 1.0)
+        self.rudder_from_sideslip = _PI(v("sideslip_kp"), v("sideslip_ki"), -1.0, 1.0)
+        self._normal_accel_integ = 0.0
+
+    # ------------------------------------------------------------------ modes
+    def _rates_from_rate_command(self, cmd: RateCommand, st: AirframeState, V: float):
+        phi, theta, _ = st.euler_ned_rad
+        sphi, cphi = math.sin(phi), math.cos(phi)
+        sth, cth = math.sin(theta), math.cos(theta)
+        # Euler rates of the paper's model (eq. add_tran, eq. dynamics)
+        phi_dot = cmd.roll_rate_rad_s + cmd.pitch_rate_rad_s * sphi * math.tan(theta)
+        theta_dot = cmd.pitch_rate_rad_s * cphi
+        psi_dot = G_M_S2 / V * math.tan(_clip(phi, -1.4, 1.4)) * cth
+        # body rates that realise them
+        p = phi_dot - sth * psi_dot
+        q = cphi * theta_dot + sphi * cth * psi_dot
+        r = -sphi * theta_dot + cphi * cth * psi_dot
+        return p, q, r, math.nan, None, None
+
+    def _rates_from_accel_command(self, cmd: AccelCommand, st: AirframeState, V: float):
+        pv = self.p.v
+        vel = st.vel_enu_m_s
+        speed = float(np.linalg.norm(vel))
+        if speed < 1.0:
+            vel, speed = dcm_enu_from_frd(st.euler_ned_rad)[:, 0] * V, V
+        vhat = vel / speed
+        R = dcm_enu_from_frd(st.euler_ned_rad)
+        x_b, y_b, z_b = R[:, 0], R[:, 1], R[:, 2]
+        a = np.asarray(cmd.accel_enu_m_s2, dtype=float)
+        a_perp = a - (a @ vhat) * vhat
+        g_vec = np.array([0.0, 0.0, -G_M_S2])
+        g_perp = g_vec - (g_vec @ vhat) * vhat
+        f_req = a_perp - g_perp  # specific force the wing must make
+        # zero-bank lift direction ("up" perpendicular to the velocity) and right
+        up = np.array([0.0, 0.0, 1.0])
+        l0 = up - (up @ vhat) * vhat
+        n_l0 = float(np.linalg.norm(l0))
+        l0 = l0 / n_l0 if n_l0 > 1e-3 else -z_b
+        r0 = np.cross(vhat, l0)
+        fl, fr = float(f_req @ l0), float(f_req @ r0)
+        if fl >= 0.0:
+            bank_sp = math.atan2(fr, fl)
+        else:  # push over: keep the wing upright and fly a negative load
+            bank_sp = math.atan2(-fr, -fl)
+        max_bank = pv("max_bank_rad")
+        bank_sp = _clip(bank_sp, -max_bank, max_bank)
+        lift_dir = -z_b
+        bank = math.atan2(float(lift_dir @ r0), float(lift_dir @ l0))
+        # rotation of the velocity that the commanded acceleration asks for
+        omega_v = np.cross(vhat, a_perp) / speed
+        p_ff, q_ff, r_ff = float(omega_v @ x_b), float(omega_v @ y_b), float(omega_v @ z_b)
+        p = p_ff + pv("bank_kp") * wrap_pi(bank_sp - bank)
+        # normal specific force: wanted along the current lift direction, measured by the accelerometer
+        n_sp = _clip(float(f_req @ lift_dir), pv("min_load_factor") * G_M_S2, pv("max_load_factor") * G_M_S2)
+        n_meas = -float(st.specific_force_frd_m_s2[2])
+        n_err = (n_sp - n_meas) / max(V, 5.0)
+        self._normal_accel_integ = _clip(self._normal_accel_integ + pv("normal_accel_ki") * n_err * self.dt_s,
+                                         -0.5, 0.5)
+        q = q_ff + pv("normal_accel_kp") * n_err + self._normal_accel_integ
+        # achieved acceleration perpendicular to the velocity (for the log)
+        f_world = R @ st.specific_force_frd_m_s2
+        acc = f_world + g_vec
+        acc_perp = acc - (acc @ vhat) * vhat
+        return p, q, r_ff, bank_sp, a_perp, acc_perp
+
+    # ------------------------------------------------------------------ step
+    def step(self, cmd: AutopilotCommand, st: AirframeState) -> tuple[ActuatorCommand, AutopilotStatus]:
+        pv = self.p.v
+        dt = self.dt_s
+        V = max(st.airspeed_m_s, 5.0)
+        fb = (self.v_ref / V) ** 2  # feedback scaling with dynamic pressure
+        ff = self.v_ref / V  # feed-forward scaling
+
+        if isinstance(cmd, RateCommand):
+            p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_rate_command(cmd, st, V)
+            self._normal_accel_integ = 0.0
+        else:
+            p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_accel_command(cmd, st, V)
+        p_sp = _clip(p_sp, -pv("max_roll_rate_rad_s"), pv("max_roll_rate_rad_s"))
+        q_sp = _clip(q_sp, -pv("max_pitch_rate_rad_s"), pv("max_pitch_rate_rad_s"))
+        p, q, r = st.body_rates_frd_rad_s
+
+        aileron = self.aileron_from_roll_rate.step(p_sp - p, dt, ff=pv("roll_rate_ff") * ff * p_sp, scale=fb)
+        # positive elevator pitches nose down: the loop works on -elevator
+        elevator = -self.elevator_from_pitch_rate.step(q_sp - q, dt, ff=pv("pitch_rate_ff") * ff * q_sp, scale=fb)
+        # rudder: yaw-rate damping toward the coordinated rate, sideslip to zero
+        # (positive sideslip needs a yaw to the right, i.e. negative rudder)
+        yaw_demand = pv("yaw_rate_kp") * fb * (r_sp - r)
+        rudder = -self.rudder_from_sideslip.step(st.beta_rad, dt, ff=yaw_demand, scale=fb)
+
+        vel = st.vel_enu_m_s
+        sin_gamma = float(vel[2]) / max(float(np.linalg.norm(vel)), 1.0)
+        throttle = self.airspeed_from_throttle.step(
+            cmd.airspeed_m_s - st.airspeed_m_s, dt, ff=self._throttle_trim + pv("airspeed_climb_ff") * sin_gamma)
+
+        act = ActuatorCommand(st.t_s, aileron, elevator, rudder, throttle)
+        status = AutopilotStatus(
+            t_s=st.t_s, mode=cmd.mode, airspeed_sp_m_s=cmd.airspeed_m_s, airspeed_m_s=st.airspeed_m_s,
+            body_rates_sp_frd_rad_s=np.array([p_sp, q_sp, r_sp]), body_rates_frd_rad_s=st.body_rates_frd_rad_s,
+            bank_sp_rad=bank_sp,
+            accel_sp_enu_m_s2=_NAN3 if a_sp is None else a_sp,
+            accel_enu_m_s2=_NAN3 if a_ach is None else a_ach,
+        )
+        return act, status
