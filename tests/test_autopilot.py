@@ -1,0 +1,123 @@
+"""Closed-loop inner loops: step responses and the acceleration mode."""
+import math
+
+import numpy as np
+import pytest
+
+from controllers.script import perpendicular_axes
+from fwsim.autopilot import load_autopilot_params
+from fwsim.messages import AccelCommand, RateCommand
+from flight import Flight
+
+DEG = math.pi / 180.0
+
+
+def level(V=22.0):
+    return lambda s: RateCommand(s.t_s, V, 0.0, 0.0)
+
+
+def test_gains_file_checks_ranges():
+    with pytest.raises(ValueError, match="outside its range"):
+        load_autopilot_params("fwuav", overrides={"roll_rate_kp": 100.0})
+    with pytest.raises(ValueError, match="unknown autopilot gain"):
+        load_autopilot_params("fwuav", overrides={"no_such_gain": 1.0})
+
+
+def test_airspeed_step_settles():
+    """22 -> 26 m/s: within 0.5 m/s of the set-point after 12 s, overshoot under 1 m/s."""
+    f = Flight()
+    f.fly(2.0, level(22.0))
+    tr = f.fly(25.0, level(26.0))
+    V = tr.arr("airspeed_m_s")
+    settled = tr.window(14.0, 27.0)
+    assert np.all(np.abs(V[settled] - 26.0) < 0.5), (V[settled].min(), V[settled].max())
+    assert V.max() < 27.0
+
+
+def test_roll_rate_step_settles():
+    """Roll rate step 0 -> 20 deg/s: 90 % within 0.3 s, then within 1.5 deg/s of the set-point."""
+    f = Flight()
+    f.fly(1.0, level())
+    tr = f.fly(1.5, lambda s: RateCommand(s.t_s, 22.0, 20 * DEG, 0.0))
+    t = np.array(tr.t)
+    p = tr.arr("body_rates_frd_rad_s")[:, 0]
+    p_sp = tr.sp("body_rates_sp_frd_rad_s")[:, 0]
+    rise = t[np.argmax(p >= 0.9 * p_sp)]
+    assert 0.0 < rise < 0.3, f"rise time {rise:.3f} s"
+    after = (t > 0.5) & (t < 1.5)
+    assert np.max(np.abs(p[after] - p_sp[after])) < 1.5 * DEG
+
+
+def test_pitch_rate_step_settles():
+    """Pitch rate step 0 -> 5 deg/s: 90 % within 0.4 s, then within 0.5 deg/s."""
+    f = Flight()
+    f.fly(1.0, level())
+    tr = f.fly(2.0, lambda s: RateCommand(s.t_s, 22.0, 0.0, 5 * DEG))
+    t = np.array(tr.t)
+    q = tr.arr("body_rates_frd_rad_s")[:, 1]
+    rise = t[np.argmax(q >= 0.9 * 5 * DEG)]
+    assert 0.0 < rise < 0.4, f"rise time {rise:.3f} s"
+    after = (t > 0.6) & (t < 2.0)
+    assert np.max(np.abs(q[after] - 5 * DEG)) < 0.5 * DEG
+
+
+def test_rate_mode_turn_is_coordinated():
+    """Roll into 30 deg with u_p, hold u_p = u_q = 0: the autopilot adds the turn's
+    yaw and pitch rates itself (psi_dot = g tan(phi) cos(theta) / V), sideslip stays
+    under 1.5 deg throughout and the altitude within 5 m."""
+    f = Flight()
+    f.fly(1.0, level())
+    f.fly(2.0, lambda s: RateCommand(s.t_s, 22.0, 15 * DEG, 0.0))
+    tr = f.fly(8.0, level())
+    beta = np.degrees(tr.arr("beta_rad"))
+    assert np.max(np.abs(beta)) < 1.5
+    z = tr.arr("pos_enu_m")[:, 2]
+    assert np.max(np.abs(z - 500.0)) < 5.0
+    w = tr.window(3.0, 8.0)
+    phi = tr.arr("euler_ned_rad")[w, 0]
+    psi = np.unwrap(tr.arr("euler_ned_rad")[w, 2])
+    turn_rate = (psi[-1] - psi[0]) / 5.0
+    expected = 9.80665 * math.tan(phi.mean()) / 22.0
+    assert turn_rate == pytest.approx(expected, rel=0.1)
+
+
+def _accel(right, up, V=22.0):
+    def cmd(s):
+        u, r = perpendicular_axes(s.vel_enu_m_s)
+        return AccelCommand(s.t_s, V, right * r + up * u)
+    return cmd
+
+
+@pytest.mark.parametrize("right", [5.0, -5.0])
+def test_accel_mode_steady_turn(right):
+    """5 m/s^2 sideways: after 3 s the achieved perpendicular acceleration is within
+    0.3 m/s^2 of the command, sideslip under 1 deg, and the path stays level
+    (vertical speed under 1 m/s: the command has no vertical part)."""
+    f = Flight()
+    f.fly(1.0, _accel(0.0, 0.0))
+    tr = f.fly(10.0, _accel(right, 0.0))
+    w = tr.window(3.0, 10.0)
+    a_sp = tr.sp("accel_sp_enu_m_s2")[w]
+    a = tr.sp("accel_enu_m_s2")[w]
+    err = np.linalg.norm(a - a_sp, axis=1)
+    assert np.max(err) < 0.3, np.max(err)
+    assert np.max(np.abs(np.degrees(tr.arr("beta_rad")[w]))) < 1.0
+    assert np.max(np.abs(tr.arr("vel_enu_m_s")[w, 2])) < 1.0
+    # banked the right way: right turn -> right wing down (positive roll)
+    assert np.sign(tr.arr("euler_ned_rad")[w, 0].mean()) == np.sign(right)
+
+
+@pytest.mark.parametrize("up", [3.0, -3.0])
+def test_accel_mode_pull_up_and_push_over(up):
+    """3 m/s^2 up (pull-up) or down (push-over) for 2 s: after 0.7 s the normal
+    acceleration is within 0.5 m/s^2 of the command and the bank stays level."""
+    f = Flight()
+    f.fly(1.0, _accel(0.0, 0.0))
+    tr = f.fly(2.0, _accel(0.0, up))
+    w = tr.window(0.7, 2.0)
+    a = tr.sp("accel_enu_m_s2")[w]
+    a_sp = tr.sp("accel_sp_enu_m_s2")[w]
+    assert np.max(np.linalg.norm(a - a_sp, axis=1)) < 0.5
+    assert np.max(np.abs(np.degrees(tr.arr("euler_ned_rad")[w, 0]))) < 2.0
+    gamma_rate = np.diff(np.arcsin(tr.arr("vel_enu_m_s")[w, 2] / np.linalg.norm(tr.arr("vel_enu_m_s")[w], axis=1)))
+    assert np.sign(gamma_rate.mean()) == np.sign(up)
