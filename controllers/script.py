@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from fwsim.frames import cross3
+
 from fwsim.messages import AccelCommand, AutopilotCommand, Measurements, RateCommand
 
 
@@ -20,7 +22,7 @@ def perpendicular_axes(vel_enu_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     up = np.array([0.0, 0.0, 1.0]) - vhat[2] * vhat
     n = float(np.linalg.norm(up))
     up = up / n if n > 1e-6 else np.array([1.0, 0.0, 0.0])
-    return up, np.cross(vhat, up)
+    return up, cross3(vhat, up)
 
 
 class ScriptedCommands:

@@ -38,7 +38,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict
 
 from fwsim import AIRCRAFT_DIR
-from fwsim.frames import dcm_enu_from_frd, wrap_pi
+from fwsim.frames import cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import (AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand,
                             AutopilotStatus, RateCommand)
 
@@ -174,7 +174,7 @@ class Autopilot:
         l0 = up - (up @ vhat) * vhat
         n_l0 = float(np.linalg.norm(l0))
         l0 = l0 / n_l0 if n_l0 > 1e-3 else -z_b
-        r0 = np.cross(vhat, l0)
+        r0 = cross3(vhat, l0)
         fl, fr = float(f_req @ l0), float(f_req @ r0)
         if fl >= 0.0:
             bank_sp = math.atan2(fr, fl)
@@ -185,7 +185,7 @@ class Autopilot:
         lift_dir = -z_b
         bank = math.atan2(float(lift_dir @ r0), float(lift_dir @ l0))
         # rotation of the velocity that the commanded acceleration asks for
-        omega_v = np.cross(vhat, a_perp) / speed
+        omega_v = cross3(vhat, a_perp) / speed
         p_ff, q_ff, r_ff = float(omega_v @ x_b), float(omega_v @ y_b), float(omega_v @ z_b)
         p = p_ff + pv("bank_kp") * wrap_pi(bank_sp - bank)
         # normal specific force: wanted along the current lift direction, measured by the accelerometer

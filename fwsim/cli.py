@@ -1,7 +1,8 @@
-"""Command line: ``fwsim run | metrics``.
+"""Command line: ``fwsim run | metrics | bench``.
 
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
     fwsim metrics runs/<log>.mcap [--json]
+    fwsim bench [--json] [--quick]
 """
 from __future__ import annotations
 
@@ -83,6 +84,22 @@ def cmd_metrics(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from fwsim.bench import run_bench
+    console.print("measuring (JSBSim raw, airframe wrapper, closed-loop checkout) ...")
+    res = run_bench(quick=args.quick)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    table = Table(title="fwsim bench")
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    for k, v in res.items():
+        table.add_row(k, _fmt(v))
+    Console().print(table)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fwsim", description="Fixed-wing UAV tracking and terminal guidance harness "
                                                           "around JSBSim.")
@@ -99,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("log", help="MCAP log of a run")
     m.add_argument("--json", action="store_true", help="print JSON instead of a table")
     m.set_defaults(func=cmd_metrics)
+    b = sub.add_parser("bench", help="measure simulation speed on this machine")
+    b.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
+    b.set_defaults(func=cmd_bench)
     return p
 
 

@@ -341,3 +341,9 @@ def test_geodetic_known():
     with pytest.raises(Exception):
         o.lat0_deg = 1.0  # frozen
     assert o == F.GeoOrigin(45.0, 179.99)
+
+
+@given(st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3), st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3))
+def test_cross3_matches_numpy(a, b):
+    from fwsim.frames import cross3
+    np.testing.assert_allclose(cross3(a, b), np.cross(a, b), rtol=1e-12, atol=1e-9)

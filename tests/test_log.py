@@ -63,8 +63,8 @@ def test_round_trip_states_and_messages(tmp_path):
     accel = [AccelCommand(t_s=s.t_s, airspeed_m_s=21.0,
                           accel_enu_m_s2=np.array([1.0, np.nan, 2.0 + k]))
              for k, s in enumerate(states[30:])]
-    status = [AutopilotStatus(t_s=s.t_s, mode="rates", airspeed_sp_m_s=20.0,
-                              body_rates_sp_frd_rad_s=np.array([0.1, 0.2, 0.3]),
+    status = [AutopilotStatus(t_s=s.t_s, mode="rates", airspeed_sp_m_s=20.0, airspeed_m_s=19.5,
+                              body_rates_sp_frd_rad_s=np.array([0.1, 0.2, 0.3]), body_rates_frd_rad_s=np.zeros(3),
                               bank_sp_rad=np.nan) for s in states[::2]]
     with LogWriter(path, metadata=META, scenario_text=SCENARIO) as log:
         for s in states:

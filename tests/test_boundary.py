@@ -1,0 +1,58 @@
+"""Flight software never reads truth (DESIGN.md section 1)."""
+import ast
+import math
+from pathlib import Path
+
+import numpy as np
+
+import controllers
+from controllers.mission import FlightSoftware
+from fwsim.messages import Measurements, RateCommand
+from fwsim.scenario import parse_scenario
+
+TRUTH_MODULES = {"jsbsim", "fwsim.airframe", "fwsim.autopilot", "fwsim.loop", "fwsim.sensors", "fwsim.target",
+                 "fwsim.camera", "fwsim.gimbal", "fwsim.world", "fwsim.log", "fwsim.metrics", "fwsim.cli"}
+ALLOWED_FWSIM = {"fwsim.messages", "fwsim.frames", "fwsim.scenario", "fwsim"}
+
+
+def imported_modules(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+    return names
+
+
+def test_controllers_import_nothing_from_the_truth_side():
+    pkg = Path(controllers.__file__).parent
+    files = sorted(pkg.rglob("*.py"))
+    assert files
+    for f in files:
+        for mod in imported_modules(f):
+            assert not any(mod == t or mod.startswith(t + ".") for t in TRUTH_MODULES), f"{f.name} imports {mod}"
+            if mod.startswith("fwsim"):
+                assert mod in ALLOWED_FWSIM, f"{f.name} imports {mod}"
+
+
+def test_flight_software_runs_on_measurements_alone():
+    """A synthetic Measurements stream (no JSBSim, no harness) drives the flight software."""
+    s = parse_scenario("""
+name: b
+duration_s: 10
+initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
+""")
+    fsw = FlightSoftware(s.controllers, s.initial)
+    for k in range(30):
+        t = k / 30
+        # flying north, 20 m right (east) of the path and 10 m low
+        meas = Measurements(t, np.array([20.0, 22.0 * t, 490.0]), np.array([0.0, 22.0, 0.0]),
+                            np.array([0.0, 0.03, 0.0]), np.zeros(3), 22.0, 490.0)
+        out = fsw.step(meas)
+    assert isinstance(out.command, RateCommand)
+    assert out.status.phase == 1
+    assert out.status.cross_track_m == 20.0
+    assert out.command.roll_rate_rad_s < 0  # roll left, back toward the path
+    assert out.command.pitch_rate_rad_s > 0  # climb back to 500 m
+    assert math.isclose(out.status.altitude_sp_m, 500.0)

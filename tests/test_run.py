@@ -1,0 +1,137 @@
+"""Whole runs: logs, metrics, determinism, failures and Ctrl-C."""
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fwsim import SCENARIO_DIR
+from fwsim.log import read_log
+from fwsim.loop import run
+from fwsim.metrics import compute_metrics
+from fwsim.scenario import load_scenario
+
+CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
+
+
+def fly(path, tmp_path, name="run.mcap", **overrides):
+    scenario, text = load_scenario(path, overrides)
+    return run(scenario, text, tmp_path / name)
+
+
+@pytest.fixture(scope="module")
+def checkout_log(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("checkout")
+    result = fly(CHECKOUT, tmp)
+    return result, read_log(result.log_path)
+
+
+def test_checkout_log_has_every_topic_and_metadata(checkout_log):
+    result, log = checkout_log
+    assert result.status == "completed" and log.status == "completed"
+    for topic in ("/uav/state", "/tf", "/uav/pose", "/events", "/autopilot/command", "/autopilot/status",
+                  "/actuators", "/fsw/status"):
+        assert log.topics.get(topic, 0) > 0, topic
+    meta = log.metadata["fwsim"]
+    assert meta["seed"] == "1" and meta["aircraft"] == "fwuav"
+    assert len(meta["aircraft_sha256"]) == 64 and meta["jsbsim_version"]
+    assert "autopilot_checkout" in log.scenario_text
+    # 60 s at 30 Hz, plus the initial state
+    assert log.topics["/uav/state"] == 60 * 30 + 1
+
+
+def test_checkout_metrics_within_bounds(checkout_log):
+    """The scripted checkout flies both modes; the inner loops track their set-points."""
+    m = compute_metrics(checkout_log[1])
+    assert m["flight_time_s"] == pytest.approx(60.0, abs=0.05)
+    assert 28 < m["bank_abs_max_deg"] < 40  # 30 deg rate-mode bank, ~27 deg for 5 m/s^2
+    assert m["sideslip_abs_max_deg"] < 5.0
+    assert m["airspeed_max_m_s"] < 27.5 and m["airspeed_min_m_s"] > 19.0
+    assert m["roll_rate_err_rms_deg_s"] < 6.0
+    assert m["pitch_rate_err_rms_deg_s"] < 2.0
+    assert m["accel_err_rms_m_s2"] < 2.0
+    assert abs(m["height_min_m"] - 500.0) < 20.0
+
+
+def test_same_seed_same_metrics(tmp_path):
+    a = compute_metrics(fly(CHECKOUT, tmp_path, "a.mcap", duration_s=20).log_path)
+    b = compute_metrics(fly(CHECKOUT, tmp_path, "b.mcap", duration_s=20).log_path)
+    assert a == b
+    la, lb = read_log(tmp_path / "a.mcap"), read_log(tmp_path / "b.mcap")
+    np.testing.assert_array_equal(la.table("/uav/state")["pos_enu_m"], lb.table("/uav/state")["pos_enu_m"])
+
+
+def test_paper_mission_flies_its_initial_path(tmp_path):
+    """Phase 1's initial path: straight toward the ship's start point at 1000 m."""
+    result = fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, duration_s=30)
+    assert result.status == "completed"
+    st = read_log(result.log_path).table("/uav/state")
+    pos = st["pos_enu_m"]
+    assert pos[-1, 0] == pytest.approx(-1000.0 + 30 * 22.0, abs=15.0)
+    assert np.max(np.abs(pos[:, 1])) < 1.0 and np.max(np.abs(pos[:, 2] - 1000.0)) < 1.0
+
+
+def test_initial_path_captures_an_offset_line(tmp_path):
+    """Start 200 m off the line and 50 m low: the follower converges onto it."""
+    result = fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, duration_s=80,
+                 **{"initial.pos_enu_m": [-1000.0, 200.0, 950.0]})
+    fsw = read_log(result.log_path).table("/fsw/status")
+    st = read_log(result.log_path).table("/uav/state")
+    assert abs(fsw["cross_track_m"][-1]) < 5.0
+    assert abs(st["pos_enu_m"][-1, 2] - 1000.0) < 5.0
+
+
+def test_failed_trim_leaves_a_log_saying_why(tmp_path):
+    scenario, text = load_scenario(CHECKOUT, {"initial.airspeed_m_s": 9.0})
+    with pytest.raises(Exception, match="trim failed"):
+        run(scenario, text, tmp_path / "fail.mcap")
+    log = read_log(tmp_path / "fail.mcap")
+    assert log.status == "failed" and "trim failed" in log.reason
+
+
+def test_airspeed_limit_ends_the_run_as_failed(tmp_path):
+    result = fly(CHECKOUT, tmp_path, **{"stop.max_airspeed_m_s": 23.5})
+    assert result.status == "failed" and "airspeed" in result.reason
+    assert read_log(result.log_path).status == "failed"
+
+
+def test_sea_contact_ends_the_run(tmp_path):
+    scenario_over = {"initial.pos_enu_m": [0.0, 0.0, 60.0], "controllers.script": [
+        {"t_s": 0, "rates": {"airspeed_m_s": 22, "pitch_rate_deg_s": -10}},
+        {"t_s": 2, "rates": {"airspeed_m_s": 22}}]}
+    result = fly(CHECKOUT, tmp_path, **scenario_over)
+    assert result.status == "completed" and "sea contact" in result.reason
+    assert result.sim_time_s < 30
+
+
+def test_sigint_leaves_a_readable_log(tmp_path):
+    log_path = tmp_path / "int.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "fwsim.cli", "run", str(CHECKOUT), "--quiet",
+                             "--log", str(log_path), "--set", "duration_s=3000"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and (not log_path.exists() or log_path.stat().st_size < 50_000):
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err
+    log = read_log(log_path)
+    assert log.status == "interrupted" and not log.truncated
+    assert log.topics["/uav/state"] > 30
+
+
+def test_cli_run_and_metrics_json(tmp_path):
+    log_path = tmp_path / "cli.mcap"
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "run", str(CHECKOUT), "--quiet", "--log",
+                           str(log_path), "--set", "duration_s=5"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "real-time factor" in proc.stderr and str(log_path) in proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "metrics", str(log_path), "--json"],
+                          capture_output=True, text=True, timeout=120)
+    m = json.loads(proc.stdout)
+    assert m["status"] == "completed" and m["flight_time_s"] == pytest.approx(5.0, abs=0.05)

@@ -1,0 +1,76 @@
+"""Scenario validation: one-line errors that name the field; shipped scenarios load."""
+import subprocess
+import sys
+
+import pytest
+
+from fwsim import SCENARIO_DIR
+from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+
+GOOD = """
+name: t
+duration_s: 10
+initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 90}
+"""
+
+
+def error_of(text: str) -> str:
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "s.yaml")
+    return str(exc.value)
+
+
+def test_good_scenario_has_defaults():
+    s = parse_scenario(GOOD)
+    assert s.rates.sim_hz == 120 and s.aircraft.name == "fwuav" and s.seed == 0
+    assert s.controllers.kind == "mission"
+
+
+@pytest.mark.parametrize("text, field, words", [
+    (GOOD.replace("airspeed_m_s: 22", "airspeed_m_s: -5"), "initial.airspeed_m_s", "greater than 0"),
+    (GOOD + "colour: blue\n", "colour", "unknown key"),
+    (GOOD.replace("heading_deg: 90", "heading_deg: 90, extra: 1"), "initial.extra", "unknown key"),
+    (GOOD.replace("[0, 0, 500]", "[0, 500]"), "initial.pos_enu_m", "at least 3"),
+    (GOOD.replace("duration_s: 10", "duration_s: ten"), "duration_s", "valid number"),
+    (GOOD + "rates: {log_hz: 7}\n", "rates", "divide sim_hz"),
+    (GOOD + "controllers: {kind: script}\n", "controllers", "non-empty 'script'"),
+    (GOOD.replace("[0, 0, 500]", "[0, 0, -1]"), "initial", "above the sea"),
+])
+def test_errors_are_one_line_naming_the_field(text, field, words):
+    msg = error_of(text)
+    assert "\n" not in msg
+    assert msg.startswith(f"s.yaml: {field}: ")
+    assert words in msg
+
+
+def test_yaml_syntax_error_names_line():
+    msg = error_of("name: x\nduration_s: [1\n")
+    assert msg.startswith("s.yaml:3:") and "YAML syntax error" in msg
+
+
+def test_missing_fields_each_get_a_line():
+    msg = error_of("name: x\n")
+    lines = msg.splitlines()
+    assert {ln.split(": ")[1] for ln in lines} == {"duration_s", "initial"}
+
+
+def test_overrides_by_path():
+    s = parse_scenario(GOOD, overrides={"initial.airspeed_m_s": 25, "seed": 4})
+    assert s.initial.airspeed_m_s == 25 and s.seed == 4
+
+
+@pytest.mark.parametrize("path", sorted(SCENARIO_DIR.rglob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_scenarios_validate(path):
+    scenario, text = load_scenario(path)
+    assert scenario.name == path.stem and text
+
+
+def test_cli_reports_bad_scenario_in_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(GOOD.replace("airspeed_m_s: 22", "airspeed_m_s: 0"))
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "run", str(bad), "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    err = proc.stderr.strip()
+    assert err == f"error: {bad}: initial.airspeed_m_s: Input should be greater than 0 (got 0)"
+    assert "Traceback" not in proc.stderr
