@@ -37,6 +37,15 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _print_table(title: str, rows: dict) -> None:
+    table = Table(title=title)
+    table.add_column("name")
+    table.add_column("value", justify="right")
+    for k, v in rows.items():
+        table.add_row(k, _fmt(v))
+    Console().print(table)
+
+
 def cmd_run(args) -> int:
     from fwsim.loop import default_log_path, run
     scenario, text = load_scenario(args.scenario, _parse_sets(args.set))
@@ -75,12 +84,7 @@ def cmd_metrics(args) -> int:
     if args.json:
         print(json.dumps(m, indent=2, allow_nan=True))
         return 0
-    table = Table(title=f"metrics: {path.name}")
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    for k, v in m.items():
-        table.add_row(k, _fmt(v))
-    Console().print(table)
+    _print_table(f"metrics: {path.name}", m)
     return 0
 
 
@@ -91,12 +95,7 @@ def cmd_bench(args) -> int:
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
-    table = Table(title="fwsim bench")
-    table.add_column("figure")
-    table.add_column("value", justify="right")
-    for k, v in res.items():
-        table.add_row(k, _fmt(v))
-    Console().print(table)
+    _print_table("fwsim bench", res)
     return 0
 
 
