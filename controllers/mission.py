@@ -14,12 +14,15 @@ from dataclasses import dataclass
 
 from controllers.path import PathFollower
 from controllers.script import ScriptedCommands
-from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, Measurements
+from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
+
+GIMBAL_ANGLE_GAIN_1_S = 3.0  # scripted gimbal angles: joint rate per rad of encoder error
 
 
 @dataclass(frozen=True, slots=True)
 class FlightSoftwareOutput:
     command: AutopilotCommand
+    gimbal: GimbalCommand
     status: FlightSoftwareStatus
 
 
@@ -39,6 +42,15 @@ class FlightSoftware:
     def step(self, meas: Measurements) -> FlightSoftwareOutput:
         if self.kind == "script":
             cmd = self._script.step(meas)
-            return FlightSoftwareOutput(cmd, FlightSoftwareStatus(meas.t_s, 0, "script", cmd.mode))
+            return FlightSoftwareOutput(cmd, self._scripted_gimbal(meas),
+                                        FlightSoftwareStatus(meas.t_s, 0, "script", cmd.mode))
         cmd, status = self._path.step(meas)
-        return FlightSoftwareOutput(cmd, status)
+        # The target search and IBVS pointing arrive with Phase 1's acquisition; until then hold.
+        return FlightSoftwareOutput(cmd, GimbalCommand(meas.t_s, math.nan, math.nan), status)
+
+    def _scripted_gimbal(self, meas: Measurements) -> GimbalCommand:
+        sp = self._script.gimbal_setpoint_rad(meas.t_s)
+        if sp is None or math.isnan(meas.pan_rad):
+            return GimbalCommand(meas.t_s, math.nan, math.nan)
+        return GimbalCommand(meas.t_s, GIMBAL_ANGLE_GAIN_1_S * (sp[0] - meas.pan_rad),
+                             GIMBAL_ANGLE_GAIN_1_S * (sp[1] - meas.tilt_rad))

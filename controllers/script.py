@@ -32,6 +32,16 @@ class ScriptedCommands:
         self.steps = list(steps)
         self._times = [s.t_s for s in self.steps]
 
+    def gimbal_setpoint_rad(self, t_s: float) -> tuple[float, float] | None:
+        """Pan and tilt of the latest step up to ``t_s`` that set ``gimbal_deg`` (None: none yet)."""
+        sp = None
+        for s in self.steps:
+            if s.t_s > t_s + 1e-9:
+                break
+            if s.gimbal_deg is not None:
+                sp = (math.radians(s.gimbal_deg[0]), math.radians(s.gimbal_deg[1]))
+        return sp
+
     def step(self, meas: Measurements) -> AutopilotCommand:
         i = max(bisect.bisect_right(self._times, meas.t_s + 1e-9) - 1, 0)
         s = self.steps[i]

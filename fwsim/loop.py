@@ -9,6 +9,8 @@ their own rates, one line per block in signal order (DESIGN.md section 1):
     truth = airframe.step(act)            # JSBSim
     log.write(...)                        # observes, never feeds back
 
+    frame = world.look()                  # camera at its own rate -> detector
+
 The autopilot stands for PX4 on the aircraft and reads the airframe state as
 PX4's own estimator would give it; the flight software only sees
 ``Measurements``.
@@ -27,18 +29,29 @@ import numpy as np
 
 import fwsim
 from controllers.mission import FlightSoftware
-from fwsim.airframe import Airframe, aircraft_file, aircraft_hash
+from fwsim.airframe import aircraft_file, aircraft_hash
 from fwsim.autopilot import Autopilot, load_autopilot_params
-from fwsim.frames import GeoOrigin
+from fwsim.camera import Detector
+from fwsim.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.scenario import Scenario
-from fwsim.sensors import Sensors
+from fwsim.sensors import Sensors, rng_for
+from fwsim.world import World
 
 #: Topics written by the loop (besides LogWriter.write_state's /uav/state, /tf, /uav/pose).
 COMMAND_TOPIC = "/autopilot/command"
 AUTOPILOT_TOPIC = "/autopilot/status"
 ACTUATOR_TOPIC = "/actuators"
 FSW_TOPIC = "/fsw/status"
+GIMBAL_CMD_TOPIC = "/fsw/gimbal_command"
+TARGET_TOPIC = "/target/state"
+GIMBAL_TOPIC = "/gimbal/state"
+FRAME_TOPIC = "/camera/frame"
+DETECTION_TOPIC = "/camera/detection"
+IMAGE_TOPIC = "/camera/image"
+CALIBRATION_TOPIC = "/camera/calibration"
+CAMERA_FRAME_ID = "camera"
+SHIP_FRAME_ID = "ship"
 
 
 @dataclass(frozen=True)
@@ -80,6 +93,18 @@ def run_metadata(scenario: Scenario) -> dict[str, str]:
     }
 
 
+def _log_truth(log: LogWriter, truth) -> None:
+    """Truth at one tick: UAV state and pose, ship, gimbal, and the camera and ship frames."""
+    t = truth.uav.t_s
+    log.write_state(truth.uav)
+    log.write(TARGET_TOPIC, truth.target)
+    log.write(GIMBAL_TOPIC, truth.gimbal)
+    log.write_transform(t, CAMERA_FRAME_ID, truth.cam_pos_enu_m, quat_from_dcm(truth.R_enu_from_cam))
+    h = truth.target.heading_ned_rad
+    half = 0.5 * (math.pi / 2 - h)  # ship frame (bow, port, up) is the ENU frame turned by the course
+    log.write_transform(t, SHIP_FRAME_ID, truth.target.pos_enu_m, (math.cos(half), 0.0, 0.0, math.sin(half)))
+
+
 def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress: Callable[[float, float], None] | None = None) -> RunResult:
     """Fly a scenario; always leaves a complete MCAP log at ``log_path``.
@@ -98,47 +123,66 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     n_ticks = int(round(scenario.duration_s * rates.sim_hz))
     progress_every = max(int(rates.sim_hz), 1)
 
+    cam_every = round(rates.sim_hz / scenario.camera.rate_hz)
+    render_hz = scenario.camera.render.rate_hz
+    render_every = round(rates.sim_hz / render_hz) if render_hz > 0 else 0
+
     wall0 = time.perf_counter()
     sim_t = 0.0
     status, reason = "completed", "duration reached"
     with LogWriter(log_path, metadata=run_metadata(scenario), scenario_text=scenario_text) as log:
         try:
-            ini = scenario.initial
-            airframe = Airframe(scenario.aircraft.name, dt_s=dt,
-                                origin=GeoOrigin(scenario.world.origin_lat_deg, scenario.world.origin_lon_deg),
-                                wind_enu_m_s=scenario.world.wind_enu_m_s)
-            truth = airframe.reset(ini.pos_enu_m, ini.airspeed_m_s, math.radians(ini.heading_deg),
-                                   math.radians(ini.flight_path_deg), trim=ini.trim)
-            log.write_event(0.0, f"trim: throttle {airframe.trim.throttle_norm:.3f}, "
-                                 f"elevator {airframe.trim.elevator_norm:.3f}, "
-                                 f"alpha {math.degrees(airframe.trim.alpha_rad):.2f} deg")
+            world = World(scenario)
+            truth = world.reset()
+            trim = world.airframe.trim
+            log.write_event(0.0, f"trim: throttle {trim.throttle_norm:.3f}, elevator {trim.elevator_norm:.3f}, "
+                                 f"alpha {math.degrees(trim.alpha_rad):.2f} deg")
             autopilot = Autopilot(load_autopilot_params(scenario.aircraft.name,
                                                         overrides=scenario.aircraft.autopilot_gains),
-                                  dt, airframe.trim.throttle_norm)
-            sensors = Sensors(scenario.seed)
+                                  dt, trim.throttle_norm)
+            sensors = Sensors(scenario.sensors, scenario.seed)
+            cam = scenario.camera
+            detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
             flight_software = FlightSoftware(scenario.controllers, scenario.initial)
-            log.write_state(truth)
+            log.write_calibration(CALIBRATION_TOPIC, 0.0, CAMERA_FRAME_ID, cam.width_px, cam.height_px,
+                                  world.camera.K.K)
+            _log_truth(log, truth)
+            last_det = None
+            frame = None
 
             for tick in range(n_ticks):
+                t_now = truth.uav.t_s
                 if tick % fsw_every == 0:
-                    meas = sensors.sample(truth)
+                    new_det = detector.arrived(t_now)
+                    last_det = new_det or last_det
+                    meas = sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, last_det)
                     out = flight_software.step(meas)
                     log.write(COMMAND_TOPIC, out.command)
+                    log.write(GIMBAL_CMD_TOPIC, out.gimbal)
                     log.write(FSW_TOPIC, out.status)
-                act, ap_status = autopilot.step(out.command, truth)
-                truth = airframe.step(act)
-                sim_t = truth.t_s
+                    if new_det is not None:
+                        log.write(DETECTION_TOPIC, new_det)
+                act, ap_status = autopilot.step(out.command, truth.uav)
+                truth = world.step(act, out.gimbal)
+                sim_t = truth.uav.t_s
+                if (tick + 1) % cam_every == 0:
+                    frame = world.look()
+                    detector.observe(frame)
+                    log.write(FRAME_TOPIC, frame)
                 if (tick + 1) % log_every == 0:
-                    log.write_state(truth)
+                    _log_truth(log, truth)
                     log.write(AUTOPILOT_TOPIC, ap_status)
                     log.write(ACTUATOR_TOPIC, act)
-                if truth.height_above_sea_m <= scenario.stop.min_height_m:
-                    log.write_state(truth)
+                if render_every and (tick + 1) % render_every == 0:
+                    img = world.render(frame.bbox_px if frame is not None else None)
+                    log.write_image(IMAGE_TOPIC, sim_t, CAMERA_FRAME_ID, world.camera.encode_jpeg(img))
+                if truth.uav.height_above_sea_m <= scenario.stop.min_height_m:
+                    _log_truth(log, truth)
                     status, reason = "completed", f"sea contact at t = {sim_t:.2f} s"
                     break
-                if truth.airspeed_m_s > scenario.stop.max_airspeed_m_s:
-                    log.write_state(truth)
-                    raise RunStopped(f"airspeed {truth.airspeed_m_s:.1f} m/s above the limit "
+                if truth.uav.airspeed_m_s > scenario.stop.max_airspeed_m_s:
+                    _log_truth(log, truth)
+                    raise RunStopped(f"airspeed {truth.uav.airspeed_m_s:.1f} m/s above the limit "
                                      f"{scenario.stop.max_airspeed_m_s:g} m/s at t = {sim_t:.2f} s")
                 if progress is not None and tick % progress_every == 0:
                     progress(sim_t, scenario.duration_s)

@@ -108,17 +108,39 @@ class AutopilotStatus:
 class Measurements:
     """What the mission computer receives in one tick (flight software input).
 
-    Navigation fields come from the onboard sensors; fields of sensors that
-    do not exist yet in a scenario are NaN.
+    Everything the paper's block diagram lists (d, r_p, r_c, V_p, omega_p,
+    omega_c, u, v), each from its own sensor with its own noise. Detection
+    fields describe the newest detection that has arrived (``det_new`` is
+    true on the tick it arrives); they are NaN / false before the first one.
     """
 
     t_s: float
-    pos_enu_m: np.ndarray  # (3,) GNSS/INS position
-    vel_enu_m_s: np.ndarray  # (3,) GNSS/INS velocity
-    euler_ned_rad: np.ndarray  # (3,) attitude
-    body_rates_frd_rad_s: np.ndarray  # (3,) gyroscopes
+    pos_enu_m: np.ndarray  # (3,) GNSS/INS position r_p
+    vel_enu_m_s: np.ndarray  # (3,) GNSS/INS velocity V_p
+    euler_ned_rad: np.ndarray  # (3,) attitude (AHRS)
+    body_rates_frd_rad_s: np.ndarray  # (3,) gyroscopes omega_p
     airspeed_m_s: float  # pitot
-    height_above_sea_m: float  # baro/altimeter
+    height_above_sea_m: float  # altimeter (h in the depth model d = h / cos alpha)
+    pan_rad: float = math.nan  # gimbal encoders
+    tilt_rad: float = math.nan
+    pan_rate_rad_s: float = math.nan
+    tilt_rate_rad_s: float = math.nan
+    cam_pos_enu_m: np.ndarray = field(default_factory=_NAN3)  # (3,) camera position r_c
+    det_new: bool = False  # a detection arrived this tick
+    det_valid: bool = False  # the newest detection found the target
+    det_exposure_t_s: float = math.nan  # when that frame was exposed
+    det_u_px: float = math.nan  # bounding-box centre (YOLO feature Q_t(u, v))
+    det_v_px: float = math.nan
+    det_bbox_px: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))  # u_min, v_min, u_max, v_max
+
+
+@dataclass(frozen=True, slots=True)
+class GimbalCommand:
+    """Pan and tilt rates the flight software asks of the gimbal (NaN: hold)."""
+
+    t_s: float
+    pan_rate_rad_s: float
+    tilt_rate_rad_s: float
 
 
 @dataclass(frozen=True, slots=True)

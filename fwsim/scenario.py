@@ -18,6 +18,10 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from fwsim.camera import CameraConfig
+from fwsim.sensors import SensorsConfig
+from fwsim.target import TargetConfig
+
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
@@ -81,6 +85,8 @@ class ScriptStep(_Strict):
     t_s: float = Field(ge=0, description="time from which this command holds")
     rates: RatesStep | None = None
     accel: AccelStep | None = None
+    gimbal_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="pan, tilt the gimbal is driven to from this step on (none: keep the last)")
 
     @model_validator(mode="after")
     def _one_mode(self):
@@ -127,10 +133,20 @@ class Scenario(_Strict):
     world: World = Field(default_factory=World)
     initial: Initial
     stop: Stop = Field(default_factory=Stop)
-    # Filled by later parts of the mission; empty sections are accepted now.
-    target: dict[str, Any] = Field(default_factory=dict)
-    camera: dict[str, Any] = Field(default_factory=dict)
+    target: TargetConfig = Field(default_factory=TargetConfig)
+    camera: CameraConfig = Field(default_factory=CameraConfig)
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
     controllers: Controllers = Field(default_factory=Controllers)
+
+    @model_validator(mode="after")
+    def _camera_rates(self):
+        for name, hz in (("camera.rate_hz", self.camera.rate_hz), ("camera.render.rate_hz",
+                                                                   self.camera.render.rate_hz)):
+            if hz > 0:
+                ratio = self.rates.sim_hz / hz
+                if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+                    raise ValueError(f"{name} must divide rates.sim_hz evenly (sim_hz / rate = {ratio:g})")
+        return self
 
 
 class ScenarioError(ValueError):

@@ -8,6 +8,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
@@ -247,6 +249,34 @@ class LogWriter:
         pos.x, pos.y, pos.z = px, py, pz
         ori.w, ori.x, ori.y, ori.z = w, x, y, z
         self._write_proto(POSE_TOPIC, pose, ns)
+
+    def write_transform(self, t_s: float, child_frame_id: str, pos, quat_wxyz,
+                        parent_frame_id: str = WORLD_FRAME) -> None:
+        """A foxglove.FrameTransform on /tf: ``child`` posed in ``parent`` (e.g. the camera, the ship)."""
+        ns = _ns(t_s)
+        msg = FrameTransform(parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
+        msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
+        msg.translation.x, msg.translation.y, msg.translation.z = (float(c) for c in pos)
+        r = msg.rotation
+        r.w, r.x, r.y, r.z = (float(c) for c in quat_wxyz)
+        self._write_proto(TF_TOPIC, msg, ns)
+
+    def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
+        """A foxglove.CompressedImage (e.g. a rendered camera frame)."""
+        ns = _ns(t_s)
+        msg = CompressedImage(frame_id=frame_id, data=data, format=fmt)
+        msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
+        self._write_proto(topic, msg, ns)
+
+    def write_calibration(self, topic: str, t_s: float, frame_id: str, width: int, height: int, K) -> None:
+        """A foxglove.CameraCalibration (pinhole, no distortion) so viewers can draw the frustum."""
+        ns = _ns(t_s)
+        K = [float(k) for k in (K.ravel() if hasattr(K, "ravel") else K)]
+        P = [K[0], K[1], K[2], 0.0, K[3], K[4], K[5], 0.0, K[6], K[7], K[8], 0.0]
+        msg = CameraCalibration(frame_id=frame_id, width=width, height=height, distortion_model="plumb_bob",
+                                D=[0.0] * 5, K=K, R=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], P=P)
+        msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
+        self._write_proto(topic, msg, ns)
 
     def write_event(
         self, t_s: float | None, text: str, level: str | int = "INFO", name: str = "fwsim"

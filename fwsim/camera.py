@@ -1,0 +1,375 @@
+"""The pan-tilt camera: pinhole intrinsics, ray-cast detection, full-frame render.
+
+What the camera sees comes from geometry, not a formula: rays from the
+camera centre are cast (Embree, through embreex) against the posed UAV mesh
+(fwsim.geometry) and the ship mesh (fwsim.target); a ship pixel is visible
+when its ray hits the ship before any part of the UAV. The UAV's own wing
+therefore hides the ship when a bank puts it above the wing plane.
+
+Cost: rays are cast only over the region of interest where the ship's
+bounding box projects (plus a margin), at a pixel stride chosen so that at
+most ``max_roi_rays`` rays are cast; the UAV is tested only on rays that hit
+the ship. Meshes stay in their own frames: rays are moved into each mesh's
+frame instead of moving the meshes.
+
+Image coordinates follow OpenCV: u right, v down, pixel (i, j) centred on the
+integer coordinates; the principal point is the image centre (the paper's
+(640, 360) for 1280x720).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from fwsim.gimbal import GimbalConfig
+
+_MISS = 1e30  # embree reports a miss as a huge distance
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DetectorConfig(_Strict):
+    """Noise model standing in for YOLO (every draw from the scenario's seed)."""
+
+    pixel_noise_px: float = Field(1.5, ge=0, le=50, description="std. dev. of the box centre noise, px")
+    box_noise_px: float = Field(1.0, ge=0, le=50, description="std. dev. of each box edge's noise, px")
+    miss_probability: float = Field(0.02, ge=0, le=1, description="chance a visible ship is not reported")
+    min_visible_px: float = Field(12.0, ge=0, description="fewer visible ship pixels than this: no detection")
+    latency_s: float = Field(0.0, ge=0, le=2, description="delay from exposure to the detection's arrival")
+
+
+class RenderConfig(_Strict):
+    rate_hz: float = Field(2.0, ge=0, le=30, description="full-frame renders per second in the log (0: none)")
+    width_px: int = Field(320, ge=16, le=1920)
+    height_px: int = Field(180, ge=16, le=1080)
+    jpeg_quality: int = Field(85, ge=10, le=100)
+
+
+class CameraConfig(_Strict):
+    width_px: int = Field(1280, ge=16, le=4096)
+    height_px: int = Field(720, ge=16, le=4096)
+    hfov_deg: float = Field(60.0, gt=1, lt=170, description="horizontal field of view; square pixels")
+    rate_hz: float = Field(30.0, gt=0, le=240, description="frame rate of the detector")
+    roi_margin_px: int = Field(8, ge=0, le=200, description="margin around the projected ship box")
+    max_roi_rays: int = Field(2048, ge=64, le=4_000_000, description="ray budget of one detection frame")
+    gimbal: GimbalConfig = Field(default_factory=GimbalConfig)
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
+    render: RenderConfig = Field(default_factory=RenderConfig)
+
+    @model_validator(mode="after")
+    def _rate(self):
+        return self
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    width_px: int
+    height_px: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_fov(cls, width_px: int, height_px: int, hfov_deg: float) -> "Intrinsics":
+        f = (width_px / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+        return cls(width_px, height_px, f, f, width_px / 2.0, height_px / 2.0)
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def scaled(self, width_px: int, height_px: int) -> "Intrinsics":
+        sx, sy = width_px / self.width_px, height_px / self.height_px
+        return Intrinsics(width_px, height_px, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy)
+
+    def project(self, p_cam: np.ndarray) -> np.ndarray:
+        """Points (n, 3) in the camera frame -> pixels (n, 2); u = fx X/Z + cx, v = fy Y/Z + cy."""
+        p = np.atleast_2d(p_cam)
+        return np.stack([self.fx * p[:, 0] / p[:, 2] + self.cx, self.fy * p[:, 1] / p[:, 2] + self.cy], axis=1)
+
+    def rays(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Unit ray directions (n, 3) in the camera frame through pixels (u, v)."""
+        d = np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u, dtype=float)], axis=1)
+        return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+@dataclass(frozen=True, slots=True)
+class FrameGeometry:
+    """What one camera frame shows of the ship (ground truth, before detector noise)."""
+
+    t_s: float
+    in_fov: bool  # some ship pixel inside the image, whether hidden or not
+    visible_px: float  # ship pixels not hidden by the UAV (ray count x stride^2)
+    ship_px: float  # ship pixels inside the image, hidden or not
+    occluded_fraction: float  # 1 - visible / ship (NaN when the ship is not in the image)
+    bbox_px: np.ndarray  # (4,) u_min, v_min, u_max, v_max of the visible ship pixels (NaN if none)
+    centre_px: np.ndarray  # (2,) centre of that box (NaN if none)
+    stride_px: int  # pixel stride of the rays cast
+    rays_cast: int
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    """The detector's output as the mission computer receives it (the YOLO stand-in)."""
+
+    t_s: float  # arrival time
+    exposure_t_s: float  # when the frame was taken
+    detected: bool
+    u_px: float  # box centre (NaN when not detected)
+    v_px: float
+    bbox_px: np.ndarray  # (4,) u_min, v_min, u_max, v_max (NaN when not detected)
+
+
+def _scene(mesh) -> rtcs.EmbreeScene:
+    sc = rtcs.EmbreeScene()
+    TriangleMesh(sc, np.ascontiguousarray(mesh.triangles, dtype=np.float32))
+    return sc
+
+
+def _first_hit(scene, origins_local: np.ndarray, dirs_local: np.ndarray) -> np.ndarray:
+    """Distance along each ray to the first hit (inf on a miss)."""
+    d = scene.run(np.ascontiguousarray(origins_local, dtype=np.float32),
+                  np.ascontiguousarray(dirs_local, dtype=np.float32), query="DISTANCE")
+    d = np.asarray(d, dtype=float)
+    d[d > _MISS] = np.inf
+    return d
+
+
+@dataclass
+class Pose:
+    """A rigid pose: p_world = R @ p_local + t."""
+
+    R: np.ndarray
+    t: np.ndarray
+
+    def to_local(self, origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays into the local frame; ``origins`` may be one point (3,) shared by all rays."""
+        o = (origins - self.t) @ self.R
+        if o.ndim == 1:
+            o = np.broadcast_to(o.astype(np.float32), dirs.shape)
+        return o, dirs @ self.R
+
+
+@dataclass
+class RayCaster:
+    """The scene the camera sees: the UAV (body frame) and the ship (ship frame)."""
+
+    uav_mesh: object
+    ship_mesh: object
+    _uav: rtcs.EmbreeScene = field(init=False)
+    _ship: rtcs.EmbreeScene = field(init=False)
+    ship_corners: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self._uav = _scene(self.uav_mesh)
+        self._ship = _scene(self.ship_mesh)
+        lo, hi = self.ship_mesh.bounds
+        self.ship_corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                      for z in (lo[2], hi[2])])
+        self.uav_lowest_z_m = float(self.uav_mesh.bounds[1][2])  # body z (down) of the UAV's lowest point
+
+    def cast(self, origin_w: np.ndarray, dirs_w: np.ndarray, uav: Pose, ship: Pose,
+             ship_rays: np.ndarray | None = None, uav_only_where_ship: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """First-hit distances to the ship and to the UAV for rays from one origin (world frame).
+
+        ``ship_rays`` (indices) limits the ship test to rays that can reach it;
+        the UAV is tested only on rays that hit the ship (``uav_only_where_ship``)
+        or, otherwise, on rays that can reach the UAV at all: from a camera below
+        the UAV's lowest point, a ray heading down (body z) cannot.
+        """
+        n = len(dirs_w)
+        d_ship = np.full(n, np.inf)
+        idx = np.arange(n) if ship_rays is None else ship_rays
+        if idx.size:
+            d_ship[idx] = _first_hit(self._ship, *ship.to_local(origin_w, dirs_w[idx]))
+        d_uav = np.full(n, np.inf)
+        if uav_only_where_ship:
+            idx = np.flatnonzero(np.isfinite(d_ship))
+        else:
+            o_body = (origin_w - uav.t) @ uav.R
+            idx = np.arange(n)
+            if o_body[2] > self.uav_lowest_z_m:
+                idx = np.flatnonzero(dirs_w @ uav.R[:, 2] < 0.0)
+        if idx.size:
+            d_uav[idx] = _first_hit(self._uav, *uav.to_local(origin_w, dirs_w[idx]))
+        return d_ship, d_uav
+
+
+def _summarise(t_s, u, v, d_ship, d_uav, stride, rays) -> FrameGeometry:
+    ship = np.isfinite(d_ship)
+    vis = ship & ~(d_uav < d_ship)
+    n_ship, n_vis = int(ship.sum()), int(vis.sum())
+    area = float(stride * stride)
+    if n_vis:
+        bbox = np.array([u[vis].min(), v[vis].min(), u[vis].max(), v[vis].max()], dtype=float)
+        centre = np.array([(bbox[0] + bbox[2]) / 2, (bbox[1] + bbox[3]) / 2])
+    else:
+        bbox, centre = np.full(4, np.nan), np.full(2, np.nan)
+    return FrameGeometry(t_s, n_ship > 0, n_vis * area, n_ship * area,
+                         (1.0 - n_vis / n_ship) if n_ship else math.nan, bbox, centre, stride, rays)
+
+
+class Camera:
+    """Ray-cast detection of the ship, and full-frame renders for the log."""
+
+    def __init__(self, cfg: CameraConfig, uav_mesh, ship_mesh):
+        self.cfg = cfg
+        self.K = Intrinsics.from_fov(cfg.width_px, cfg.height_px, cfg.hfov_deg)
+        self.caster = RayCaster(uav_mesh, ship_mesh)
+        self._ray_table = self._table(self.K)  # unit ray of every pixel, camera frame (H, W, 3)
+        rc = cfg.render
+        self.K_render = self.K.scaled(rc.width_px, rc.height_px)
+        self._render_rays = self._table(self.K_render).reshape(-1, 3)
+
+    @staticmethod
+    def _table(K: Intrinsics) -> np.ndarray:
+        uu, vv = np.meshgrid(np.arange(K.width_px, dtype=float), np.arange(K.height_px, dtype=float))
+        return K.rays(uu.ravel(), vv.ravel()).reshape(K.height_px, K.width_px, 3)
+
+    # ------------------------------------------------------------------ detection
+    def roi(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose) -> tuple[int, int, int, int] | None:
+        """Pixel box (u0, v0, u1, v1 inclusive) where the ship can project, or None if it cannot."""
+        corners_w = self.caster.ship_corners @ ship.R.T + ship.t
+        p_cam = (corners_w - cam_pos) @ R_enu_cam
+        front = p_cam[:, 2] > 1e-3
+        if not front.any():
+            return None
+        W, H, m = self.cfg.width_px, self.cfg.height_px, self.cfg.roi_margin_px
+        if front.all():
+            uv = self.K.project(p_cam)
+            u0, v0 = np.floor(uv.min(axis=0)) - m
+            u1, v1 = np.ceil(uv.max(axis=0)) + m
+        else:  # the box straddles the camera plane: the whole image may show it
+            u0, v0, u1, v1 = 0, 0, W - 1, H - 1
+        u0, v0 = max(int(u0), 0), max(int(v0), 0)
+        u1, v1 = min(int(u1), W - 1), min(int(v1), H - 1)
+        if u0 > u1 or v0 > v1:
+            return None
+        return u0, v0, u1, v1
+
+    def detect(self, t_s: float, cam_pos: np.ndarray, R_enu_cam: np.ndarray, uav: Pose, ship: Pose) -> FrameGeometry:
+        """Visible ship pixels by ray casting over the region of interest."""
+        box = self.roi(cam_pos, R_enu_cam, ship)
+        if box is None:
+            return _summarise(t_s, np.empty(0), np.empty(0), np.empty(0), np.empty(0), 1, 0)
+        u0, v0, u1, v1 = box
+        area = (u1 - u0 + 1) * (v1 - v0 + 1)
+        stride = max(1, math.ceil(math.sqrt(area / self.cfg.max_roi_rays)))
+        us = np.arange(u0, u1 + 1, stride)
+        vs = np.arange(v0, v1 + 1, stride)
+        u = np.tile(us, len(vs)).astype(float)
+        v = np.repeat(vs, len(us)).astype(float)
+        dirs_w = self._ray_table[v0:v1 + 1:stride, u0:u1 + 1:stride].reshape(-1, 3) @ R_enu_cam.T
+        d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship)
+        return _summarise(t_s, u, v, d_ship, d_uav, stride, len(u))
+
+    def detect_full_frame(self, t_s, cam_pos, R_enu_cam, uav: Pose, ship: Pose) -> FrameGeometry:
+        """The same measurement from every pixel of the image (the reference for ``detect``)."""
+        uu, vv = np.meshgrid(np.arange(self.cfg.width_px, dtype=float), np.arange(self.cfg.height_px, dtype=float))
+        u, v = uu.ravel(), vv.ravel()
+        dirs_w = self._ray_table.reshape(-1, 3) @ R_enu_cam.T
+        d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship)
+        return _summarise(t_s, u, v, d_ship, d_uav, 1, len(u))
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, uav: Pose, ship: Pose,
+               bbox_px: np.ndarray | None = None) -> np.ndarray:
+        """A shaded BGR image at the render resolution: sky, sea, ship, UAV parts in view."""
+        rc = self.cfg.render
+        dirs_w = self._render_rays @ R_enu_cam.T
+        box = self.roi(cam_pos, R_enu_cam, ship)  # full-resolution pixels where the ship can be
+        if box is None:
+            ship_rays = np.empty(0, dtype=int)
+        else:
+            s = rc.width_px / self.cfg.width_px
+            uu, vv = np.meshgrid(np.arange(rc.width_px), np.arange(rc.height_px))
+            inside = ((uu >= box[0] * s - 1) & (uu <= box[2] * s + 1) & (vv >= box[1] * s - 1)
+                      & (vv <= box[3] * s + 1))
+            ship_rays = np.flatnonzero(inside.ravel())
+        d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship, ship_rays=ship_rays, uav_only_where_ship=False)
+        n = len(dirs_w)
+        img = np.empty((n, 3))
+        # sky: lighter toward the horizon
+        elev = np.clip(dirs_w[:, 2], 0.0, 1.0)
+        img[:] = np.stack([235 - 60 * elev, 206 - 70 * elev, 170 - 90 * elev], axis=1)
+        # sea plane z = 0, fading into haze with distance
+        down = dirs_w[:, 2] < -1e-6
+        d_sea = np.full(n, np.inf)
+        d_sea[down] = -cam_pos[2] / dirs_w[down, 2]
+        haze = np.clip(d_sea / 4000.0, 0.0, 1.0)[:, None]
+        sea_col = np.array([120.0, 80.0, 30.0]) * (1 - haze) + np.array([200.0, 180.0, 150.0]) * haze
+        img[down] = sea_col[down]
+        sun = np.array([0.4, 0.3, 0.86])
+        sun /= np.linalg.norm(sun)
+        ship_px = np.isfinite(d_ship) & (d_ship < d_sea + 1.0) & ~(d_uav < d_ship)
+        if ship_px.any():
+            shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ sun)
+            img[ship_px] = np.array([150.0, 150.0, 160.0]) * shade[:, None]
+        uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
+        img[uav_px] = np.array([60.0, 60.0, 60.0])
+        out = img.reshape(rc.height_px, rc.width_px, 3).astype(np.uint8)
+        if bbox_px is not None and np.all(np.isfinite(bbox_px)):
+            s = np.array([rc.width_px / self.cfg.width_px, rc.height_px / self.cfg.height_px] * 2)
+            b = np.round(bbox_px * s).astype(int)
+            cv2.rectangle(out, (b[0], b[1]), (b[2], b[3]), (0, 255, 0), 1)
+        return out
+
+    @staticmethod
+    def _normals(scene, pose: Pose, origin_w, dirs_w) -> np.ndarray:
+        o, d = pose.to_local(np.broadcast_to(origin_w, dirs_w.shape), dirs_w)
+        res = scene.run(np.ascontiguousarray(o, dtype=np.float32), np.ascontiguousarray(d, dtype=np.float32),
+                        output=1)
+        ng = np.asarray(res["Ng"], dtype=float) @ pose.R.T
+        return ng / np.maximum(np.linalg.norm(ng, axis=1), 1e-12)[:, None]
+
+    def encode_jpeg(self, img: np.ndarray) -> bytes:
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, self.cfg.render.jpeg_quality])
+        if not ok:
+            raise RuntimeError("JPEG encoding failed")
+        return buf.tobytes()
+
+
+class Detector:
+    """YOLO stand-in: turns the geometric truth of a frame into a noisy detection.
+
+    Pixel noise on the box edges and centre, missed detections, and latency
+    (detections arrive ``latency_s`` after exposure), all drawn from ``rng``.
+    """
+
+    def __init__(self, cfg: DetectorConfig, rng: np.random.Generator, width_px: int, height_px: int):
+        self.cfg = cfg
+        self.rng = rng
+        self.size = (width_px, height_px)
+        self._queue: list[Detection] = []
+
+    def observe(self, frame: FrameGeometry) -> None:
+        c = self.cfg
+        t_arrive = frame.t_s + c.latency_s
+        # draw every random number each frame, so one frame's outcome never shifts the next's stream
+        miss_draw = self.rng.random()
+        noise = self.rng.normal(size=6)
+        if frame.visible_px < max(c.min_visible_px, 1e-9) or miss_draw < c.miss_probability:
+            det = Detection(t_arrive, frame.t_s, False, math.nan, math.nan, np.full(4, np.nan))
+        else:
+            b = frame.bbox_px + c.box_noise_px * noise[:4]
+            centre = frame.centre_px + c.pixel_noise_px * noise[4:]
+            W, H = self.size
+            b = np.clip(b, [0, 0, 0, 0], [W - 1, H - 1, W - 1, H - 1])
+            det = Detection(t_arrive, frame.t_s, True, float(centre[0]), float(centre[1]), b)
+        self._queue.append(det)
+
+    def arrived(self, t_s: float) -> Detection | None:
+        """The newest detection that has arrived by ``t_s`` (older arrivals are dropped)."""
+        out = None
+        while self._queue and self._queue[0].t_s <= t_s + 1e-9:
+            out = self._queue.pop(0)
+        return out

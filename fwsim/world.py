@@ -1,0 +1,79 @@
+"""The truth world: JSBSim airframe, ship target, pan-tilt gimbal and camera.
+
+``World.step`` advances everything by one tick; ``World.look`` takes one
+camera frame (the geometric truth of what the camera sees). Only the harness
+uses this module; the flight software sees its ``Measurements``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fwsim.airframe import Airframe
+from fwsim.camera import Camera, FrameGeometry, Pose
+from fwsim.frames import GeoOrigin, dcm_enu_from_frd
+from fwsim.geometry import uav_mesh
+from fwsim.gimbal import Gimbal, GimbalState, camera_pose_world
+from fwsim.messages import ActuatorCommand, AirframeState, GimbalCommand
+from fwsim.scenario import Scenario
+from fwsim.target import Ship, TargetState
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """Everything true at one tick (harness side only)."""
+
+    uav: AirframeState
+    target: TargetState
+    gimbal: GimbalState
+    cam_pos_enu_m: np.ndarray
+    R_enu_from_cam: np.ndarray
+
+
+class World:
+    def __init__(self, scenario: Scenario):
+        self.scenario = scenario
+        dt = 1.0 / scenario.rates.sim_hz
+        self.dt_s = dt
+        w = scenario.world
+        self.airframe = Airframe(scenario.aircraft.name, dt_s=dt, origin=GeoOrigin(w.origin_lat_deg, w.origin_lon_deg),
+                                 wind_enu_m_s=w.wind_enu_m_s)
+        self.ship = Ship(scenario.target)
+        self.gimbal = Gimbal(scenario.camera.gimbal, dt)
+        self.camera = Camera(scenario.camera, uav_mesh(scenario.aircraft.name), self.ship.mesh)
+        self._mount = np.asarray(scenario.camera.gimbal.mount_offset_frd_m, dtype=float)
+        self.truth: Truth | None = None
+
+    def _compose(self, uav: AirframeState, g: GimbalState) -> Truth:
+        cam_pos, R_cam = camera_pose_world(uav.pos_enu_m, uav.euler_ned_rad, self._mount, g.pan_rad, g.tilt_rad)
+        self.truth = Truth(uav, self.ship.state(uav.t_s), g, cam_pos, R_cam)
+        return self.truth
+
+    def reset(self) -> Truth:
+        ini = self.scenario.initial
+        uav = self.airframe.reset(ini.pos_enu_m, ini.airspeed_m_s, math.radians(ini.heading_deg),
+                                  math.radians(ini.flight_path_deg), trim=ini.trim)
+        return self._compose(uav, self.gimbal.reset())
+
+    def step(self, act: ActuatorCommand, gimbal_cmd: GimbalCommand) -> Truth:
+        uav = self.airframe.step(act)
+        g = self.gimbal.step(uav.t_s, gimbal_cmd.pan_rate_rad_s, gimbal_cmd.tilt_rate_rad_s)
+        return self._compose(uav, g)
+
+    def poses(self) -> tuple[Pose, Pose]:
+        """Current poses of the UAV (body FRD) and the ship (ship frame) in the world."""
+        tr = self.truth
+        uav = Pose(dcm_enu_from_frd(tr.uav.euler_ned_rad), tr.uav.pos_enu_m)
+        pos, R = self.ship.pose(tr.uav.t_s)
+        return uav, Pose(R, pos)
+
+    def look(self) -> FrameGeometry:
+        """One camera frame: what the camera sees of the ship right now."""
+        uav, ship = self.poses()
+        return self.camera.detect(self.truth.uav.t_s, self.truth.cam_pos_enu_m, self.truth.R_enu_from_cam, uav, ship)
+
+    def render(self, bbox_px=None) -> np.ndarray:
+        uav, ship = self.poses()
+        return self.camera.render(self.truth.cam_pos_enu_m, self.truth.R_enu_from_cam, uav, ship, bbox_px)
