@@ -52,6 +52,36 @@ def wrapper_steps_per_s(seconds: float = 30.0, repeats: int = 3) -> float:
     return n / _best_of(once, repeats)
 
 
+def detection_frame_ms(frames: int = 600) -> tuple[float, float]:
+    """(median, p99) milliseconds of one detection frame: ROI ray casting against the
+    UAV and the ship, the ship about 900 m away (a loiter at R = H = 500 m), the
+    camera pointed at it, the pose varying a little every frame."""
+    import numpy as np
+
+    from fwsim.camera import Camera, CameraConfig, Pose
+    from fwsim.frames import dcm_enu_from_frd
+    from fwsim.geometry import uav_mesh
+    from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
+    from fwsim.target import Ship, TargetConfig
+    ship = Ship(TargetConfig())
+    cam = Camera(CameraConfig(), uav_mesh("fwuav"), ship.mesh)
+    R_s, t_s = ship.pose(0.0)[1], ship.pose(0.0)[0]
+    mount = np.array([0.0, 0.0, 0.1])
+    times = []
+    for k in range(frames):
+        a = 2 * math.pi * k / frames
+        pos = np.array([500 * math.cos(a), 500 * math.sin(a), 500.0])
+        euler = np.array([-0.2, 0.02, (math.pi - a) % (2 * math.pi) - math.pi])
+        R = dcm_enu_from_frd(euler)
+        pan, tilt = pan_tilt_pointing_at(R.T @ (np.array([0, 0, 8.0]) - pos - R @ mount))
+        cp, Rc = camera_pose_world(pos, euler, mount, pan, tilt)
+        t0 = time.perf_counter()
+        cam.detect(0.0, cp, Rc, Pose(R, pos), Pose(R_s, t_s))
+        times.append(time.perf_counter() - t0)
+    ms = np.array(times) * 1e3
+    return float(np.median(ms)), float(np.percentile(ms, 99))
+
+
 def closed_loop(scenario_path: Path, repeats: int = 2) -> tuple[float, float, float]:
     """(sim seconds, best wall seconds, real-time factor) of a full run with logging."""
     from fwsim.loop import run
@@ -74,6 +104,8 @@ def run_bench(quick: bool = False) -> dict[str, float | str]:
     raw = jsbsim_raw_steps_per_s(seconds, repeats)
     wrap = wrapper_steps_per_s(seconds, repeats)
     sim, wall, rtf = closed_loop(SCENARIO_DIR / "autopilot_checkout.yaml", 1 if quick else 2)
+    det_med, det_p99 = detection_frame_ms(200 if quick else 600)
+    p_sim, p_wall, p_rtf = closed_loop(SCENARIO_DIR / "paper_mission.yaml", 1)
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "jsbsim_raw_steps_per_s": raw,
@@ -83,4 +115,8 @@ def run_bench(quick: bool = False) -> dict[str, float | str]:
         "checkout_wall_s": wall,
         "checkout_real_time_factor": rtf,
         "checkout_share_of_raw_rate": rtf * 120.0 / raw if raw > 0 else math.nan,
+        "detection_frame_ms_median": det_med,
+        "detection_frame_ms_p99": det_p99,
+        "paper_mission_sim_s": p_sim,
+        "paper_mission_real_time_factor": p_rtf,
     }

@@ -47,7 +47,7 @@ class DetectorConfig(_Strict):
 
 
 class RenderConfig(_Strict):
-    rate_hz: float = Field(2.0, ge=0, le=30, description="full-frame renders per second in the log (0: none)")
+    rate_hz: float = Field(1.0, ge=0, le=30, description="full-frame renders per second in the log (0: none)")
     width_px: int = Field(320, ge=16, le=1920)
     height_px: int = Field(180, ge=16, le=1080)
     jpeg_quality: int = Field(85, ge=10, le=100)
@@ -297,25 +297,25 @@ class Camera:
             ship_rays = np.flatnonzero(inside.ravel())
         d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship, ship_rays=ship_rays, uav_only_where_ship=False)
         n = len(dirs_w)
-        img = np.empty((n, 3))
+        dz = dirs_w[:, 2].astype(np.float32)
         # sky: lighter toward the horizon
-        elev = np.clip(dirs_w[:, 2], 0.0, 1.0)
-        img[:] = np.stack([235 - 60 * elev, 206 - 70 * elev, 170 - 90 * elev], axis=1)
+        elev = np.clip(dz, 0.0, 1.0)[:, None]
+        img = np.array([235.0, 206.0, 170.0], np.float32) - elev * np.array([60.0, 70.0, 90.0], np.float32)
         # sea plane z = 0, fading into haze with distance
-        down = dirs_w[:, 2] < -1e-6
-        d_sea = np.full(n, np.inf)
-        d_sea[down] = -cam_pos[2] / dirs_w[down, 2]
-        haze = np.clip(d_sea / 4000.0, 0.0, 1.0)[:, None]
-        sea_col = np.array([120.0, 80.0, 30.0]) * (1 - haze) + np.array([200.0, 180.0, 150.0]) * haze
-        img[down] = sea_col[down]
+        down = dz < -1e-6
+        d_sea = np.full(n, np.inf, np.float32)
+        d_sea[down] = -np.float32(cam_pos[2]) / dz[down]
+        haze = np.clip(d_sea[down] / 4000.0, 0.0, 1.0)[:, None]
+        img[down] = (np.array([120.0, 80.0, 30.0], np.float32) * (1 - haze)
+                     + np.array([200.0, 180.0, 150.0], np.float32) * haze)
         sun = np.array([0.4, 0.3, 0.86])
         sun /= np.linalg.norm(sun)
         ship_px = np.isfinite(d_ship) & (d_ship < d_sea + 1.0) & ~(d_uav < d_ship)
         if ship_px.any():
             shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ sun)
-            img[ship_px] = np.array([150.0, 150.0, 160.0]) * shade[:, None]
+            img[ship_px] = np.array([150.0, 150.0, 160.0], np.float32) * shade[:, None].astype(np.float32)
         uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
-        img[uav_px] = np.array([60.0, 60.0, 60.0])
+        img[uav_px] = np.array([60.0, 60.0, 60.0], np.float32)
         out = img.reshape(rc.height_px, rc.width_px, 3).astype(np.uint8)
         if bbox_px is not None and np.all(np.isfinite(bbox_px)):
             s = np.array([rc.width_px / self.cfg.width_px, rc.height_px / self.cfg.height_px] * 2)

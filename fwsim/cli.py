@@ -90,7 +90,7 @@ def cmd_metrics(args) -> int:
 
 def cmd_bench(args) -> int:
     from fwsim.bench import run_bench
-    console.print("measuring (JSBSim raw, airframe wrapper, closed-loop checkout) ...")
+    console.print("measuring (JSBSim raw, airframe wrapper, closed loops, detection frames) ...")
     res = run_bench(quick=args.quick)
     if args.json:
         print(json.dumps(res, indent=2))

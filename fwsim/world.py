@@ -21,15 +21,32 @@ from fwsim.scenario import Scenario
 from fwsim.target import Ship, TargetState
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Truth:
-    """Everything true at one tick (harness side only)."""
+    """Everything true at one tick (harness side only).
+
+    The camera pose is computed on first use: most ticks (120 Hz) never need it.
+    """
 
     uav: AirframeState
     target: TargetState
     gimbal: GimbalState
-    cam_pos_enu_m: np.ndarray
-    R_enu_from_cam: np.ndarray
+    mount_offset_frd_m: np.ndarray
+    _cam: tuple | None = None
+
+    def _camera(self) -> tuple:
+        if self._cam is None:
+            self._cam = camera_pose_world(self.uav.pos_enu_m, self.uav.euler_ned_rad, self.mount_offset_frd_m,
+                                          self.gimbal.pan_rad, self.gimbal.tilt_rad)
+        return self._cam
+
+    @property
+    def cam_pos_enu_m(self) -> np.ndarray:
+        return self._camera()[0]
+
+    @property
+    def R_enu_from_cam(self) -> np.ndarray:
+        return self._camera()[1]
 
 
 class World:
@@ -47,8 +64,7 @@ class World:
         self.truth: Truth | None = None
 
     def _compose(self, uav: AirframeState, g: GimbalState) -> Truth:
-        cam_pos, R_cam = camera_pose_world(uav.pos_enu_m, uav.euler_ned_rad, self._mount, g.pan_rad, g.tilt_rad)
-        self.truth = Truth(uav, self.ship.state(uav.t_s), g, cam_pos, R_cam)
+        self.truth = Truth(uav, self.ship.state(uav.t_s), g, self._mount)
         return self.truth
 
     def reset(self) -> Truth:
