@@ -41,4 +41,16 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
         if np.any(accel):
             a_err = np.linalg.norm(ap["accel_sp_enu_m_s2"][accel] - ap["accel_enu_m_s2"][accel], axis=1)
             m["accel_err_rms_m_s2"] = _rms(a_err)
+    if "/camera/frame" in log.topics:
+        fr = log.table("/camera/frame")
+        in_fov = fr["in_fov"].astype(bool)
+        visible = fr["visible_px"] > 0
+        m["camera_frames"] = float(len(in_fov))
+        m["target_in_fov_fraction"] = float(np.mean(in_fov)) if len(in_fov) else math.nan
+        m["target_visible_fraction"] = float(np.mean(visible)) if len(visible) else math.nan
+        m["occluded_frames"] = float(np.sum(in_fov & ~visible))  # in view but hidden by the UAV
+        m["partly_occluded_frames"] = float(np.sum(visible & (fr["occluded_fraction"] > 0)))
+    if "/camera/detection" in log.topics:
+        det = log.table("/camera/detection")
+        m["detections"] = float(np.sum(det["detected"].astype(bool)))
     return m
