@@ -2,7 +2,9 @@
 
 Each sensor adds white Gaussian noise with its own ``numpy.random.Generator``,
 seeded from the scenario seed and the sensor's name (so adding a sensor never
-shifts another's noise). Sampled at the flight software's rate; the camera
+shifts another's noise). Each sensor also has its own update rate: between
+updates the mission computer holds the last sample (as it would hold the last
+GNSS fix). The flight software reads them at its own rate; the camera
 detection arrives through ``Detector`` (fwsim.camera) at the camera's rate,
 with its own latency.
 """
@@ -27,11 +29,34 @@ class SensorsConfig(BaseModel):
     airspeed_noise_m_s: float = Field(0.2, ge=0, le=10, description="pitot airspeed")
     height_noise_m: float = Field(0.5, ge=0, le=100, description="height above the sea")
     encoder_noise_rad: float = Field(0.0005, ge=0, le=0.1, description="gimbal pan and tilt encoders")
+    gnss_rate_hz: float = Field(10.0, gt=0, le=1000, description="position and velocity updates")
+    ahrs_rate_hz: float = Field(100.0, gt=0, le=1000, description="attitude and gyro updates")
+    air_data_rate_hz: float = Field(20.0, gt=0, le=1000, description="airspeed and height updates")
+    encoder_rate_hz: float = Field(100.0, gt=0, le=1000, description="gimbal encoder updates")
 
 
 def rng_for(seed: int, name: str) -> np.random.Generator:
     """A generator for one named noise source, fixed by the scenario seed."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32(name.encode())]))
+
+
+class _Held:
+    """Sample-and-hold at a rate: ``due(t)`` is true when a new sample is due."""
+
+    __slots__ = ("period", "next_t", "value")
+
+    def __init__(self, rate_hz: float):
+        self.period = 1.0 / rate_hz
+        self.next_t = -1.0
+        self.value = None
+
+    def due(self, t_s: float) -> bool:
+        if t_s + 1e-9 >= self.next_t:
+            self.next_t = (t_s if self.next_t < 0 else self.next_t) + self.period
+            if self.next_t <= t_s:  # sampled more slowly than the sensor's rate: catch up
+                self.next_t = t_s + self.period
+            return True
+        return False
 
 
 class Sensors:
@@ -41,6 +66,10 @@ class Sensors:
         self.cfg = cfg
         names = ("position", "velocity", "attitude", "gyro", "airspeed", "height", "encoders")
         self._rng = {n: rng_for(seed, "sensor/" + n) for n in names}
+        self._gnss = _Held(cfg.gnss_rate_hz)
+        self._ahrs = _Held(cfg.ahrs_rate_hz)
+        self._air = _Held(cfg.air_data_rate_hz)
+        self._enc = _Held(cfg.encoder_rate_hz)
 
     def _n(self, name: str, sigma: float, size=None):
         if sigma == 0.0:
@@ -50,26 +79,34 @@ class Sensors:
     def sample(self, uav: AirframeState, gimbal=None, cam_pos_enu_m=None, detection=None,
                last_detection=None) -> Measurements:
         """``detection``: the one arriving this tick (or None); ``last_detection``: the newest so far."""
-        c = self.cfg
+        c, t = self.cfg, uav.t_s
+        if self._gnss.due(t):
+            self._gnss.value = (uav.pos_enu_m + self._n("position", c.position_noise_m, 3),
+                                uav.vel_enu_m_s + self._n("velocity", c.velocity_noise_m_s, 3),
+                                uav.pos_enu_m)
+        if self._ahrs.due(t):
+            self._ahrs.value = (uav.euler_ned_rad + self._n("attitude", c.attitude_noise_rad, 3),
+                                uav.body_rates_frd_rad_s + self._n("gyro", c.gyro_noise_rad_s, 3))
+        if self._air.due(t):
+            self._air.value = (uav.airspeed_m_s + self._n("airspeed", c.airspeed_noise_m_s),
+                               uav.height_above_sea_m + self._n("height", c.height_noise_m))
+        pos, vel, pos_true = self._gnss.value
+        euler, rates = self._ahrs.value
+        airspeed, height = self._air.value
         kw = {}
         if gimbal is not None:
-            e = self._n("encoders", c.encoder_noise_rad, 2)
-            kw.update(pan_rad=gimbal.pan_rad + e[0], tilt_rad=gimbal.tilt_rad + e[1],
-                      pan_rate_rad_s=gimbal.pan_rate_rad_s, tilt_rate_rad_s=gimbal.tilt_rate_rad_s)
-        pos_noise = self._n("position", c.position_noise_m, 3)
-        if cam_pos_enu_m is not None:  # r_c from the navigation solution and the known mount: same error
-            kw["cam_pos_enu_m"] = cam_pos_enu_m + pos_noise
+            if self._enc.due(t):
+                e = self._n("encoders", c.encoder_noise_rad, 2)
+                self._enc.value = (gimbal.pan_rad + e[0], gimbal.tilt_rad + e[1], gimbal.pan_rate_rad_s,
+                                   gimbal.tilt_rate_rad_s)
+            pan, tilt, pan_rate, tilt_rate = self._enc.value
+            kw.update(pan_rad=pan, tilt_rad=tilt, pan_rate_rad_s=pan_rate, tilt_rate_rad_s=tilt_rate)
+        if cam_pos_enu_m is not None:
+            # r_c from the navigation solution and the known mount: it carries the same position error
+            kw["cam_pos_enu_m"] = cam_pos_enu_m + (pos - pos_true)
         det = detection if detection is not None else last_detection
         if det is not None:
             kw.update(det_new=detection is not None, det_valid=det.detected, det_exposure_t_s=det.exposure_t_s,
                       det_u_px=det.u_px, det_v_px=det.v_px, det_bbox_px=det.bbox_px)
-        return Measurements(
-            t_s=uav.t_s,
-            pos_enu_m=uav.pos_enu_m + pos_noise,
-            vel_enu_m_s=uav.vel_enu_m_s + self._n("velocity", c.velocity_noise_m_s, 3),
-            euler_ned_rad=uav.euler_ned_rad + self._n("attitude", c.attitude_noise_rad, 3),
-            body_rates_frd_rad_s=uav.body_rates_frd_rad_s + self._n("gyro", c.gyro_noise_rad_s, 3),
-            airspeed_m_s=uav.airspeed_m_s + self._n("airspeed", c.airspeed_noise_m_s),
-            height_above_sea_m=uav.height_above_sea_m + self._n("height", c.height_noise_m),
-            **kw,
-        )
+        return Measurements(t_s=t, pos_enu_m=pos, vel_enu_m_s=vel, euler_ned_rad=euler,
+                            body_rates_frd_rad_s=rates, airspeed_m_s=airspeed, height_above_sea_m=height, **kw)
