@@ -351,3 +351,86 @@ def cross3(a, b) -> np.ndarray:
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
     b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+# --------------------------------------------------------------------------- pan-tilt camera
+# Pan-then-tilt (paper "PT Camera Model"): pan about the mount z (down), positive
+# clockwise seen from above; tilt about the panned y, positive UP; pan = tilt = 0
+# looks along body +x. R_frd_from_cam = Rz_active(pan) Ry_active(tilt) R_FRD_FROM_CAM.
+
+
+def R_frd_from_cam(pan_rad: float, tilt_rad: float) -> np.ndarray:
+    """R_frd_from_cam = Rz_active(pan) @ Ry_active(tilt) @ R_TILT_FROM_CAM; column 2 is the optical axis in FRD."""
+    cp, sp = math.cos(pan_rad), math.sin(pan_rad)
+    ct, st = math.cos(tilt_rad), math.sin(tilt_rad)
+    return np.array([[-sp, cp * st, cp * ct], [cp, sp * st, sp * ct], [0.0, ct, -st]])
+
+
+def camera_pose_world(pos_enu_m, euler_ned_rad, mount_offset_frd_m, pan_rad: float, tilt_rad: float):
+    """Camera position (world ENU, m) and R_enu_from_cam from the UAV pose and the joint angles.
+
+    ``cam_pos = pos_enu + R_enu_from_frd @ mount_offset_frd`` and
+    ``R_enu_from_cam = R_enu_from_frd @ R_frd_from_cam(pan, tilt)``; ``euler_ned_rad``
+    are the NED 3-2-1 [roll, pitch, yaw] of the body. Returns ``(cam_pos_enu_m (3,), R (3,3))``.
+    """
+    R_ef = dcm_enu_from_frd(euler_ned_rad)
+    ox, oy, oz = float(mount_offset_frd_m[0]), float(mount_offset_frd_m[1]), float(mount_offset_frd_m[2])
+    e0, e1, e2 = R_ef.tolist()  # python floats: much faster to index than array rows
+    cam_pos = np.array([
+        float(pos_enu_m[0]) + e0[0] * ox + e0[1] * oy + e0[2] * oz,
+        float(pos_enu_m[1]) + e1[0] * ox + e1[1] * oy + e1[2] * oz,
+        float(pos_enu_m[2]) + e2[0] * ox + e2[1] * oy + e2[2] * oz,
+    ])
+    return cam_pos, R_ef @ R_frd_from_cam(pan_rad, tilt_rad)
+
+
+def camera_angular_velocity(pan_rad: float, tilt_rad: float, pan_rate: float, tilt_rate: float,
+                            body_rates_frd_rad_s) -> np.ndarray:
+    """Total camera angular velocity (rad/s) relative to the world, expressed in the camera frame.
+
+    ``omega_c = [tilt_rate, cos(tilt)*pan_rate, -sin(tilt)*pan_rate]`` (paper eq. omegac,
+    the joints' part) ``+ R_cam_from_frd @ body_rates_frd`` (the airframe's part).
+    Pass zero body rates for the part relative to the body.
+    """
+    cp, sp = math.cos(pan_rad), math.sin(pan_rad)
+    ct, st = math.cos(tilt_rad), math.sin(tilt_rad)
+    p, q, r = float(body_rates_frd_rad_s[0]), float(body_rates_frd_rad_s[1]), float(body_rates_frd_rad_s[2])
+    # rows of R_cam_from_frd = columns of R_frd_from_cam
+    return np.array([
+        tilt_rate + (-sp * p + cp * q),
+        ct * pan_rate + (cp * st * p + sp * st * q + ct * r),
+        -st * pan_rate + (cp * ct * p + sp * ct * q - st * r),
+    ])
+
+
+def joint_rates_from_camera_rates(tilt_rad: float, omega_cx: float, omega_cy: float,
+                                  cos_min: float = 0.05) -> tuple[float, float]:
+    """(pan_rate, tilt_rate) realising the camera-frame rates (omega_cx, omega_cy) relative to the body.
+
+    Paper eq. (sigular): ``tilt_rate = omega_cx``, ``pan_rate = omega_cy / cos(tilt)``.
+    Singularity at tilt = +-90 deg (optical axis along body z: pan only spins the
+    image about the optical axis, it can no longer move it sideways). Handling:
+    ``|cos(tilt)|`` is floored at ``cos_min`` keeping its sign, so the result is
+    always finite, and within ``|tilt| > acos(cos_min)`` (about 87.1 deg for the
+    default 0.05) ``|pan_rate|`` is at most ``|omega_cy| / cos_min`` and the
+    commanded ``omega_cy`` is only partly realised (by the factor
+    ``|cos(tilt)| / cos_min``). The Gimbal's rate limit clips further. The third
+    component ``omega_cz`` cannot be commanded independently (2 joints, 3 rates).
+    """
+    if not 0.0 < cos_min <= 1.0:
+        raise ValueError(f"cos_min must be in (0, 1], got {cos_min}")
+    c = math.cos(tilt_rad)
+    if abs(c) < cos_min:
+        c = math.copysign(cos_min, c)
+    return float(omega_cy) / c, float(omega_cx)
+
+
+def pan_tilt_pointing_at(direction_frd) -> tuple[float, float]:
+    """(pan, tilt) that put the optical axis along a body-frame (FRD) direction (any length).
+
+    ``pan = atan2(dy, dx)`` in [-pi, pi], ``tilt = atan2(-dz, hypot(dx, dy))`` in [-pi/2, pi/2].
+    Straight down/up (dx = dy = 0) gives pan = 0 and tilt = -+pi/2; the zero
+    vector gives (0, 0). Joint limits are not applied here.
+    """
+    dx, dy, dz = float(direction_frd[0]), float(direction_frd[1]), float(direction_frd[2])
+    return math.atan2(dy, dx), math.atan2(-dz, math.hypot(dx, dy))
