@@ -1,8 +1,12 @@
-"""Command line: ``fwsim run | metrics | bench``.
+"""Command line: ``fwsim run | metrics | bench | batch | compare | plot | replay``.
 
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
     fwsim metrics runs/<log>.mcap [--json]
     fwsim bench [--json] [--quick]
+    fwsim batch SPEC.yaml [--workers N] [--out DIR] [--resume] [--ray auto|local|ADDRESS]
+    fwsim compare BASELINE RUN [--tolerances FILE]
+    fwsim plot LOG [--out DIR] [--only a,b]
+    fwsim replay LOG [--rrd OUT.rrd]
 """
 from __future__ import annotations
 
@@ -99,6 +103,113 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_batch(args) -> int:
+    from rich.progress import TimeRemainingColumn
+
+    from fwsim.batch import run_batch
+    out = Path(args.out) if args.out else Path("runs") / Path(args.spec).stem
+    failed = 0
+    with Progress(TextColumn("runs {task.completed:>4.0f} / {task.total:.0f}"), BarColumn(),
+                  TextColumn("[red]{task.fields[failed]} failed[/]"), TimeElapsedColumn(), TimeRemainingColumn(),
+                  console=console, disable=args.quiet, transient=True) as bar:
+        task = bar.add_task("batch", total=0, failed=0)
+
+        def on_start(total: int, resumed: int) -> None:
+            bar.update(task, total=total, completed=resumed)
+            console.print(f"[bold]fwsim batch[/] {args.spec}: {total} runs -> {out}"
+                          + (f" ({resumed} read back from their logs with --resume)" if resumed else ""))
+
+        def on_row(row: dict) -> None:
+            nonlocal failed
+            failed += row["status"] != "completed"
+            bar.update(task, advance=1, failed=failed)
+
+        try:
+            result = run_batch(args.spec, out, workers=args.workers, resume=args.resume, ray_address=args.ray,
+                               on_start=on_start, on_row=on_row)
+        except KeyboardInterrupt:
+            bar.stop()
+            console.print(f"[yellow]interrupted[/]: the summary of the finished runs is in {out}; "
+                          "continue with --resume")
+            return 130
+    bad = result.failed
+    if bad:
+        table = Table(title=f"{len(bad)} of {len(result.rows)} runs did not complete")
+        table.add_column("id")
+        table.add_column("status")
+        table.add_column("reason")
+        for row in bad[:20]:
+            table.add_row(row["id"], row["status"], row.get("error") or row["reason"])
+        console.print(table)
+    walls = [r["wall_time_s"] for r in result.rows if isinstance(r.get("wall_time_s"), float)
+             and r["wall_time_s"] == r["wall_time_s"]]
+    console.print(f"[{'red' if bad else 'green'}]{len(result.rows) - len(bad)} completed, {len(bad)} failed[/]"
+                  + (f", {result.resumed} resumed" if result.resumed else "")
+                  + (f"; {sum(walls):.1f} s of run time" if walls else ""))
+    for f in result.files:
+        print(f)
+    return 1 if bad else 0
+
+
+def cmd_compare(args) -> int:
+    from fwsim.compare import compare_files
+    cmp = compare_files(args.baseline, args.run, args.tolerances)
+    out = Console()
+    if not out.is_terminal:
+        out = Console(width=200)
+    table = Table(title=f"baseline {cmp.baseline_label}\nrun {cmp.run_label}")
+    for name, justify in (("metric", "left"), ("baseline", "right"), ("run", "right"), ("diff", "right"),
+                          ("tolerance", "left"), ("verdict", "left")):
+        table.add_column(name, justify=justify, no_wrap=name != "verdict")
+    colours = {"ok": "green", "REGRESSION": "bold red", "missing": "bold red", "new": "yellow", "ignored": "dim"}
+    for row, check in zip(cmp.rows(), cmp.checks):
+        table.add_row(*row[:5], f"[{colours[check.verdict]}]{row[5]}[/]")
+    out.print(table)
+    out.print(cmp.summary_line())
+    return 0 if cmp.ok else 1
+
+
+def cmd_plot(args) -> int:
+    from fwsim.plot import plot_log
+    path = Path(args.log)
+    if not path.is_file():
+        console.print(f"[red]{path}: no such log file[/]")
+        return 2
+    out = Path(args.out) if args.out else path.with_name(f"{path.stem}_plots")
+    try:
+        res = plot_log(path, out, only=args.only.split(",") if args.only else None)
+    except ValueError as exc:
+        console.print(f"[red]error[/]: {exc}")
+        return 2
+    for name, why in res.skipped:
+        console.print(f"skipped {name}: {why}")
+    for name, err in res.failed:
+        console.print(f"[red]failed {name}[/]: {err}")
+    for f in res.written:
+        print(f)
+    return 1 if res.failed else 0
+
+
+def cmd_replay(args) -> int:
+    from fwsim.log.rerun_export import ReplayOptions, export_rrd
+    path = Path(args.log)
+    if not path.is_file():
+        console.print(f"[red]{path}: no such log file[/]")
+        return 2
+    rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
+    try:
+        res = export_rrd(path, rrd, ReplayOptions(marker_scale=args.marker_scale))
+    except ValueError as exc:
+        console.print(f"[red]error[/]: {exc}")
+        return 2
+    console.print(f"logged: {', '.join(res.layers)}")
+    for name, why in res.skipped:
+        console.print(f"skipped {name}: {why}")
+    console.print(f"open it with: rerun {rrd}")
+    print(rrd)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fwsim", description="Fixed-wing UAV tracking and terminal guidance harness "
                                                           "around JSBSim.")
@@ -119,6 +230,32 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true", help="print JSON instead of a table")
     b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
     b.set_defaults(func=cmd_bench)
+    ba = sub.add_parser("batch", help="fly many runs from a batch spec (process pool or Ray); summary table")
+    ba.add_argument("spec", help="batch spec YAML (docs/TOOLS.md)")
+    ba.add_argument("--out", help="output folder: logs/, summary.csv/.json/.parquet (default: runs/<spec name>)")
+    ba.add_argument("--workers", type=int, default=None, help="parallel runs (default: CPU count)")
+    ba.add_argument("--resume", action="store_true",
+                    help="keep runs whose log exists and is completed or failed; fly the rest")
+    ba.add_argument("--ray", metavar="auto|local|ADDRESS",
+                    help="run as Ray tasks: 'auto' (running cluster), 'local' (start one here) or an address")
+    ba.add_argument("--quiet", action="store_true", help="no progress bar")
+    ba.set_defaults(func=cmd_batch)
+    c = sub.add_parser("compare", help="compare a run's metrics with a baseline; exit 1 on a regression")
+    c.add_argument("baseline", help="baseline: a log (.mcap), metrics (.json) or baseline file (.yaml)")
+    c.add_argument("run", help="run: a log (.mcap), metrics (.json) or baseline file (.yaml)")
+    c.add_argument("--tolerances", help="YAML of per-metric tolerances (overrides the baseline's own)")
+    c.set_defaults(func=cmd_compare)
+    pl = sub.add_parser("plot", help="PNG figures from a log")
+    pl.add_argument("log", help="MCAP log of a run")
+    pl.add_argument("--out", help="folder for the PNGs (default: <log>_plots/ beside the log)")
+    pl.add_argument("--only", help="comma-separated figure names (default: all)")
+    pl.set_defaults(func=cmd_plot)
+    rp = sub.add_parser("replay", help="turn a log into a Rerun recording (.rrd)")
+    rp.add_argument("log", help="MCAP log of a run")
+    rp.add_argument("--rrd", help="output .rrd (default: the log's path with .rrd)")
+    rp.add_argument("--marker-scale", type=float, default=10.0,
+                    help="draw the UAV this many times life size (default 10)")
+    rp.set_defaults(func=cmd_replay)
     return p
 
 

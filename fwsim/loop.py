@@ -90,6 +90,9 @@ def run_metadata(scenario: Scenario) -> dict[str, str]:
         "sim_hz": f"{scenario.rates.sim_hz:g}",
         "flight_software_hz": f"{scenario.rates.flight_software_hz:g}",
         "log_hz": f"{scenario.rates.log_hz:g}",
+        "camera_width_px": str(scenario.camera.width_px),
+        "camera_height_px": str(scenario.camera.height_px),
+        "camera_hfov_deg": f"{scenario.camera.hfov_deg:g}",
     }
 
 
@@ -143,7 +146,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             sensors = Sensors(scenario.sensors, scenario.seed)
             cam = scenario.camera
             detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
-            flight_software = FlightSoftware(scenario.controllers, scenario.initial)
+            flight_software = FlightSoftware(scenario.controllers, scenario.initial, scenario.camera)
             log.write_calibration(CALIBRATION_TOPIC, 0.0, CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
             _log_truth(log, truth)
@@ -160,6 +163,10 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     log.write(COMMAND_TOPIC, out.command)
                     log.write(GIMBAL_CMD_TOPIC, out.gimbal)
                     log.write(FSW_TOPIC, out.status)
+                    for topic, msg in out.logs.items():
+                        log.write(topic, msg)
+                    for text in out.events:
+                        log.write_event(t_now, text)
                     if new_det is not None:
                         log.write(DETECTION_TOPIC, new_det)
                 act, ap_status = autopilot.step(out.command, truth.uav)

@@ -155,6 +155,9 @@ class FlightSoftwareStatus:
     bank_sp_rad: float = math.nan  # initial path: bank set-point
     altitude_sp_m: float = math.nan  # initial path: altitude set-point
     cross_track_m: float = math.nan  # initial path: signed distance right of the path
+    locked: bool = False  # the target is locked (acquisition done)
+    lock_t_s: float = math.nan  # when it was locked
+    radial_err_m: float = math.nan  # orbit: distance to the estimated target minus the radius
 
 
 def as_dict(msg) -> dict:

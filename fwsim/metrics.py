@@ -2,6 +2,14 @@
 
 Inner-loop tracking errors are RMS over every logged tick of the
 ``/autopilot/status`` topic (set-point minus what the loop saw).
+
+Target estimation (``/fsw/estimate`` against ``/target/state``, truth
+interpolated to the estimate's times): errors are horizontal (x, y), as in the
+paper's figures; the filter estimates a point on the ship at its configured
+height, the truth is the waterline centre. Convergence is defined from the
+filter's own covariance, not from truth: the first time after which the
+estimate's horizontal position standard deviation stays below
+``CONVERGED_STD_M``.
 """
 from __future__ import annotations
 
@@ -11,6 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from fwsim.log import RunLog, read_log
+
+
+CONVERGED_STD_M = 5.0
+PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -53,4 +65,63 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
     if "/camera/detection" in log.topics:
         det = log.table("/camera/detection")
         m["detections"] = float(np.sum(det["detected"].astype(bool)))
+    _acquisition_metrics(log, m)
     return m
+
+
+def _acquisition_metrics(log: RunLog, m: dict) -> None:
+    lock_t = math.nan
+    if "/fsw/status" in log.topics:
+        fs = log.table("/fsw/status")
+        if "locked" in fs:
+            locked = fs["locked"].astype(bool)
+            if locked.any():
+                lock_t = float(fs["t_s"][np.argmax(locked)])
+    m["lock_time_s"] = lock_t
+    if math.isnan(lock_t):
+        return
+    meta = log.metadata.get("fwsim", {})
+    if "/camera/frame" in log.topics:
+        fr = log.table("/camera/frame")
+        after = fr["t_s"] >= lock_t
+        if after.any():
+            m["target_in_fov_fraction_after_lock"] = float(np.mean(fr["in_fov"][after].astype(bool)))
+            m["occluded_frames_after_lock"] = float(np.sum(fr["in_fov"][after].astype(bool)
+                                                           & (fr["visible_px"][after] <= 0)))
+    if "/camera/detection" in log.topics and "camera_width_px" in meta:
+        det = log.table("/camera/detection")
+        cx, cy = float(meta["camera_width_px"]) / 2, float(meta["camera_height_px"]) / 2
+        err = np.hypot(det["u_px"] - cx, det["v_px"] - cy)
+        detected = det["detected"].astype(bool)
+        ok = detected & (det["exposure_t_s"] >= lock_t + PIXEL_SETTLE_S)
+        m["pixel_err_rms_px_u"] = _rms(det["u_px"][ok] - cx)
+        m["pixel_err_rms_px_v"] = _rms(det["v_px"][ok] - cy)
+        m["pixel_err_max_px"] = float(np.max(err[ok])) if ok.any() else math.nan
+        # the recentring after the lock: time until the error stays under 20 px
+        after = detected & (det["exposure_t_s"] >= lock_t)
+        big = np.flatnonzero(after & (err > 20.0))
+        m["ibvs_recentre_time_s"] = float(det["exposure_t_s"][big[-1]] - lock_t) if big.size else 0.0
+    if "/fsw/estimate" in log.topics and "/target/state" in log.topics:
+        est = log.table("/fsw/estimate")
+        tru = log.table("/target/state")
+        t = est["t_s"]
+        valid = np.all(np.isfinite(est["pos_enu_m"][:, :2]), axis=1)
+        if not valid.any():
+            return
+        t, pos, vel = t[valid], est["pos_enu_m"][valid, :2], est["vel_enu_m_s"][valid, :2]
+        std = np.max(est["pos_std_m"][valid, :2], axis=1)
+        tp = np.stack([np.interp(t, tru["t_s"], tru["pos_enu_m"][:, i]) for i in range(2)], axis=1)
+        tv = np.stack([np.interp(t, tru["t_s"], tru["vel_enu_m_s"][:, i]) for i in range(2)], axis=1)
+        pe = np.linalg.norm(pos - tp, axis=1)
+        ve = np.linalg.norm(vel - tv, axis=1)
+        m["ukf_pos_rmse_m"] = _rms(pe)
+        m["ukf_vel_rmse_m_s"] = _rms(ve)
+        above = np.flatnonzero(std >= CONVERGED_STD_M)
+        k = 0 if above.size == 0 else above[-1] + 1
+        if k < len(t):
+            m["ukf_convergence_time_s"] = float(t[k] - lock_t)
+            m["ukf_pos_err_max_after_convergence_m"] = float(np.max(pe[k:]))
+            m["ukf_pos_rmse_after_convergence_m"] = _rms(pe[k:])
+            m["ukf_vel_rmse_after_convergence_m_s"] = _rms(ve[k:])
+        else:
+            m["ukf_convergence_time_s"] = math.nan

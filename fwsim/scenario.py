@@ -18,6 +18,9 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from controllers.ibvs import IbvsConfig
+from controllers.search import AcquisitionConfig
+from controllers.ukf import UkfConfig
 from fwsim.camera import CameraConfig
 from fwsim.sensors import SensorsConfig
 from fwsim.target import TargetConfig
@@ -102,10 +105,24 @@ class InitialPath(_Strict):
     max_bank_deg: float = Field(35.0, gt=0, le=60)
 
 
+class Orbit(_Strict):
+    """Circle around the estimated target after lock (a stand-in until the NMPC loiter)."""
+
+    airspeed_m_s: float = Field(22.0, gt=0, le=60)
+    radius_m: float = Field(500.0, gt=20, le=5000, description="the paper's R")
+    altitude_m: float = Field(500.0, gt=20, le=5000, description="the paper's H")
+    clockwise: bool = Field(False, description="seen from above")
+
+
 class Controllers(_Strict):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
     script: list[ScriptStep] = Field(default_factory=list)
     initial_path: InitialPath = Field(default_factory=InitialPath)
+    acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
+    after_lock: Literal["path", "orbit"] = Field("path", description="what the UAV flies after the lock")
+    orbit: Orbit = Field(default_factory=Orbit)
+    ukf: UkfConfig = Field(default_factory=UkfConfig)
+    ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
 
     @model_validator(mode="after")
     def _script(self):

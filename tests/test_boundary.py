@@ -43,7 +43,7 @@ name: b
 duration_s: 10
 initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
 """)
-    fsw = FlightSoftware(s.controllers, s.initial)
+    fsw = FlightSoftware(s.controllers, s.initial, s.camera)
     for k in range(30):
         t = k / 30
         # flying north, 20 m right (east) of the path and 10 m low

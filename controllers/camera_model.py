@@ -1,0 +1,161 @@
+"""Pinhole camera and image-feature kinematics for the flight software (UKF, IBVS).
+
+A small, dependency-free module (numpy only) shared by ``controllers.ukf`` and
+the IBVS controller. The harness has its own camera (``fwsim.camera``), which
+flight software must not import; this one holds only what a mission computer
+knows: the intrinsics and the geometry.
+
+Conventions (DESIGN.md section 4):
+  * camera frame C: z along the optical axis, x right, y down;
+  * pinhole (OpenCV): ``u = fx X/Z + cx``, ``v = fy Y/Z + cy``;
+  * normalised features ``x1 = X/Z``, ``x2 = Y/Z`` where ``P = [X, Y, Z]`` is
+    the target relative to the camera, in the camera frame;
+  * world ENU, metres, z up; the sea is the plane z = 0.
+
+API:
+  * :class:`PinholeCamera` -- intrinsics; ``normalised(u, v)``, ``pixel(x1, x2)``;
+  * :func:`feature_rates` -- ``[x1_dot, x2_dot]`` of a moving point seen by a
+    moving, rotating camera;
+  * :func:`interaction_matrix` -- the same as a (2, 6) matrix ``[Lv | Lw]``;
+  * :func:`depth_on_plane` -- depth Z of the point on a horizontal plane seen
+    along the ray through (x1, x2) (the paper's flat-sea depth model).
+
+All functions broadcast: scalars, or arrays with a leading batch dimension
+(``x1`` of shape (n,), vectors of shape (n, 3) or (3,)).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["PinholeCamera", "feature_rates", "interaction_matrix", "depth_on_plane"]
+
+#: rays whose downward component (-d_z / |d|) is below this are treated as not meeting the sea
+MIN_RAY_DOWN = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class PinholeCamera:
+    """Pinhole intrinsics in pixels (OpenCV: u right, v down, principal point (cx, cy))."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width_px: int = 0  # 0: unknown (only needed for field-of-view checks)
+    height_px: int = 0
+
+    @classmethod
+    def from_fov(cls, width_px: int, height_px: int, hfov_deg: float) -> "PinholeCamera":
+        """Square pixels, principal point at the image centre (same as ``fwsim.camera.Intrinsics.from_fov``)."""
+        f = (width_px / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+        return cls(f, f, width_px / 2.0, height_px / 2.0, int(width_px), int(height_px))
+
+    @classmethod
+    def from_config(cls, camera_cfg) -> "PinholeCamera":
+        """From a scenario's ``camera`` section (anything with ``width_px``, ``height_px``, ``hfov_deg``)."""
+        return cls.from_fov(camera_cfg.width_px, camera_cfg.height_px, camera_cfg.hfov_deg)
+
+    def normalised(self, u_px, v_px):
+        """(x1, x2) = ((u - cx) / fx, (v - cy) / fy) (paper eq. 10)."""
+        return (np.asarray(u_px, dtype=float) - self.cx) / self.fx, (np.asarray(v_px, dtype=float) - self.cy) / self.fy
+
+    def pixel(self, x1, x2):
+        """(u, v) = (fx x1 + cx, fy x2 + cy)."""
+        return self.fx * np.asarray(x1, dtype=float) + self.cx, self.fy * np.asarray(x2, dtype=float) + self.cy
+
+
+def feature_rates(x1, x2, Z, v_cam, w_cam) -> np.ndarray:
+    """Time derivative ``[x1_dot, x2_dot]`` of the normalised image features.
+
+    Derived from the pinhole model: ``P = [X, Y, Z]`` is the target relative to
+    the camera in the camera frame, ``x1 = X/Z``, ``x2 = Y/Z``, and
+    ``P_dot = v - w x P``, with
+
+      * ``v_cam`` = the target's velocity relative to the camera, in the camera
+        frame: ``R_cam_from_enu (V_q - V_c)``, where ``V_c = V_p + omega_p x r_c/p``
+        is the camera's velocity in the world (UAV velocity plus the lever arm);
+      * ``w_cam`` = the camera's total angular velocity relative to the world
+        (airframe + pan-tilt joints), in the camera frame.
+
+    Result::
+
+        x1_dot = (v_x - x1 v_z)/Z + x1 x2 w_x - (1 + x1^2) w_y + x2 w_z
+        x2_dot = (v_y - x2 v_z)/Z + (1 + x2^2) w_x - x1 x2 w_y - x1 w_z
+
+    i.e. ``[x1_dot, x2_dot] = Lv v + Lw w`` with ``Lv = [[1, 0, -x1], [0, 1, -x2]] / Z``
+    and ``Lw = [[x1 x2, -(1 + x1^2), x2], [1 + x2^2, -x1 x2, -x1]]`` (the paper's L1).
+
+    This replaces the paper's eq. (6) and (8), which have typos:
+      * eta_1 = (v_px x1 - v_px) x3 uses v_px twice; it must be
+        (v_pz x1 - v_px) x3 (the camera's own velocity enters with a minus
+        sign, v = V_q - V_c), and eta_2 = (v_px x2 - v_py) x3 likewise must be
+        (v_pz x2 - v_py) x3;
+      * zeta_1 ends in omega_cx x2 and zeta_2 in omega_cx x1 (zeta_2 repeats
+        omega_cx); they must be omega_cz x2 and -omega_cz x1, and Omega_2
+        starts with omega_pz where omega_px belongs (compare with Lw above);
+      * the Omega terms with the mount offset m = r_c/p are the lever-arm
+        velocity omega_p x r_c/p of V_c = V_p + omega_p x r_c/p written out in
+        camera coordinates, plus the airframe's share of the rotation. Here
+        V_c carries the lever arm and w_cam is the camera's total angular
+        velocity (joints + airframe), so no m appears.
+    The formula is checked against finite differences of the projection of a
+    moving point seen by a moving, rotating camera in ``tests/test_ukf.py``.
+
+    Shapes: ``x1, x2, Z`` scalars or (n,); ``v_cam, w_cam`` (3,) or (n, 3).
+    Returns (2,) or (n, 2).
+    """
+    x1 = np.asarray(x1, dtype=float)
+    x2 = np.asarray(x2, dtype=float)
+    Z = np.asarray(Z, dtype=float)
+    v = np.asarray(v_cam, dtype=float)
+    w = np.asarray(w_cam, dtype=float)
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
+    x12 = x1 * x2
+    x1d = (vx - x1 * vz) / Z + x12 * wx - (1.0 + x1 * x1) * wy + x2 * wz
+    x2d = (vy - x2 * vz) / Z + (1.0 + x2 * x2) * wx - x12 * wy - x1 * wz
+    return np.stack(np.broadcast_arrays(x1d, x2d), axis=-1)
+
+
+def interaction_matrix(x1: float, x2: float, Z: float) -> np.ndarray:
+    """(2, 6) matrix ``[Lv | Lw]`` with ``[x1_dot, x2_dot] = Lv v + Lw w`` (see :func:`feature_rates`).
+
+    Sign convention: ``v`` is the TARGET's velocity relative to the camera
+    (``R_cam_from_enu (V_q - V_c)``), so ``Lv`` is minus the classical IBVS
+    ``Lv`` written for the camera's own velocity; ``Lw`` (columns for the
+    camera's angular velocity w_x, w_y, w_z) is the classical one (paper's L1).
+    """
+    x1, x2, Z = float(x1), float(x2), float(Z)
+    return np.array([
+        [1.0 / Z, 0.0, -x1 / Z, x1 * x2, -(1.0 + x1 * x1), x2],
+        [0.0, 1.0 / Z, -x2 / Z, 1.0 + x2 * x2, -x1 * x2, -x1],
+    ])
+
+
+def depth_on_plane(x1, x2, R_enu_from_cam, cam_z_m, plane_z_m: float = 0.0):
+    """Depth Z (camera-frame z of the point) where the ray through (x1, x2) meets the plane z = plane_z_m.
+
+    The ray in the world is ``d_w = R_enu_from_cam [x1, x2, 1]``; from the
+    camera at height ``cam_z_m`` it meets the plane at
+    ``Z = (cam_z_m - plane_z_m) / (-d_w,z)`` (the point is ``r_c + Z d_w``).
+    On the optical axis (x1 = x2 = 0) this is the paper's ``d = h / cos(alpha)``
+    with ``alpha = acos(-e3 . c3)``. The paper's depth model puts the target on
+    the sea (plane_z_m = 0); a detector that reports the box centre sees a
+    point above the waterline, which a positive plane_z_m models.
+
+    NaN where the ray does not point down (``-d_w,z / |d_w| < MIN_RAY_DOWN``) or
+    the camera is not above the plane. Shapes: x1, x2 scalars or (n,).
+    """
+    x1 = np.asarray(x1, dtype=float)
+    x2 = np.asarray(x2, dtype=float)
+    R = np.asarray(R_enu_from_cam, dtype=float)
+    dz = R[2, 0] * x1 + R[2, 1] * x2 + R[2, 2]
+    norm = np.sqrt(x1 * x1 + x2 * x2 + 1.0)
+    h = float(cam_z_m) - float(plane_z_m)
+    ok = (-dz / norm >= MIN_RAY_DOWN) & (h > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Z = np.where(ok, h / np.where(ok, -dz, 1.0), np.nan)
+    return float(Z) if Z.ndim == 0 else Z

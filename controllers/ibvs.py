@@ -1,0 +1,421 @@
+"""IBVS control of the pan-tilt camera (paper section "Phase 1: Controller design of the PT camera System").
+
+Goal: keep the target's image feature ``s = [x1, x2] = [X/Z, Y/Z]`` (camera frame
+z = optical axis, x right, y down; ``x1 = (u - cx)/fx``, ``x2 = (v - cy)/fy``) at
+``s* = 0`` (the image centre), i.e. make ``e = s - s*`` obey ``edot = -lambda e``.
+
+Feature kinematics (derived from the pinhole model, DESIGN.md section 5; the
+paper's eq. 6/8 have typos). The target P = [X, Y, Z] in the camera frame moves as
+``Pdot = v - omega x P`` with
+
+  * ``v = R_cam_from_enu (V_q - V_c)``: target velocity relative to the camera,
+    ``V_c = V_p + R_enu_from_frd (omega_p x r_c/p)`` (camera velocity, world ENU);
+  * ``omega = omega_rel + R_cam_from_frd omega_p``: camera angular velocity
+    w.r.t. the world in the camera frame, ``omega_rel = M(tilt) [tilt_dot, pan_dot]``
+    with ``M(t) = [[1, 0], [0, cos t], [0, -sin t]]`` (paper eq. omegac),
+
+hence ``edot = L1 omega + T`` with::
+
+    L1 = [[x1 x2, -(1 + x1^2),  x2],        T = [(v_x - x1 v_z) / Z,
+          [1 + x2^2,   -x1 x2, -x1]]             (v_y - x2 v_z) / Z]
+
+(this module keeps its own copy of these formulas; ``tests/test_ibvs.py`` checks
+them against finite differences of the projection).
+
+The law. Everything in ``edot`` that the joints do not cause is "known"
+(the paper's ``L2 [V_p - V_q; omega_p]``):
+``k = L1 R_cam_from_frd omega_p + T``. With ``q = [tilt_dot, pan_dot]``::
+
+    edot = J q + k,    J = L1 M(tilt)
+         = [[x1 x2,    -cos t (1 + x1^2) - sin t x2],
+            [1 + x2^2, -cos t x1 x2      + sin t x1]]
+
+and ``q = J^+ (-lambda e - k)`` gives ``edot = -lambda e``.
+
+Relation to the paper. Eq. IBVSsss computes ``[w_cx, w_cy] = L1hat^-1 (-k - lambda e)``
+with ``L1hat`` the first two columns of L1, then eq. sigular converts
+``tilt_dot = w_cx``, ``pan_dot = w_cy / cos(tilt)``. Substituting, the paper
+solves ``[L1[:, 0], cos t L1[:, 1]] q = -k - lambda e``: the same law as above
+with the third-column term ``-sin t L1[:, 2] pan_dot`` dropped (the image
+rotation ``w_cz = -sin t pan_dot`` that panning brings along, eq. omegac). The two
+coincide when ``tilt = 0`` or at the goal ``x = 0`` (where ``L1[:, 2] = [x2, -x1]
+= 0``); off-centre at large tilt the paper's law does not realise
+``edot = -lambda e`` exactly, this one does. ``camera_rates_paper`` gives the
+paper's form for comparison. Solving for the joint rates directly is the
+paper's two steps combined, and it moves the singularity to where it really is:
+``det J = (1 + x1^2 + x2^2)(cos t + x2 sin t)`` vanishes when the line of sight to
+the TARGET is along the pan axis (body z), e.g. the target centred while the
+camera looks straight down (tilt = -90 deg): panning then only spins the image
+about the target. The paper's two-step form is singular at tilt = +-90 deg for
+any target position. Singularity handling (the paper leaves it open): a
+damped least-squares inverse ``q = (J^T J + rho^2 I)^-1 J^T b`` with adaptive
+damping ``rho^2 = mu^2 - sigma_min^2`` when the smallest singular value
+``sigma_min`` of J is below ``mu`` (``singularity_damping``) and ``rho = 0``
+otherwise: the law is exact away from the singularity, continuous across the
+threshold, and ``|q| <= |b| / mu`` everywhere (for a centred target
+``sigma_min = |cos t|``, so damping starts at ``|tilt| > acos(mu)``, 84.3 deg
+for mu = 0.1).
+
+Known limit: flying (almost) straight over the target, the line of sight
+passes through the pan axis while tilt is at its -90 deg joint limit; the
+local law cannot swing the pan through 180 deg, so the target leaves the image
+(measured in a kinematic test at 300 m height: lost at a 0 or 5 m lateral
+miss, held within 0.2 px at 30 m, the pan then swinging 0.1 -> 3.0 rad). A
+re-pointing manoeuvre for that case would be the mission's (or a later
+version's) job; the paper avoids overflight by the loiter geometry.
+
+Limits (what the flight software knows of the gimbal): a joint at a limit is
+not pushed further, and within one step of it the rate is cut so that it lands
+on the limit; then both rates are scaled by the same factor to the rate limits
+(the direction of the joint-rate vector is kept).
+
+Modes (``IbvsStatus.mode``):
+  * ``"track"``: the newest detection found the target and is at most
+    ``max_detection_age_s`` old: feedback ``-lambda e`` plus feed-forward;
+  * ``"coast"``: no fresh detection, for up to ``hold_timeout_s`` after the
+    track was lost: feed-forward only (UAV rotation, UAV and target motion) at
+    the predicted feature, which keeps the target where it was in the image
+    (zero rates when ``feedforward`` is off);
+  * ``"hold"``: nothing to track (never seen, lost for longer, or no joint
+    angles): the command is NaN ("hold", GimbalCommand's convention).
+
+Between detections (the loop may call ``step`` faster than the detector) and
+from the detection's exposure to now, the feature is propagated with the
+kinematics above using the measured joint rates (encoders; the last command if
+they are NaN) and gyros (``propagate_feature``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Annotated
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd
+from fwsim.messages import GimbalCommand, Measurements
+
+_PI = math.pi
+_HALF_PI = 0.5 * math.pi
+_FEATURE_CAP = 3.0  # |x1|, |x2| of a propagated feature (about 72 deg off axis): numerical guard only
+
+_PanAngle = Annotated[float, Field(ge=-2.0 * _PI, le=2.0 * _PI)]
+_TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+class IbvsConfig(BaseModel):
+    """IBVS gimbal controller settings (flight software side; angles in rad)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    lambda_1_s: float = Field(1.5, gt=0.0, le=20.0,
+                              description="feedback gain lambda: the image error decays as exp(-lambda t), 1/s")
+    feedforward: bool = Field(True, description="cancel the feature motion caused by the UAV's rotation and by "
+                                                "the UAV's and the target's velocity (paper's L2 term)")
+    singularity_damping: float = Field(0.1, gt=0.0, le=1.0,
+                                       description="mu of the damped least-squares inverse: active when the "
+                                                   "smallest singular value of J drops below mu (target line of "
+                                                   "sight near the pan axis); bounds |joint rates| by |b|/mu")
+    pan_limits_rad: list[_PanAngle] = Field(default_factory=lambda: [-_PI, _PI], min_length=2, max_length=2,
+                                            description="[min, max] pan angle the gimbal allows, rad")
+    tilt_limits_rad: list[_TiltAngle] = Field(default_factory=lambda: [-_HALF_PI, _HALF_PI], min_length=2,
+                                              max_length=2, description="[min, max] tilt angle, rad (up positive)")
+    max_pan_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="pan rate limit, rad/s")
+    max_tilt_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="tilt rate limit, rad/s")
+    hold_timeout_s: float = Field(1.0, ge=0.0, le=60.0,
+                                  description="after the track is lost, keep feeding forward (coast) this long, "
+                                              "then hold the joints, s")
+    max_detection_age_s: float = Field(0.2, gt=0.0, le=10.0,
+                                       description="a valid detection older than this (since its exposure) no "
+                                                   "longer counts as tracking, s")
+    propagate_feature: bool = Field(True, description="predict the feature from the detection's exposure to now "
+                                                      "and between detections with the feature kinematics")
+    nominal_dt_s: float = Field(1.0 / 30.0, gt=0.0, le=1.0,
+                                description="controller period assumed on the first call (joint-limit "
+                                            "look-ahead and feature propagation), s")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for name, lim in (("pan", self.pan_limits_rad), ("tilt", self.tilt_limits_rad)):
+            if not lim[0] < lim[1]:
+                raise ValueError(f"{name}_limits_rad must be ordered [min, max] with min < max (got {lim})")
+        return self
+
+
+# --------------------------------------------------------------------------- feature kinematics (own copy)
+
+
+def l1_matrix(x1: float, x2: float) -> np.ndarray:
+    """L1 (2x3): rotational part of the feature kinematics, ``sdot = L1 omega_cam + T``."""
+    return np.array([[x1 * x2, -(1.0 + x1 * x1), x2], [1.0 + x2 * x2, -x1 * x2, -x1]])
+
+
+def translational_feature_rates(x1: float, x2: float, depth_m: float, v_rel_cam_m_s) -> np.ndarray:
+    """T = [(v_x - x1 v_z)/Z, (v_y - x2 v_z)/Z]: feature rate from the target's velocity relative to the camera.
+
+    ``v_rel_cam_m_s`` = R_cam_from_enu (V_q - V_c) (camera frame), ``depth_m`` = Z (along the optical axis).
+    """
+    vx, vy, vz = float(v_rel_cam_m_s[0]), float(v_rel_cam_m_s[1]), float(v_rel_cam_m_s[2])
+    inv_z = 1.0 / float(depth_m)
+    return np.array([(vx - x1 * vz) * inv_z, (vy - x2 * vz) * inv_z])
+
+
+def feature_rates(x1: float, x2: float, depth_m: float, v_rel_cam_m_s, omega_cam_rad_s) -> np.ndarray:
+    """[x1dot, x2dot] = L1 omega + T for a target at feature (x1, x2) and depth Z (pinhole model).
+
+    ``omega_cam_rad_s``: camera angular velocity w.r.t. the world, camera frame;
+    ``v_rel_cam_m_s``: target velocity relative to the camera, camera frame.
+    """
+    return l1_matrix(x1, x2) @ np.asarray(omega_cam_rad_s, dtype=float) + translational_feature_rates(
+        x1, x2, depth_m, v_rel_cam_m_s)
+
+
+def joint_jacobian(x1: float, x2: float, tilt_rad: float) -> np.ndarray:
+    """J (2x2) with ``sdot = J @ [tilt_dot, pan_dot] + (UAV rotation + translation)``; J = L1 M(tilt).
+
+    Finite everywhere; ``det J = (1 + x1^2 + x2^2)(cos t + x2 sin t)``.
+    """
+    ct, st = math.cos(tilt_rad), math.sin(tilt_rad)
+    return np.array([[x1 * x2, -ct * (1.0 + x1 * x1) - st * x2],
+                     [1.0 + x2 * x2, -ct * x1 * x2 + st * x1]])
+
+
+def damped_solve(J: np.ndarray, b, mu: float) -> tuple[np.ndarray, float]:
+    """q = (J^T J + rho^2 I)^-1 J^T b with rho^2 = max(0, mu^2 - sigma_min^2); returns (q, sigma_min).
+
+    Exact inverse while the smallest singular value sigma_min of the 2x2 J is at
+    least mu; continuous across; ``|q| <= |b| / mu`` always.
+    """
+    a, c = float(J[0, 0]), float(J[0, 1])
+    d, f = float(J[1, 0]), float(J[1, 1])
+    b0, b1 = float(b[0]), float(b[1])
+    # A = J^T J = [[p, r], [r, s]]
+    p, r, s = a * a + d * d, a * c + d * f, c * c + f * f
+    half_tr = 0.5 * (p + s)
+    det_a = p * s - r * r
+    sig2_min = max(0.0, half_tr - math.sqrt(max(0.0, half_tr * half_tr - det_a)))
+    rho2 = max(0.0, mu * mu - sig2_min)
+    p += rho2
+    s += rho2
+    g0, g1 = a * b0 + d * b1, c * b0 + f * b1  # J^T b
+    det = p * s - r * r
+    if det <= 0.0:  # only when mu = 0 and J is singular: no motion
+        return np.zeros(2), math.sqrt(sig2_min)
+    return np.array([(s * g0 - r * g1) / det, (p * g1 - r * g0) / det]), math.sqrt(sig2_min)
+
+
+def joint_rates_direct(x1: float, x2: float, tilt_rad: float, lambda_1_s: float, known_rate=(0.0, 0.0),
+                       mu: float = 0.1) -> tuple[float, float]:
+    """(pan_rate, tilt_rate) making ``sdot = -lambda s`` (unlimited): ``q = J^+(-lambda e - known_rate)``.
+
+    ``known_rate``: the part of ``sdot`` not caused by the joints (``L1 R_cam_from_frd omega_p + T``).
+    """
+    b = (-lambda_1_s * x1 - float(known_rate[0]), -lambda_1_s * x2 - float(known_rate[1]))
+    q, _ = damped_solve(joint_jacobian(x1, x2, tilt_rad), b, mu)
+    return float(q[1]), float(q[0])
+
+
+def camera_rates_paper(x1: float, x2: float, lambda_1_s: float, known_rate=(0.0, 0.0)) -> np.ndarray:
+    """The paper's eq. IBVSsss: ``[w_cx, w_cy] = -L1hat^-1 known_rate - lambda L1hat^-1 e`` (camera frame,
+    relative to the body). ``L1hat`` = first two columns of L1 (det = 1 + x1^2 + x2^2 > 0, always invertible);
+    ``known_rate`` is the paper's ``L2 [V_p - V_q; omega_p]``. Convert with eq. sigular
+    (``fwsim.frames.joint_rates_from_camera_rates``) for the joint rates.
+    """
+    a, c = x1 * x2, -(1.0 + x1 * x1)
+    d, f = 1.0 + x2 * x2, -x1 * x2
+    b0 = -lambda_1_s * x1 - float(known_rate[0])
+    b1 = -lambda_1_s * x2 - float(known_rate[1])
+    det = a * f - c * d
+    return np.array([(f * b0 - c * b1) / det, (a * b1 - d * b0) / det])
+
+
+def limit_joint_rates(pan_rad: float, tilt_rad: float, pan_rate: float, tilt_rate: float, cfg: IbvsConfig,
+                      dt_s: float) -> tuple[float, float, float]:
+    """Joint- and rate-limit aware command: returns (pan_rate, tilt_rate, scale).
+
+    1. a rate pushing a joint into its limit is cut so that one step of ``dt_s``
+       lands on the limit at most (zero when the joint is at or past it);
+    2. both rates are scaled by one factor ``scale <= 1`` so that each is
+       within its rate limit (the direction is kept).
+    """
+    pan_lo, pan_hi = cfg.pan_limits_rad
+    tilt_lo, tilt_hi = cfg.tilt_limits_rad
+    if pan_rate > 0.0:
+        pan_rate = min(pan_rate, max(0.0, (pan_hi - pan_rad) / dt_s))
+    elif pan_rate < 0.0:
+        pan_rate = max(pan_rate, min(0.0, (pan_lo - pan_rad) / dt_s))
+    if tilt_rate > 0.0:
+        tilt_rate = min(tilt_rate, max(0.0, (tilt_hi - tilt_rad) / dt_s))
+    elif tilt_rate < 0.0:
+        tilt_rate = max(tilt_rate, min(0.0, (tilt_lo - tilt_rad) / dt_s))
+    scale = 1.0
+    if abs(pan_rate) > cfg.max_pan_rate_rad_s:
+        scale = cfg.max_pan_rate_rad_s / abs(pan_rate)
+    if abs(tilt_rate) * scale > cfg.max_tilt_rate_rad_s:
+        scale = cfg.max_tilt_rate_rad_s / abs(tilt_rate)
+    return pan_rate * scale, tilt_rate * scale, scale
+
+
+# --------------------------------------------------------------------------- controller
+
+
+@dataclass(frozen=True, slots=True)
+class IbvsStatus:
+    """What the IBVS controller did this tick (for the log; never fed back)."""
+
+    t_s: float
+    mode: str  # "track", "coast" or "hold"
+    e: np.ndarray  # (2,) feature error [x1, x2] the law used (predicted to t_s); NaN in hold
+    pixel_err_px: np.ndarray  # (2,) the same as pixels [u - cx, v - cy]
+    pan_rate_cmd_rad_s: float  # the command sent (after limits); NaN in hold
+    tilt_rate_cmd_rad_s: float
+    detection_age_s: float  # t_s minus the exposure time of the newest valid detection (NaN: none yet)
+    sigma_min: float  # smallest singular value of J (near 0: singular, damping active below mu)
+    rate_scale: float  # factor applied by the rate limits (1: not saturated)
+
+
+def _finite(*xs) -> bool:
+    return all(math.isfinite(float(x)) for x in xs)
+
+
+class Ibvs:
+    """IBVS pan-tilt controller: ``step(meas, target_vel, depth, mount_offset) -> (GimbalCommand, IbvsStatus)``."""
+
+    def __init__(self, cfg: IbvsConfig, fx: float, fy: float, cx: float, cy: float):
+        if not (fx > 0.0 and fy > 0.0 and _finite(fx, fy, cx, cy)):
+            raise ValueError(f"Ibvs: focal lengths must be positive and finite (fx={fx}, fy={fy}, cx={cx}, cy={cy})")
+        self.cfg = cfg
+        self.fx, self.fy, self.cx, self.cy = float(fx), float(fy), float(cx), float(cy)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the target (next step holds until a detection arrives)."""
+        self._s: np.ndarray | None = None  # feature estimate at self._last_t
+        self._last_t: float | None = None
+        self._det_key = None  # (exposure, u, v) of the last detection consumed
+        self._fix_t = math.nan  # exposure time of the newest valid detection
+        self._lost_t: float | None = None  # when the track was lost (start of coast)
+        self._last_cmd = (0.0, 0.0)  # (pan_rate, tilt_rate) last sent, 0 when holding
+
+    # ------------------------------------------------------------------ helpers
+
+    def _sdot(self, s, tilt, R_cf, w_p, pan_rate, tilt_rate, T_fn) -> np.ndarray:
+        """Feature rate with the given joint rates (for propagation)."""
+        ct, st = math.cos(tilt), math.sin(tilt)
+        omega = R_cf @ w_p + np.array([tilt_rate, ct * pan_rate, -st * pan_rate])
+        out = l1_matrix(s[0], s[1]) @ omega
+        T = T_fn(s)
+        return out if T is None else out + T
+
+    def _hold(self, t: float, e=None, age=math.nan) -> tuple[GimbalCommand, IbvsStatus]:
+        self._last_cmd = (0.0, 0.0)
+        e = np.full(2, np.nan) if e is None else e
+        px = np.array([e[0] * self.fx, e[1] * self.fy])
+        return (GimbalCommand(t, math.nan, math.nan),
+                IbvsStatus(t, "hold", e, px, math.nan, math.nan, age, math.nan, 1.0))
+
+    # ------------------------------------------------------------------ step
+
+    def step(self, meas: Measurements, target_vel_enu_m_s, depth_m, mount_offset_frd_m
+             ) -> tuple[GimbalCommand, IbvsStatus]:
+        """One control tick.
+
+        ``target_vel_enu_m_s``: target velocity estimate (world ENU, e.g. the
+        UKF's); None: taken as 0. ``depth_m``: target depth Z along the optical
+        axis (flat-sea geometry or the estimate); None: the translational
+        feed-forward T is skipped. ``mount_offset_frd_m``: camera rotation centre
+        r_c/p relative to the CG (body FRD, m).
+        """
+        cfg = self.cfg
+        t = float(meas.t_s)
+        dt = cfg.nominal_dt_s
+        if self._last_t is not None and 0.0 < t - self._last_t <= 1.0:
+            dt = t - self._last_t
+        prev_t = self._last_t
+        self._last_t = t
+        pan, tilt = float(meas.pan_rad), float(meas.tilt_rad)
+        if not _finite(pan, tilt):
+            self._s = None
+            return self._hold(t)
+
+        R_fc = R_frd_from_cam(pan, tilt)
+        R_cf = R_fc.T
+        w_p = np.asarray(meas.body_rates_frd_rad_s, dtype=float)
+        if not np.all(np.isfinite(w_p)):
+            w_p = np.zeros(3)
+
+        # translational term T(s): needs the depth, attitude and UAV velocity
+        v_rel = None
+        if depth_m is not None and math.isfinite(float(depth_m)) and float(depth_m) > 0.0:
+            vel = np.asarray(meas.vel_enu_m_s, dtype=float)
+            eul = np.asarray(meas.euler_ned_rad, dtype=float)
+            if np.all(np.isfinite(vel)) and np.all(np.isfinite(eul)):
+                R_ef = dcm_enu_from_frd(eul)
+                v_c = vel + R_ef @ cross3(w_p, mount_offset_frd_m)
+                v_q = np.zeros(3) if target_vel_enu_m_s is None else np.asarray(target_vel_enu_m_s, dtype=float)
+                if np.all(np.isfinite(v_q)):
+                    v_rel = R_cf @ (R_ef.T @ (v_q - v_c))
+        z = float(depth_m) if v_rel is not None else math.nan
+
+        def T_fn(s):
+            return None if v_rel is None else translational_feature_rates(s[0], s[1], z, v_rel)
+
+        # measured joint rates for the propagation (encoders; else the last command)
+        pr_m, tr_m = float(meas.pan_rate_rad_s), float(meas.tilt_rate_rad_s)
+        if not _finite(pr_m, tr_m):
+            pr_m, tr_m = self._last_cmd
+
+        # ---- feature estimate
+        u, v = float(meas.det_u_px), float(meas.det_v_px)
+        valid = bool(meas.det_valid) and _finite(u, v)
+        key = (float(meas.det_exposure_t_s), u, v)
+        if valid and key != self._det_key:  # a new detection (NaN exposure: every tick is new)
+            self._det_key = key
+            exp_t = key[0]
+            self._fix_t = exp_t if math.isfinite(exp_t) else t
+            s = np.array([(u - self.cx) / self.fx, (v - self.cy) / self.fy])
+            age = t - self._fix_t
+            if cfg.propagate_feature and 0.0 < age <= cfg.max_detection_age_s:
+                s = s + age * self._sdot(s, tilt, R_cf, w_p, pr_m, tr_m, T_fn)
+            self._s = s
+        elif self._s is not None and cfg.propagate_feature and prev_t is not None:
+            self._s = self._s + dt * self._sdot(self._s, tilt, R_cf, w_p, pr_m, tr_m, T_fn)
+        if self._s is not None:
+            np.clip(self._s, -_FEATURE_CAP, _FEATURE_CAP, out=self._s)
+        age = t - self._fix_t if math.isfinite(self._fix_t) else math.nan
+
+        # ---- mode
+        if self._s is not None and valid and age <= cfg.max_detection_age_s:
+            mode = "track"
+            self._lost_t = None
+        elif self._s is not None:
+            if self._lost_t is None:
+                self._lost_t = t
+            if t - self._lost_t > cfg.hold_timeout_s:
+                self._s = None  # forget the target: hold until the next valid detection
+                return self._hold(t, age=age)
+            mode = "coast"
+        else:
+            return self._hold(t, age=age)
+
+        # ---- law: J [tilt_dot, pan_dot] = b
+        s = self._s
+        x1, x2 = float(s[0]), float(s[1])
+        b = np.zeros(2)
+        if mode == "track":
+            b -= cfg.lambda_1_s * s
+        if cfg.feedforward:
+            b -= l1_matrix(x1, x2) @ (R_cf @ w_p)
+            T = T_fn(s)
+            if T is not None:
+                b -= T
+        q, sigma_min = damped_solve(joint_jacobian(x1, x2, tilt), b, cfg.singularity_damping)
+        pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, float(q[1]), float(q[0]), cfg, dt)
+        self._last_cmd = (pan_rate, tilt_rate)
+        status = IbvsStatus(t, mode, s.copy(), np.array([x1 * self.fx, x2 * self.fy]), pan_rate, tilt_rate,
+                            age, sigma_min, scale)
+        return GimbalCommand(t, pan_rate, tilt_rate), status

@@ -1,0 +1,553 @@
+"""Target state estimation: the paper's 8-state UKF (section "UKF") on filterpy.
+
+State ``x = [x1, x2, r_q (3, world ENU, m), V_q (3, m/s)]``:
+
+  * ``x1 = X/Z``, ``x2 = Y/Z``: normalised image features of the target
+    (``[X, Y, Z]`` = target relative to the camera, camera frame);
+  * ``r_q``, ``V_q``: the target's position and velocity in the world.
+
+Process model (continuous, integrated with RK4 over each predict):
+  * ``x1_dot, x2_dot`` from :func:`controllers.camera_model.feature_rates`
+    (derived from the pinhole model; replaces the paper's eq. 6/8, which have
+    typos), with ``Z`` = camera-frame depth of ``r_q`` (z-component of
+    ``R_cam_from_enu (r_q - r_c)``), ``v = R_cam_from_enu (V_q - V_c)`` and the
+    camera's total angular velocity; this keeps x1, x2 consistent with r_q;
+  * ``r_q_dot = V_q``, ``V_q_dot = 0`` (constant velocity) + white-noise
+    acceleration; x1, x2 get a small random walk (``feature_process_noise``).
+  The camera motion over the interval: pose of the previous call, camera
+  velocity and angular velocity the mean of the previous and the new ones,
+  held constant (the pose is rotated/translated by them inside the interval).
+
+Measurement (paper eq. 9), on every new valid detection:
+  ``z = [u, v, r_c]``, ``h(x) = [fx x1 + cx, fy x2 + cy, r_q - d_w Z]`` with
+  ``d_w = R_enu_from_cam [x1, x2, 1]`` and ``Z`` from the flat-sea depth model
+  (:func:`controllers.camera_model.depth_on_plane`, the plane
+  ``z = target_plane_height_m``; camera height from the altimeter). The
+  r_c rows carry GNSS noise plus the attitude and altimeter errors projected
+  over the range.
+
+Interfaces: :class:`TargetEstimator` (Protocol) is what the mission uses, so a
+second filter can be swapped in and compared on the same logs;
+:class:`TargetEstimate` is the message to log; :class:`UnscentedCore` is the
+generic unscented machinery (filterpy + batched process model + covariance
+hygiene), reusable with any ``fx``/``hx`` (the tests run it on a linear case
+against a linear Kalman filter).
+
+Timing: the detection is used at the tick it arrives, with the camera pose of
+that tick (``det_exposure_t_s`` is not used: correct for zero detector
+latency, the scenario default).
+
+Nothing here imports the truth side of the harness (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import scipy.linalg
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from pydantic import BaseModel, ConfigDict, Field
+
+from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates
+from fwsim.frames import camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
+from fwsim.messages import Measurements
+
+__all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "TargetEstimator", "UnscentedCore",
+           "UkfTargetEstimator"]
+
+MIN_DEPTH_M = 1.0  # process model: camera-frame depth of a sigma point is floored here
+_MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floored here (|d_w| >= 1)
+_VAR_FLOOR = 1e-12  # numerical reset: smallest variance kept on the diagonal
+_INIT_VERTICAL_POS_STD_M = 1.0
+_INIT_VERTICAL_VEL_STD_M_S = 0.5
+
+
+class UkfConfig(BaseModel):
+    """Tuning of the target UKF (all noise values are 1-sigma)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pixel_noise_px: float = Field(2.0, gt=0, le=100, description="detector box-centre noise (u, v), px")
+    cam_pos_noise_m: float = Field(0.5, gt=0, le=100, description="camera position r_c (GNSS/INS), per axis, m")
+    attitude_noise_rad: float = Field(
+        0.002, ge=0, le=0.2,
+        description="attitude + encoder error; adds (range * this) to the r_c measurement noise, rad")
+    height_noise_m: float = Field(
+        0.5, ge=0, le=100,
+        description="altimeter error in the flat-sea depth; adds (range / height * this) to the r_c noise, m")
+    target_accel_noise_m_s2: float = Field(
+        0.2, gt=0, le=50,
+        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2")
+    target_vertical_accel_noise_m_s2: float = Field(
+        0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
+    feature_process_noise: float = Field(
+        0.01, gt=0, le=10,
+        description="random walk of x1, x2 (gyro/encoder-rate errors), normalised units per sqrt(s)")
+    target_plane_height_m: float = Field(
+        0.0, ge=-100, le=200,
+        description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
+    init_pos_std_frac: float = Field(
+        0.05, gt=0, le=1, description="initial horizontal position std as a fraction of the slant range")
+    init_vel_std_m_s: float = Field(10.0, gt=0, le=100, description="initial horizontal velocity std, m/s")
+    max_substep_s: float = Field(0.05, gt=0, le=1, description="largest RK4 step of the process model, s")
+    sigma_alpha: float = Field(1.0, gt=0, le=1, description="Merwe sigma-point spread alpha")
+    sigma_beta: float = Field(2.0, ge=0, le=10, description="Merwe beta (2 is optimal for Gaussians)")
+    sigma_kappa: float = Field(0.0, ge=-7, le=10, description="Merwe kappa (n + kappa must stay > 0)")
+
+
+# --------------------------------------------------------------------------- camera motion
+
+
+@dataclass(frozen=True, slots=True)
+class CameraMotion:
+    """The camera's pose and motion as the flight software knows it at ``t_s``."""
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,) camera position r_c in the world
+    vel_enu_m_s: np.ndarray  # (3,) camera velocity V_c = V_p + R_enu_from_frd (omega_p x r_c/p)
+    R_enu_from_cam: np.ndarray  # (3, 3)
+    omega_cam_rad_s: np.ndarray  # (3,) camera angular velocity relative to the world, camera frame
+    height_m: float  # camera height above the sea (altimeter + lever arm), for the depth model
+
+    @classmethod
+    def from_measurements(cls, meas: Measurements, mount_offset_frd_m) -> "CameraMotion":
+        """Build from one ``Measurements`` and the known mount offset r_c/p (body FRD, m).
+
+        Pose from :func:`fwsim.frames.camera_pose_world` (attitude + encoders);
+        ``r_c`` is ``meas.cam_pos_enu_m`` when finite, else the pose's;
+        ``omega`` from :func:`fwsim.frames.camera_angular_velocity` (encoder
+        rates, NaN taken as 0, plus gyros); height from the altimeter (the
+        GNSS height of r_c if the altimeter is NaN). Raises ValueError without
+        gimbal encoders.
+        """
+        pan, tilt = float(meas.pan_rad), float(meas.tilt_rad)
+        if not (math.isfinite(pan) and math.isfinite(tilt)):
+            raise ValueError("CameraMotion needs the gimbal encoders (pan_rad, tilt_rad are NaN)")
+        m = np.asarray(mount_offset_frd_m, dtype=float)
+        cam_pos, R = camera_pose_world(meas.pos_enu_m, meas.euler_ned_rad, m, pan, tilt)
+        if np.all(np.isfinite(meas.cam_pos_enu_m)):
+            cam_pos = np.array(meas.cam_pos_enu_m, dtype=float)
+        R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
+        vel = np.asarray(meas.vel_enu_m_s, dtype=float) + R_ef @ cross3(meas.body_rates_frd_rad_s, m)
+        pan_rate = float(meas.pan_rate_rad_s) if math.isfinite(meas.pan_rate_rad_s) else 0.0
+        tilt_rate = float(meas.tilt_rate_rad_s) if math.isfinite(meas.tilt_rate_rad_s) else 0.0
+        omega = camera_angular_velocity(pan, tilt, pan_rate, tilt_rate, meas.body_rates_frd_rad_s)
+        h = float(meas.height_above_sea_m)
+        height = h + float(R_ef[2] @ m) if math.isfinite(h) else float(cam_pos[2])
+        return cls(float(meas.t_s), cam_pos, vel, R, omega, height)
+
+
+def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
+    """Rotation matrix exp([w]x t) (Rodrigues)."""
+    wx, wy, wz = float(w[0]) * t, float(w[1]) * t, float(w[2]) * t
+    th2 = wx * wx + wy * wy + wz * wz
+    K = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+    if th2 < 1e-16:
+        return np.eye(3) + K + 0.5 * (K @ K)
+    th = math.sqrt(th2)
+    return np.eye(3) + (math.sin(th) / th) * K + ((1.0 - math.cos(th)) / th2) * (K @ K)
+
+
+# --------------------------------------------------------------------------- messages and interface
+
+
+@dataclass(frozen=True, slots=True)
+class TargetEstimate:
+    """A target estimator's output at ``t_s``, for the log and the controllers."""
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,) r_q
+    vel_enu_m_s: np.ndarray  # (3,) V_q
+    pos_std_m: np.ndarray  # (3,) sqrt of the diagonal of the r_q covariance
+    vel_std_m_s: np.ndarray  # (3,)
+    x1: float  # normalised image features (NaN if the estimator has none)
+    x2: float
+    innovation_px: np.ndarray  # (2,) pixel innovation of an update at t_s; NaN when no update at t_s
+
+
+@runtime_checkable
+class TargetEstimator(Protocol):
+    """What the mission needs of a target filter (so filters can be swapped and compared on logs)."""
+
+    @property
+    def initialised(self) -> bool: ...
+
+    @property
+    def t_s(self) -> float: ...
+
+    @property
+    def pos_enu_m(self) -> np.ndarray: ...
+
+    @property
+    def vel_enu_m_s(self) -> np.ndarray: ...
+
+    @property
+    def pos_vel_cov(self) -> np.ndarray:
+        """(6, 6) covariance of [r_q, V_q]."""
+        ...
+
+    def initialise(self, meas: Measurements, motion: CameraMotion) -> None: ...
+
+    def predict(self, t_s: float, motion: CameraMotion) -> None: ...
+
+    def update(self, meas: Measurements, motion: CameraMotion) -> None: ...
+
+    def estimate(self) -> TargetEstimate: ...
+
+
+# --------------------------------------------------------------------------- generic unscented machinery
+
+
+def _safe_cholesky(M: np.ndarray) -> np.ndarray:
+    """Upper Cholesky factor (filterpy's convention); the diagonal's square root if M is not positive definite.
+
+    The fallback only keeps filterpy's sigma-point call from raising; the
+    covariance itself is repaired (and counted) by ``UnscentedCore._guard``.
+    """
+    try:
+        return scipy.linalg.cholesky(M)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.diag(np.sqrt(np.maximum(np.abs(np.nan_to_num(np.diag(M))), _VAR_FLOOR)))
+
+
+class _BatchUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with the process model applied to all sigma points at once: fx(sigmas (m, n), dt, **kw)."""
+
+    def compute_process_sigmas(self, dt, fx=None, **fx_args):
+        fx = self.fx if fx is None else fx
+        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float).reshape(sigmas.shape)
+
+
+class UnscentedCore:
+    """Generic UKF: filterpy ``UnscentedKalmanFilter`` + ``MerweScaledSigmaPoints`` with covariance hygiene.
+
+    * ``predict(dt, fx_batch, Q, **kw)``: ``fx_batch(sigmas (2n+1, n), dt, **kw) -> (2n+1, n)``;
+    * ``update(z, hx, R, **kw) -> innovation``: ``hx(x (n,), **kw) -> (dim_z,)``; the
+      sigma points are drawn from the current (x, P), so updates may follow
+      each other or an initialisation without a predict in between;
+    * after each step P is symmetrised; if it is not positive definite
+      (Cholesky fails) it is replaced by its diagonal (absolute values,
+      floored) and ``numerical_resets`` counts it. Non-finite state raises
+      ``FloatingPointError``.
+    """
+
+    def __init__(self, dim_x: int, dim_z: int, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
+        if dim_x + kappa <= 0:
+            raise ValueError(f"dim_x + kappa must be > 0 (dim_x={dim_x}, kappa={kappa})")
+        points = MerweScaledSigmaPoints(dim_x, alpha=alpha, beta=beta, kappa=kappa, sqrt_method=_safe_cholesky)
+        self._kf = _BatchUKF(dim_x=dim_x, dim_z=dim_z, dt=1.0, hx=None, fx=None, points=points)
+        self.numerical_resets = 0
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._kf.x.copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        return self._kf.P.copy()
+
+    @property
+    def filter(self) -> UnscentedKalmanFilter:
+        """The underlying filterpy object (read its S, K, y, ...; do not step it directly)."""
+        return self._kf
+
+    def set_state(self, x, P) -> None:
+        self._kf.x = np.array(x, dtype=float)
+        self._kf.P = np.array(P, dtype=float)
+        self._guard()
+
+    def predict(self, dt: float, fx_batch, Q, **fx_args) -> None:
+        self._guard()
+        self._kf.Q = np.asarray(Q, dtype=float)
+        self._kf.predict(dt=dt, fx=fx_batch, **fx_args)
+        self._guard()
+
+    def update(self, z, hx, R, **hx_args) -> np.ndarray:
+        self._guard()
+        self._kf.sigmas_f = self._kf.points_fn.sigma_points(self._kf.x, self._kf.P)
+        self._kf.update(np.asarray(z, dtype=float), R=np.asarray(R, dtype=float), hx=hx, **hx_args)
+        self._guard()
+        return np.array(self._kf.y, dtype=float)
+
+    def _guard(self) -> None:
+        kf = self._kf
+        if not np.all(np.isfinite(kf.x)):
+            raise FloatingPointError("UKF state is not finite")
+        P = 0.5 * (kf.P + kf.P.T)
+        ok = bool(np.all(np.isfinite(P)))
+        if ok:
+            try:
+                np.linalg.cholesky(P)
+            except np.linalg.LinAlgError:
+                ok = False
+        if not ok:
+            d = np.abs(np.nan_to_num(np.diag(P), nan=1.0, posinf=1.0))
+            P = np.diag(np.maximum(d, _VAR_FLOOR))
+            self.numerical_resets += 1
+        kf.P = P
+
+
+# --------------------------------------------------------------------------- the paper's UKF
+
+
+def _process_noise(dt: float, cfg: UkfConfig) -> np.ndarray:
+    """Q over dt: random walk on x1, x2; continuous white-noise acceleration on each (r_q, V_q) axis."""
+    Q = np.zeros((8, 8))
+    Q[0, 0] = Q[1, 1] = cfg.feature_process_noise ** 2 * dt
+    block = np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0], [dt ** 2 / 2.0, dt]])
+    for i, q in enumerate((cfg.target_accel_noise_m_s2, cfg.target_accel_noise_m_s2,
+                           cfg.target_vertical_accel_noise_m_s2)):
+        idx = np.array([2 + i, 5 + i])
+        Q[np.ix_(idx, idx)] = q * q * block
+    return Q
+
+
+def _fx_batch(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
+    """Integrate the process model for all sigma points S (m, 8) over dt with RK4.
+
+    Camera inside the interval (tau from its start): r_c = r_c0 + V_c tau,
+    R_enu_from_cam = R_ec0 exp([omega]x tau), omega in the camera frame.
+    """
+    n = max(1, int(math.ceil(dt / max_step - 1e-9)))
+    h = dt / n
+    cache: dict[float, np.ndarray] = {}
+
+    def R_ce(tau: float) -> np.ndarray:
+        R = cache.get(tau)
+        if R is None:
+            R = cache[tau] = (R_ec0 @ _exp_so3(omega, tau)).T
+        return R
+
+    def deriv(X: np.ndarray, tau: float) -> np.ndarray:
+        Rce = R_ce(tau)
+        rel = X[:, 2:5] - (r_c0 + V_c * tau)
+        Z = np.maximum(rel @ Rce[2], MIN_DEPTH_M)
+        v = (X[:, 5:8] - V_c) @ Rce.T
+        D = np.zeros_like(X)
+        D[:, 0:2] = feature_rates(X[:, 0], X[:, 1], Z, v, omega)
+        D[:, 2:5] = X[:, 5:8]
+        return D
+
+    X = np.array(S, dtype=float)
+    for k in range(n):
+        t0 = k * h
+        k1 = deriv(X, t0)
+        k2 = deriv(X + 0.5 * h * k1, t0 + 0.5 * h)
+        k3 = deriv(X + 0.5 * h * k2, t0 + 0.5 * h)
+        k4 = deriv(X + h * k3, t0 + h)
+        X = X + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return X
+
+
+def _hx(x: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_ec: np.ndarray, cam_h: float,
+        plane_z: float) -> np.ndarray:
+    """[u, v, r_c] predicted from one state: pinhole + flat-sea depth along the ray through (x1, x2)."""
+    x1, x2 = float(x[0]), float(x[1])
+    d = R_ec[:, 0] * x1 + R_ec[:, 1] * x2 + R_ec[:, 2]
+    Z = (cam_h - plane_z) / max(-float(d[2]), _MIN_RAY_DOWN)
+    out = np.empty(5)
+    out[0] = f_u * x1 + c_u
+    out[1] = f_v * x2 + c_v
+    out[2:5] = x[2:5] - d * Z
+    return out
+
+
+class UkfTargetEstimator:
+    """The paper's 8-state UKF (implements :class:`TargetEstimator`).
+
+    Use per tick::
+
+        motion = CameraMotion.from_measurements(meas, mount_offset_frd_m)
+        est = ukf.step(meas, motion)        # None until the first valid detection
+
+    or call ``initialise`` / ``predict`` / ``update`` yourself.
+    """
+
+    name = "ukf"
+
+    def __init__(self, camera: PinholeCamera, config: UkfConfig | None = None):
+        self.cfg = config if config is not None else UkfConfig()
+        self.camera = camera
+        c = self.cfg
+        self._core = UnscentedCore(8, 5, c.sigma_alpha, c.sigma_beta, c.sigma_kappa)
+        self._initialised = False
+        self._t = math.nan
+        self._motion: CameraMotion | None = None
+        self._innov = np.full(2, np.nan)
+        self._innov_t = math.nan
+        self.rejected_updates = 0  # detections not used (ray misses the plane, non-finite pixels)
+        self.divergence_resets = 0  # non-finite state: the filter de-initialised itself
+        self.updates = 0
+
+    # ------------------------------------------------------------ properties
+    @property
+    def initialised(self) -> bool:
+        return self._initialised
+
+    @property
+    def t_s(self) -> float:
+        return self._t
+
+    @property
+    def x(self) -> np.ndarray:
+        """The 8-state [x1, x2, r_q, V_q] (copy)."""
+        return self._core.x
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The 8x8 covariance (copy)."""
+        return self._core.P
+
+    @property
+    def pos_enu_m(self) -> np.ndarray:
+        return self._core.x[2:5]
+
+    @property
+    def vel_enu_m_s(self) -> np.ndarray:
+        return self._core.x[5:8]
+
+    @property
+    def pos_vel_cov(self) -> np.ndarray:
+        return self._core.P[2:8, 2:8]
+
+    @property
+    def features(self) -> tuple[float, float]:
+        x = self._core.x
+        return float(x[0]), float(x[1])
+
+    @property
+    def numerical_resets(self) -> int:
+        """How often P was not positive definite and was reset to its diagonal."""
+        return self._core.numerical_resets
+
+    @property
+    def core(self) -> UnscentedCore:
+        return self._core
+
+    # ------------------------------------------------------------ steps
+    def reset(self) -> None:
+        """Forget the target: the next valid detection initialises again."""
+        self._initialised = False
+        self._motion = None
+        self._innov = np.full(2, np.nan)
+        self._innov_t = math.nan
+
+    def initialise(self, meas: Measurements, motion: CameraMotion) -> None:
+        """Start from one valid detection: r_q on the plane along its ray, V_q = 0 with a large variance.
+
+        Raises ValueError if the detection is not valid or its ray does not meet the plane.
+        """
+        c, cam = self.cfg, self.camera
+        if not (meas.det_valid and math.isfinite(meas.det_u_px) and math.isfinite(meas.det_v_px)):
+            raise ValueError("initialise needs a valid detection")
+        x1, x2 = (float(a) for a in cam.normalised(meas.det_u_px, meas.det_v_px))
+        Z = depth_on_plane(x1, x2, motion.R_enu_from_cam, motion.height_m, c.target_plane_height_m)
+        if not math.isfinite(Z):
+            raise ValueError("the detection's ray does not meet the target plane")
+        d = motion.R_enu_from_cam @ np.array([x1, x2, 1.0])
+        r_q = motion.pos_enu_m + Z * d
+        r_q[2] = c.target_plane_height_m
+        rng = Z * math.sqrt(1.0 + x1 * x1 + x2 * x2)
+        sp = max(c.init_pos_std_frac * rng, c.cam_pos_noise_m)
+        sv = c.init_vel_std_m_s
+        P = np.diag([(c.pixel_noise_px / cam.fx) ** 2, (c.pixel_noise_px / cam.fy) ** 2, sp * sp, sp * sp,
+                     _INIT_VERTICAL_POS_STD_M ** 2, sv * sv, sv * sv, _INIT_VERTICAL_VEL_STD_M_S ** 2])
+        self._core.set_state(np.concatenate([[x1, x2], r_q, np.zeros(3)]), P)
+        self._t = float(meas.t_s)
+        self._motion = motion
+        self._innov = np.full(2, np.nan)
+        self._innov_t = math.nan
+        self._initialised = True
+
+    def predict(self, t_s: float, motion: CameraMotion) -> None:
+        """Propagate to t_s (no-op before initialisation or if t_s is not later than the filter's time)."""
+        if not self._initialised:
+            return
+        dt = float(t_s) - self._t
+        if dt <= 0.0:
+            if dt == 0.0:
+                self._motion = motion
+            return
+        m0 = self._motion if self._motion is not None else motion
+        omega = 0.5 * (m0.omega_cam_rad_s + motion.omega_cam_rad_s)
+        V_c = 0.5 * (m0.vel_enu_m_s + motion.vel_enu_m_s)
+        try:
+            self._core.predict(dt, _fx_batch, _process_noise(dt, self.cfg), r_c0=m0.pos_enu_m,
+                               R_ec0=m0.R_enu_from_cam, V_c=V_c, omega=omega, max_step=self.cfg.max_substep_s)
+        except FloatingPointError:
+            self.divergence_resets += 1
+            self.reset()
+            return
+        self._t = float(t_s)
+        self._motion = motion
+
+    def update(self, meas: Measurements, motion: CameraMotion) -> bool:
+        """Use the detection in ``meas`` if it is new and valid (predicts to meas.t_s first). True if used."""
+        if not (self._initialised and meas.det_new and meas.det_valid):
+            return False
+        if float(meas.t_s) > self._t:
+            self.predict(meas.t_s, motion)
+            if not self._initialised:
+                return False
+        c, cam = self.cfg, self.camera
+        u, v = float(meas.det_u_px), float(meas.det_v_px)
+        if not (math.isfinite(u) and math.isfinite(v)):
+            self.rejected_updates += 1
+            return False
+        x1m, x2m = cam.normalised(u, v)
+        if not math.isfinite(depth_on_plane(x1m, x2m, motion.R_enu_from_cam, motion.height_m,
+                                            c.target_plane_height_m)):
+            self.rejected_updates += 1
+            return False
+        x = self._core.x
+        rng = float(np.linalg.norm(x[2:5] - motion.pos_enu_m))
+        h = max(motion.height_m - c.target_plane_height_m, 1.0)
+        s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
+        R = np.diag([c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2])
+        z = np.concatenate([[u, v], motion.pos_enu_m])
+        try:
+            y = self._core.update(z, _hx, R, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
+                                  R_ec=motion.R_enu_from_cam, cam_h=motion.height_m,
+                                  plane_z=c.target_plane_height_m)
+        except FloatingPointError:
+            self.divergence_resets += 1
+            self.reset()
+            return False
+        self._innov = y[:2].copy()
+        self._innov_t = self._t
+        self._motion = motion
+        self.updates += 1
+        return True
+
+    def step(self, meas: Measurements, motion: CameraMotion) -> TargetEstimate | None:
+        """One tick: initialise on the first valid detection, else predict to meas.t_s and update if one arrived.
+
+        Returns the estimate, or None while not initialised.
+        """
+        if not self._initialised:
+            if not (meas.det_new and meas.det_valid):
+                return None
+            try:
+                self.initialise(meas, motion)
+            except ValueError:
+                self.rejected_updates += 1
+                return None
+            return self.estimate()
+        self.predict(meas.t_s, motion)
+        if meas.det_new and meas.det_valid:
+            self.update(meas, motion)
+        return self.estimate() if self._initialised else None
+
+    def estimate(self) -> TargetEstimate:
+        x, P = self._core.x, self._core.P
+        sd = np.sqrt(np.maximum(np.diag(P), 0.0))
+        innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
+        if not self._initialised:
+            nan3 = np.full(3, np.nan)
+            return TargetEstimate(self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan,
+                                  np.full(2, np.nan))
+        return TargetEstimate(self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(),
+                              float(x[0]), float(x[1]), innov)

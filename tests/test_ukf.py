@@ -1,0 +1,303 @@
+"""The target UKF (controllers.ukf) and the feature kinematics / depth model (controllers.camera_model).
+
+Oracles: finite differences of the projection (feature kinematics), the
+paper's on-axis depth formula, a linear Kalman filter (filterpy) on a linear
+case, and a synthetic constant-velocity ship seen from an orbiting camera
+(truth pointing from fwsim.frames.pan_tilt_pointing_at, used only by the test).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from pydantic import ValidationError
+
+from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
+from controllers.ukf import (CameraMotion, TargetEstimate, TargetEstimator, UkfConfig, UkfTargetEstimator,
+                             UnscentedCore)
+from fwsim import frames as F
+from fwsim.messages import Measurements
+
+
+def exp_so3(w, t):
+    """Rotation exp([w]x t) via scipy-free Rodrigues (independent of the module's helper)."""
+    th = np.linalg.norm(w) * t
+    if th == 0.0:
+        return np.eye(3)
+    k = np.asarray(w) / np.linalg.norm(w)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+
+
+def random_rotation(rng):
+    q = rng.normal(size=4)
+    return F.dcm_from_quat(q / np.linalg.norm(q))
+
+
+# ---------------------------------------------------------------- feature kinematics
+
+
+def test_feature_rates_match_finite_differences_of_the_projection():
+    """A moving, accelerating point seen by a translating, rotating camera: 20 random geometries."""
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        R0 = random_rotation(rng)  # R_enu_from_cam at t = 0
+        w = rng.normal(scale=0.5, size=3)  # camera angular velocity, camera frame (constant)
+        c0, Vc, ac = rng.normal(scale=50, size=3), rng.normal(scale=20, size=3), rng.normal(scale=3, size=3)
+        # target in front of the camera, off-axis
+        P0 = np.array([rng.uniform(-0.4, 0.4), rng.uniform(-0.3, 0.3), 1.0]) * rng.uniform(50, 800)
+        q0 = c0 + R0 @ P0
+        Vq, aq = rng.normal(scale=8, size=3), rng.normal(scale=1, size=3)
+
+        def features(t):
+            R = R0 @ exp_so3(w, t)
+            P = R.T @ ((q0 + Vq * t + 0.5 * aq * t * t) - (c0 + Vc * t + 0.5 * ac * t * t))
+            return P[:2] / P[2]
+
+        h = 1e-4
+        fd = (features(h) - features(-h)) / (2 * h)
+        x1, x2 = P0[:2] / P0[2]
+        v = R0.T @ (Vq - Vc)
+        got = feature_rates(x1, x2, P0[2], v, w)
+        assert np.allclose(got, fd, rtol=1e-6, atol=1e-9 * (1 + np.abs(fd).max())), (got, fd)
+        # the matrix form and the batched form agree
+        L = interaction_matrix(x1, x2, P0[2])
+        assert np.allclose(L @ np.concatenate([v, w]), got, rtol=1e-12, atol=1e-15)
+        batch = feature_rates(np.array([x1, x1]), np.array([x2, x2]), np.array([P0[2]] * 2), np.array([v, v]), w)
+        assert batch.shape == (2, 2) and np.allclose(batch[1], got)
+        # the paper's L1 (rotational block)
+        assert np.allclose(L[:, 3:], [[x1 * x2, -(1 + x1 ** 2), x2], [1 + x2 ** 2, -x1 * x2, -x1]])
+
+
+def test_camera_motion_from_measurements_matches_the_pan_tilt_pose_derivatives():
+    """V_c and omega_cam built from Measurements equal the derivatives of fwsim.frames.camera_pose_world."""
+    rng = np.random.default_rng(2)
+    m = np.array([0.3, -0.1, 0.15])
+    for _ in range(10):
+        e0, de = rng.uniform([-0.5, -0.4, -3], [0.5, 0.4, 3]), rng.normal(scale=0.3, size=3)
+        pt0, dpt = np.array([rng.uniform(-3, 3), rng.uniform(-1.2, 1.2)]), rng.normal(scale=0.5, size=2)
+        p0, vp = rng.normal(scale=100, size=3), rng.normal(scale=20, size=3)
+
+        def pose(t):
+            return F.camera_pose_world(p0 + vp * t, e0 + de * t, m, *(pt0 + dpt * t))
+
+        rates = F.body_rates_from_euler_rates(e0, de)
+        meas = Measurements(0.0, p0, vp, e0, rates, 22.0, p0[2], pan_rad=pt0[0], tilt_rad=pt0[1],
+                            pan_rate_rad_s=dpt[0], tilt_rate_rad_s=dpt[1])
+        mo = CameraMotion.from_measurements(meas, m)
+        c, R = pose(0.0)
+        assert np.allclose(mo.pos_enu_m, c) and np.allclose(mo.R_enu_from_cam, R)
+        assert math.isclose(mo.height_m, c[2], abs_tol=1e-9)
+        h = 1e-5
+        (cp, Rp), (cm, Rm) = pose(h), pose(-h)
+        assert np.allclose(mo.vel_enu_m_s, (cp - cm) / (2 * h), atol=1e-6)
+        W = R.T @ (Rp - Rm) / (2 * h)  # [omega]x in the camera frame
+        assert np.allclose(mo.omega_cam_rad_s, [W[2, 1], W[0, 2], W[1, 0]], atol=1e-6)
+
+
+# ---------------------------------------------------------------- depth model
+
+
+def test_depth_on_the_optical_axis_is_the_papers_h_over_cos_alpha():
+    rng = np.random.default_rng(3)
+    e3 = np.array([0.0, 0.0, 1.0])
+    for _ in range(20):
+        R = random_rotation(rng)
+        c3 = R[:, 2]
+        if -c3[2] < 0.05:
+            R = R @ np.diag([1.0, -1.0, -1.0])  # flip the optical axis down
+            c3 = R[:, 2]
+        h = rng.uniform(50, 1500)
+        alpha = math.acos(-e3 @ c3)
+        assert math.isclose(depth_on_plane(0.0, 0.0, R, h), h / math.cos(alpha), rel_tol=1e-12)
+
+
+def test_depth_off_axis_lands_on_the_plane_and_rejects_upward_rays():
+    rng = np.random.default_rng(4)
+    R = F.R_ENU_FROM_NED @ F.R_frd_from_cam(0.0, -math.pi / 2)  # level UAV, camera straight down
+    x1, x2 = rng.uniform(-0.5, 0.5, 50), rng.uniform(-0.3, 0.3, 50)
+    Z = depth_on_plane(x1, x2, R, 400.0, 12.5)
+    pts = np.array([0.0, 0.0, 400.0]) + Z[:, None] * (np.stack([x1, x2, np.ones(50)], 1) @ R.T)
+    assert np.allclose(pts[:, 2], 12.5)
+    assert np.allclose(Z, 387.5)  # looking straight down every ray has the same camera-frame depth
+    R_up = F.R_ENU_FROM_NED @ F.R_frd_from_cam(0.0, 0.3)  # optical axis above the horizon
+    assert math.isnan(depth_on_plane(0.0, 0.0, R_up, 400.0))
+    assert math.isnan(depth_on_plane(0.0, 0.0, R, -5.0))  # camera below the plane
+
+
+# ---------------------------------------------------------------- generic machinery vs linear KF
+
+
+@pytest.mark.parametrize("alpha,beta,kappa", [(1.0, 2.0, 0.0), (0.5, 2.0, 1.0), (0.3, 0.0, 3.0)])
+def test_unscented_core_equals_a_linear_kalman_filter_on_a_linear_case(alpha, beta, kappa):
+    """3-D constant-velocity target, direct position measurements, 50 steps: same x and P as filterpy's KF."""
+    rng = np.random.default_rng(5)
+    dt = 0.1
+    Fm = np.eye(6)
+    Fm[0:3, 3:6] = dt * np.eye(3)
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    A = rng.normal(size=(6, 6))
+    Q = 0.01 * A @ A.T + 1e-3 * np.eye(6)
+    B = rng.normal(size=(3, 3))
+    R = B @ B.T + 0.5 * np.eye(3)
+    C = rng.normal(size=(6, 6))
+    x0, P0 = rng.normal(size=6), C @ C.T + np.eye(6)
+
+    kf = KalmanFilter(dim_x=6, dim_z=3)
+    kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = x0.copy(), P0.copy(), Fm, Q, H, R
+    core = UnscentedCore(6, 3, alpha, beta, kappa)
+    core.set_state(x0, P0)
+    truth = np.array([0.0, 0, 0, 1, -2, 0.5])
+    for k in range(50):
+        truth = Fm @ truth
+        z = H @ truth + rng.normal(size=3)
+        kf.predict()
+        core.predict(dt, lambda S, dt_: S @ Fm.T, Q)
+        assert np.allclose(core.x, kf.x, rtol=1e-8, atol=1e-10)
+        assert np.allclose(core.P, kf.P, rtol=1e-8, atol=1e-10)
+        if k % 7 != 3:  # some steps without a measurement
+            kf.update(z)
+            y = core.update(z, lambda x: H @ x, R)
+            assert np.allclose(y, kf.y, rtol=1e-8, atol=1e-10)
+        assert np.allclose(core.x, kf.x, rtol=1e-8, atol=1e-10)
+        assert np.allclose(core.P, kf.P, rtol=1e-8, atol=1e-10)
+    assert core.numerical_resets == 0
+
+
+def test_unscented_core_resets_a_broken_covariance_to_its_diagonal():
+    core = UnscentedCore(2, 1)
+    core.set_state([0.0, 0.0], [[1.0, 2.0], [2.0, 1.0]])  # indefinite
+    assert core.numerical_resets == 1
+    assert np.allclose(core.P, np.eye(2))
+    core.predict(0.1, lambda S, dt: S, np.zeros((2, 2)))
+    assert np.all(np.isfinite(core.P)) and core.numerical_resets == 1
+
+
+def test_config_defaults_and_strictness():
+    cfg = UkfConfig.model_validate({})
+    assert cfg.pixel_noise_px == 2.0 and cfg.target_plane_height_m == 0.0
+    with pytest.raises(ValidationError):
+        UkfConfig.model_validate({"pixel_noise": 1.0})
+    with pytest.raises(ValidationError):
+        UkfConfig(pixel_noise_px=-1.0)
+    with pytest.raises(ValidationError):
+        cfg.pixel_noise_px = 3.0  # frozen
+
+
+# ---------------------------------------------------------------- synthetic mission
+
+
+CAM = PinholeCamera.from_fov(1280, 720, 60.0)
+MOUNT = np.array([0.0, 0.0, 0.10])
+G = 9.80665
+
+
+class OrbitTruth:
+    """A 5 m/s ship on the sea and a UAV circling it (R, H, airspeed) with the camera pointed at it."""
+
+    def __init__(self, radius=500.0, height=500.0, speed=22.0, ship_speed=5.0, ship_heading_deg=30.0):
+        self.R, self.H, self.V = radius, height, speed
+        self.Om = speed / radius  # counter-clockwise seen from above (left turn)
+        hd = math.radians(ship_heading_deg)
+        self.Vq = ship_speed * np.array([math.sin(hd), math.cos(hd), 0.0])
+        self.roll = -math.atan(speed * self.Om / G)
+
+    def ship(self, t):
+        return self.Vq * t
+
+    def uav(self, t):
+        a = math.pi + self.Om * t
+        pos = self.ship(t) + np.array([self.R * math.cos(a), self.R * math.sin(a), self.H])
+        vel = self.Vq + self.R * self.Om * np.array([-math.sin(a), math.cos(a), 0.0])
+        euler = np.array([self.roll, 0.0, math.atan2(vel[0], vel[1])])
+        return pos, vel, euler
+
+    def joints(self, t):
+        """Pan/tilt at the target plus a slow few-degree wobble so the target moves in the image."""
+        pos, _, euler = self.uav(t)
+        R_ef = F.dcm_enu_from_frd(euler)
+        cam = pos + R_ef @ MOUNT
+        pan, tilt = F.pan_tilt_pointing_at(R_ef.T @ (self.ship(t) - cam))
+        return np.array([pan + 0.05 * math.sin(0.3 * t), tilt + 0.04 * math.cos(0.23 * t)])
+
+    def sample(self, t, rng, detect=True, px=2.0, gnss=0.5, att=0.002, gyro=0.003, height=0.5, enc=0.0005,
+               gnss_err=None):
+        """Measurements at t (sensor noise as fwsim.sensors' defaults); gnss_err: a held GNSS error (3,)."""
+        pos, vel, euler = self.uav(t)
+        h = 1e-3
+        de = F.wrap_pi(self.uav(t + h)[2] - self.uav(t - h)[2]) / (2 * h)
+        rates = F.body_rates_from_euler_rates(euler, de)
+        pt = self.joints(t)
+        dpt = F.wrap_pi(self.joints(t + h) - self.joints(t - h)) / (2 * h)
+        cam, R = F.camera_pose_world(pos, euler, MOUNT, pt[0], pt[1])
+        P = R.T @ (self.ship(t) - cam)
+        u = CAM.fx * P[0] / P[2] + CAM.cx + rng.normal(0, px)
+        v = CAM.fy * P[1] / P[2] + CAM.cy + rng.normal(0, px)
+        assert P[2] > 0 and 0 <= u <= 1280 and 0 <= v <= 720
+        dp = rng.normal(0, gnss, 3) if gnss_err is None else gnss_err
+        kw = dict(det_new=True, det_valid=True, det_exposure_t_s=t, det_u_px=u, det_v_px=v) if detect else {}
+        return Measurements(
+            t, pos + dp, vel + rng.normal(0, 0.05, 3), euler + rng.normal(0, att, 3),
+            rates + rng.normal(0, gyro, 3), self.V, pos[2] + rng.normal(0, height),
+            pan_rad=pt[0] + rng.normal(0, enc), tilt_rad=pt[1] + rng.normal(0, enc),
+            pan_rate_rad_s=dpt[0], tilt_rate_rad_s=dpt[1], cam_pos_enu_m=cam + dp, **kw)
+
+
+def run_orbit(duration_s=75.0, gap=(45.0, 48.0), seed=7):
+    truth = OrbitTruth()
+    rng = np.random.default_rng(seed)
+    ukf = UkfTargetEstimator(CAM, UkfConfig())
+    rows = []
+    for k in range(int(duration_s * 30) + 1):
+        t = k / 30.0
+        if k % 3 == 0:  # GNSS at 10 Hz, held in between (as fwsim.sensors does): correlated over 3 updates
+            gnss_err = rng.normal(0, 0.5, 3)
+        meas = truth.sample(t, rng, detect=not (gap[0] <= t < gap[1]), gnss_err=gnss_err)
+        est = ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+        assert est is not None and isinstance(est, TargetEstimate)
+        rows.append((t, np.linalg.norm(est.pos_enu_m - truth.ship(t)), np.linalg.norm(est.vel_enu_m_s - truth.Vq),
+                     np.linalg.norm(est.pos_std_m), np.abs(est.innovation_px).max()))
+    return ukf, np.array(rows)
+
+
+def settle_time(t, err, bar):
+    """First time after which err stays below bar."""
+    above = np.nonzero(err >= bar)[0]
+    return t[0] if above.size == 0 else t[min(above[-1] + 1, len(t) - 1)]
+
+
+def test_ukf_tracks_a_constant_velocity_ship_from_an_orbit_and_survives_a_dropout():
+    ukf, r = run_orbit()
+    t, pe, ve = r[:, 0], r[:, 1], r[:, 2]
+    assert isinstance(ukf, TargetEstimator)
+    before, gap, after = t < 45.0, (t >= 45.0) & (t < 48.0), t >= 48.0
+    # converged within 60 s: position < 8 m (the paper's bar), velocity < 1 m/s, and it stays there
+    assert settle_time(t[before], pe[before], 8.0) < 60.0
+    assert settle_time(t[before], ve[before], 1.0) < 60.0
+    assert pe[(t >= 30) & before].max() < 8.0 and ve[(t >= 30) & before].max() < 1.0
+    # the 3 s dropout: predicted only, no innovation, error bounded
+    assert np.all(np.isnan(r[gap, 4]))
+    assert pe[gap].max() < 15.0
+    # and back under the bar after it
+    assert pe[t >= 50].max() < 8.0 and ve[t >= 55].max() < 1.0
+    assert ukf.numerical_resets == 0 and ukf.rejected_updates == 0
+    # innovations are of the size of the pixel noise once converged
+    assert np.sqrt(np.nanmean(r[t > 20, 4] ** 2)) < 8.0
+
+
+def test_ukf_step_before_any_detection_and_the_initial_guess():
+    truth = OrbitTruth()
+    rng = np.random.default_rng(8)
+    ukf = UkfTargetEstimator(CAM)
+    m0 = truth.sample(0.0, rng, detect=False)
+    assert ukf.step(m0, CameraMotion.from_measurements(m0, MOUNT)) is None and not ukf.initialised
+    m1 = truth.sample(1 / 30, rng)
+    est = ukf.step(m1, CameraMotion.from_measurements(m1, MOUNT))
+    assert ukf.initialised and est.t_s == m1.t_s
+    # first guess on the sea along the detection's ray: within a few percent of the ~700 m range
+    assert np.linalg.norm(est.pos_enu_m - truth.ship(m1.t_s)) < 30.0
+    assert est.pos_enu_m[2] == 0.0 and np.all(est.vel_enu_m_s == 0.0)
+    assert np.allclose(est.vel_std_m_s[:2], 10.0)
+    assert ukf.cov.shape == (8, 8) and ukf.pos_vel_cov.shape == (6, 6)
