@@ -81,7 +81,7 @@ class FlightSoftware:
             return z if z > 1.0 else None
         if meas.det_valid:
             x1, x2 = self.camera.normalised(meas.det_u_px, meas.det_v_px)
-            z = depth_on_plane(x1, x2, motion.R_enu_from_cam, motion.pos_enu_m[2], self.cfg.ukf.target_plane_height_m)
+            z = depth_on_plane(x1, x2, motion.R_enu_from_cam, motion.height_m, self.cfg.ukf.target_plane_height_m)
             return float(z) if np.isfinite(z) else None
         return None
 
