@@ -1,0 +1,551 @@
+"""Many runs from one batch spec: a local process pool, or Ray tasks.
+
+A batch spec (YAML) lists scenario files and what to sweep::
+
+    name: airspeed_sweep                 # optional; defaults to the spec's file name
+    runs:
+      - scenario: ../scenarios/autopilot_checkout.yaml   # relative to this file
+        seeds: [1, 2, 3]                 # or {range: [1, 9]} (Python's range: 1..8),
+                                         # or omitted: the scenario's own seed
+        grid:                            # cartesian product, by scenario field path
+          initial.airspeed_m_s: [20, 24]
+          initial.heading_deg: [0, 90]
+        set: {duration_s: 20}            # fixed overrides for every run of this entry
+
+Every run gets a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
+is the first 8 hex digits of the SHA-256 of its overrides (``set`` + one grid
+point, canonical JSON), and writes its log to ``OUT/logs/<id>.mcap``. Each run
+becomes one summary row (:data:`BASE_COLUMNS`, one ``set.<path>`` column per
+override, then every metric of :func:`fwsim.metrics.compute_metrics`); a run
+that raises is a failed row with its error, never a lost batch. The summary is
+written as ``OUT/summary.csv``, ``OUT/summary.json`` and, when pyarrow is
+importable, ``OUT/summary.parquet``.
+
+Runs go to a local process pool (spawn context) or, with ``ray_address``, to
+Ray remote tasks running the same :func:`run_one`.
+"""
+from __future__ import annotations
+
+import csv
+import ctypes
+import hashlib
+import itertools
+import json
+import math
+import multiprocessing
+import os
+import re
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+import fwsim
+from fwsim.scenario import ScenarioError, load_scenario
+
+#: Columns every summary row has, in this order; ``set.<path>`` override
+#: columns follow, then the metrics.
+BASE_COLUMNS = ("id", "scenario", "seed", "overrides", "status", "reason", "error", "wall_time_s", "log",
+                "resumed")
+#: Statuses of a finished log that ``--resume`` keeps.
+FINISHED_STATUSES = ("completed", "failed")
+_SPEC_KEYS = {"name", "runs"}
+_RUN_KEYS = {"scenario", "seeds", "grid", "set"}
+
+
+class BatchSpecError(ScenarioError):
+    """A batch spec that cannot be used; ``str()`` is one line per problem."""
+
+
+@dataclass(frozen=True)
+class RunJob:
+    """One run of a batch: everything a worker needs (picklable, no live objects)."""
+
+    id: str
+    scenario: str  # scenario name (after overrides)
+    scenario_file: str  # absolute path
+    seed: int
+    overrides: dict[str, Any]  # every override except the seed
+    log_path: str  # absolute path of its MCAP log
+
+    def all_overrides(self) -> dict[str, Any]:
+        return {**self.overrides, "seed": self.seed}
+
+
+@dataclass
+class BatchResult:
+    rows: list[dict[str, Any]]  # in spec order
+    out_dir: Path
+    files: list[Path] = field(default_factory=list)  # summary files written
+    resumed: int = 0  # rows recomputed from existing logs
+    interrupted: bool = False
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        return [r for r in self.rows if r["status"] != "completed"]
+
+
+# -- the spec ---------------------------------------------------------------
+
+def _canonical(overrides: dict[str, Any]) -> str:
+    return json.dumps(overrides, sort_keys=True, separators=(",", ":"))
+
+
+def run_id(scenario_name: str, seed: int, overrides: dict[str, Any]) -> str:
+    """``<name>-s<seed>-<8 hex>``: stable across machines and spec edits that keep the run."""
+    digest = hashlib.sha256(_canonical(overrides).encode()).hexdigest()[:8]
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", scenario_name)
+    return f"{safe}-s{seed}-{digest}"
+
+
+def _seeds(value: Any, where: str) -> list[int] | None:
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        if set(value) != {"range"}:
+            raise BatchSpecError(f"{where}.seeds: expected a list of seeds or {{range: [start, stop]}}")
+        r = value["range"]
+        if not (isinstance(r, list) and 2 <= len(r) <= 3 and all(isinstance(x, int) for x in r)):
+            raise BatchSpecError(f"{where}.seeds.range: expected [start, stop] or [start, stop, step] "
+                                 f"integers (got {r!r})")
+        seeds = list(range(*r))
+    elif isinstance(value, list):
+        seeds = value
+    else:
+        seeds = [value]
+    if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
+        raise BatchSpecError(f"{where}.seeds: expected a non-empty list of integers >= 0 (got {value!r})")
+    return seeds
+
+
+def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]:
+    """Read a batch spec and expand it into jobs (validating every scenario once).
+
+    Returns ``(batch name, jobs)`` in spec order: entries in order, then grid
+    points (cartesian product in the order the keys are written), then seeds.
+    Raises :class:`BatchSpecError` (or ScenarioError for a bad scenario) with
+    one line per problem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BatchSpecError(f"{path}: no such batch spec")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise BatchSpecError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("runs"), list) or not data["runs"]:
+        raise BatchSpecError(f"{path}: expected a mapping with a non-empty 'runs:' list")
+    unknown = set(data) - _SPEC_KEYS
+    if unknown:
+        raise BatchSpecError(f"{path}: {sorted(unknown)[0]}: unknown key (allowed: {sorted(_SPEC_KEYS)})")
+    name = str(data.get("name") or path.stem)
+    logs = Path(out_dir).resolve() / "logs"
+    jobs: list[RunJob] = []
+    for i, entry in enumerate(data["runs"]):
+        where = f"{path}: runs.{i}"
+        if not isinstance(entry, dict) or "scenario" not in entry:
+            raise BatchSpecError(f"{where}: expected a mapping with a 'scenario:' file")
+        unknown = set(entry) - _RUN_KEYS
+        if unknown:
+            raise BatchSpecError(f"{where}.{sorted(unknown)[0]}: unknown key (allowed: {sorted(_RUN_KEYS)})")
+        scenario_file = (path.parent / str(entry["scenario"])).resolve()
+        if not scenario_file.is_file():
+            raise BatchSpecError(f"{where}.scenario: no such scenario file {scenario_file}")
+        fixed = entry.get("set") or {}
+        grid = entry.get("grid") or {}
+        if not isinstance(fixed, dict) or not isinstance(grid, dict):
+            raise BatchSpecError(f"{where}: 'set' and 'grid' must map field paths to values")
+        for key, values in grid.items():
+            if not isinstance(values, list) or not values:
+                raise BatchSpecError(f"{where}.grid.{key}: expected a non-empty list of values (got {values!r})")
+        seeds = _seeds(entry.get("seeds"), where)
+        if seeds is not None and ("seed" in fixed or "seed" in grid):
+            raise BatchSpecError(f"{where}: give the seed in 'seeds' or in 'set'/'grid', not both")
+        keys = list(grid)
+        for point in itertools.product(*(grid[k] for k in keys)):
+            overrides = {**fixed, **dict(zip(keys, point))}
+            base_seed = overrides.pop("seed", None)
+            for seed in seeds if seeds is not None else [base_seed]:
+                ov = dict(overrides) if seed is None else {**overrides, "seed": seed}
+                try:
+                    scenario, _ = load_scenario(scenario_file, ov)
+                except ScenarioError as exc:
+                    raise BatchSpecError(f"{where} ({_canonical(ov)}): {exc}") from None
+                rid = run_id(scenario.name, scenario.seed, overrides)
+                jobs.append(RunJob(rid, scenario.name, str(scenario_file), scenario.seed, overrides,
+                                   str(logs / f"{rid}.mcap")))
+    seen: dict[str, int] = {}
+    for j in jobs:
+        seen[j.id] = seen.get(j.id, 0) + 1
+    dup = [k for k, n in seen.items() if n > 1]
+    if dup:
+        raise BatchSpecError(f"{path}: {len(dup)} run id(s) appear more than once (same scenario name, seed and "
+                             f"overrides), e.g. {dup[0]}")
+    return name, jobs
+
+
+# -- one run (runs in a worker process or a Ray task) -------------------------
+
+def _describe(exc: BaseException) -> str:
+    from fwsim.log.writer import describe_exception
+    return describe_exception(exc)
+
+
+def _base_row(job: RunJob, wall_time_s: float, error: str) -> dict[str, Any]:
+    row: dict[str, Any] = {
+        "id": job.id, "scenario": job.scenario, "seed": job.seed, "overrides": _canonical(job.overrides),
+        "status": "failed", "reason": error, "error": error, "wall_time_s": wall_time_s,
+        "log": str(Path("logs") / Path(job.log_path).name), "resumed": False,
+    }
+    row.update({f"set.{k}": v for k, v in job.overrides.items()})
+    return row
+
+
+def row_from_log(job: RunJob, wall_time_s: float = math.nan, error: str = "") -> dict[str, Any]:
+    """The summary row of a job, from its log (status, reason, metrics) if it exists.
+
+    ``error`` is the exception the run raised ("" if none): such a run is
+    failed whatever its log says.
+    """
+    from fwsim.log import read_log
+    from fwsim.log.writer import STATE_TOPIC
+    from fwsim.metrics import compute_metrics
+
+    row = _base_row(job, wall_time_s, error)
+    log_path = Path(job.log_path)
+    if not log_path.is_file():
+        row["reason"] = error or "no log was written"
+        return row
+    try:
+        log = read_log(log_path)
+    except Exception as exc:  # noqa: BLE001 - an unreadable log is a failed row
+        row["reason"] = error or f"unreadable log: {_describe(exc)}"
+        return row
+    row["status"] = "failed" if error else log.status
+    row["reason"] = log.reason or error
+    if not log.topics.get(STATE_TOPIC):  # failed before the first state (e.g. the trim): no metrics
+        return row
+    try:
+        metrics = compute_metrics(log)
+    except Exception as exc:  # noqa: BLE001 - a metric that cannot be computed: the row says why
+        row["metrics_error"] = _describe(exc)
+        return row
+    metrics.pop("status", None)  # the row's status and reason come from the same log
+    metrics.pop("end_reason", None)
+    row.update(metrics)
+    return row
+
+
+@contextmanager
+def _console_to(path: Path):
+    """Send this process's stdout/stderr (file descriptors 1 and 2, so JSBSim's
+    C++ output too) to ``path`` for the duration; the file is removed if empty."""
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    libc.fflush(None)
+    saved = os.dup(1), os.dup(2)
+    try:
+        with open(path, "wb") as f:
+            os.dup2(f.fileno(), 1)
+            os.dup2(f.fileno(), 2)
+            try:
+                yield
+            finally:
+                sys.stdout.flush()
+                sys.stderr.flush()
+                libc.fflush(None)
+                os.dup2(saved[0], 1)
+                os.dup2(saved[1], 2)
+    finally:
+        os.close(saved[0])
+        os.close(saved[1])
+        if path.is_file() and path.stat().st_size == 0:
+            path.unlink()
+
+
+def run_one(job: RunJob) -> dict[str, Any]:
+    """Fly one job and return its summary row (never raises for a failed run).
+
+    What the run prints (JSBSim's messages) goes to ``logs/<id>.console.txt``
+    (kept only when not empty), not to the terminal of the batch.
+    """
+    from fwsim.loop import run
+
+    t0 = time.perf_counter()
+    error = ""
+    interrupted = False
+    log_path = Path(job.log_path)
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    with _console_to(log_path.with_suffix(".console.txt")):
+        try:
+            scenario, text = load_scenario(job.scenario_file, job.all_overrides())
+            run(scenario, text, log_path)
+        except KeyboardInterrupt:  # the log already says 'interrupted'
+            interrupted = True
+        except Exception as exc:  # noqa: BLE001 - a failed run is a row, not a lost batch
+            error = _describe(exc)
+    if interrupted:
+        if _IN_POOL_WORKER:  # Ctrl-C reached the pool's workers too: leave, so no queued run starts
+            os._exit(130)
+        raise KeyboardInterrupt
+    return row_from_log(job, time.perf_counter() - t0, error)
+
+
+_IN_POOL_WORKER = False
+
+
+def _pool_worker_init() -> None:
+    global _IN_POOL_WORKER
+    _IN_POOL_WORKER = True
+
+
+def failed_row(job: RunJob, error: str) -> dict[str, Any]:
+    """A failed row for a job whose worker died or could not report."""
+    return _base_row(job, math.nan, error)
+
+
+# -- executors --------------------------------------------------------------
+
+RowCallback = Callable[[dict[str, Any]], None]
+
+
+def _run_pool(jobs: list[RunJob], workers: int, on_row: RowCallback, run_fn: Callable) -> None:
+    """Local process pool (spawn). A worker that dies (segfault, os._exit) breaks
+    the pool: the runs it took down are retried one by one in fresh processes,
+    and the one that dies again becomes a failed row."""
+    ctx = multiprocessing.get_context("spawn")
+    casualties: list[RunJob] = []
+    pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(jobs))), mp_context=ctx,
+                               initializer=_pool_worker_init)
+    try:
+        futures = {pool.submit(run_fn, j): j for j in jobs}
+        for fut in as_completed(futures):
+            job = futures[fut]
+            try:
+                on_row(fut.result())
+            except BrokenProcessPool:
+                casualties.append(job)
+            except Exception as exc:  # noqa: BLE001 - e.g. a result that does not pickle
+                on_row(failed_row(job, f"worker error: {_describe(exc)}"))
+    finally:  # on Ctrl-C: start nothing new (the runs in flight log 'interrupted')
+        pool.shutdown(wait=True, cancel_futures=True)
+    for job in casualties:  # one process per run: a crash takes down only itself
+        with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_pool_worker_init) as pool:
+            try:
+                on_row(pool.submit(run_fn, job).result())
+            except BrokenProcessPool:
+                on_row(failed_row(job, "worker process died (crashed twice; see its log if any)"))
+            except Exception as exc:  # noqa: BLE001
+                on_row(failed_row(job, f"worker error: {_describe(exc)}"))
+
+
+def ray_connect(address: str, workers: int) -> bool:
+    """Make sure Ray is initialised; True if this call started it (and must shut it down).
+
+    Uses the Ray instance already initialised in this process if there is
+    one; otherwise ``address`` is ``local`` (start a local instance with
+    ``workers`` CPUs), ``auto`` (connect to the cluster started with ``ray
+    start``) or a cluster address (``ray://host:10001``, ``host:6379``).
+    """
+    try:
+        import ray
+    except ImportError:
+        raise BatchSpecError("--ray needs Ray: pip install 'fwsim[ray]'") from None
+    if ray.is_initialized():
+        return False
+    try:
+        if address == "local":
+            ray.init(num_cpus=workers, include_dashboard=False)
+        else:
+            ray.init(address=address)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise BatchSpecError(f"--ray {address}: cannot connect to Ray: {exc}") from None
+    return True
+
+
+def _run_ray(jobs: list[RunJob], on_row: RowCallback, run_fn: Callable) -> None:
+    """Ray remote tasks running ``run_fn`` (1 CPU each). Logs are written by the
+    workers at ``OUT/logs``: on a multi-node cluster OUT must be a shared file
+    system and fwsim installed on every node."""
+    import ray
+
+    remote = ray.remote(num_cpus=1, max_retries=1)(run_fn)
+    refs = {remote.remote(j): j for j in jobs}
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        for ref in done:
+            try:
+                row = ray.get(ref)
+            except Exception as exc:  # noqa: BLE001 - a lost worker or node: a failed row
+                row = failed_row(refs[ref], f"ray task failed: {type(exc).__name__}: {exc}")
+            on_row(row)
+
+
+# -- the batch --------------------------------------------------------------
+
+def _previous_rows(out_dir: Path) -> dict[str, dict[str, Any]]:
+    try:
+        data = json.loads((out_dir / "summary.json").read_text())
+        return {r["id"]: r for r in data.get("rows", [])}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def resumable(job: RunJob) -> bool:
+    """True when the job's log exists, is finished (completed/failed) and was
+    flown from the scenario file as it is now."""
+    from fwsim.log import read_log
+
+    log_path = Path(job.log_path)
+    if not log_path.is_file():
+        return False
+    try:
+        log = read_log(log_path)
+    except Exception:  # noqa: BLE001 - unreadable: fly it again
+        return False
+    if log.status not in FINISHED_STATUSES:
+        return False
+    return log.scenario_text == Path(job.scenario_file).read_text()
+
+
+def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
+              ray_address: str | None = None, on_start: Callable[[int, int], None] | None = None,
+              on_row: RowCallback | None = None, run_fn: Callable[[RunJob], dict] = run_one) -> BatchResult:
+    """Expand a spec, fly what is needed, write the summary files.
+
+    ``on_start(total, resumed)`` is called once before flying and
+    ``on_row(row)`` after each finished run (for a progress bar). ``run_fn``
+    must be a module-level function (it is pickled by reference).
+    Ctrl-C writes the summary of the runs finished so far, then re-raises.
+    """
+    out_dir = Path(out_dir)
+    name, jobs = load_spec(spec_path, out_dir)
+    (out_dir / "logs").mkdir(parents=True, exist_ok=True)
+    workers = workers or os.cpu_count() or 1
+    rows: dict[str, dict[str, Any]] = {}
+    todo = jobs
+    if resume:
+        previous = _previous_rows(out_dir)
+        todo = []
+        for job in jobs:
+            if resumable(job):
+                prev = previous.get(job.id, {})
+                wall = prev.get("wall_time_s")
+                row = row_from_log(job, float(wall) if isinstance(wall, (int, float)) else math.nan,
+                                   prev.get("error") or "")
+                row["resumed"] = True
+                rows[job.id] = row
+            else:
+                todo.append(job)
+    if on_start is not None:
+        on_start(len(jobs), len(rows))
+
+    def collect(row: dict[str, Any]) -> None:
+        rows[row["id"]] = row
+        if on_row is not None:
+            on_row(row)
+
+    result = BatchResult([], out_dir, resumed=len(jobs) - len(todo))
+    ray_started = bool(todo and ray_address and ray_connect(ray_address, workers))
+    try:
+        if todo:
+            if ray_address:
+                _run_ray(todo, collect, run_fn)
+            else:
+                _run_pool(todo, workers, collect, run_fn)
+    except KeyboardInterrupt:
+        result.interrupted = True
+        raise
+    finally:
+        if ray_started:
+            import ray
+            ray.shutdown()
+        result.rows = [rows[j.id] for j in jobs if j.id in rows]
+        result.files = write_summary(result.rows, out_dir, {
+            "name": name, "spec": str(Path(spec_path).resolve()), "fwsim_version": fwsim.__version__,
+            "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "runs": len(jobs), "finished": len(result.rows),
+            "failed": sum(r["status"] != "completed" for r in result.rows),
+            "interrupted": result.interrupted, "executor": f"ray ({ray_address})" if ray_address else
+            f"process pool ({workers} workers)"})
+    return result
+
+
+# -- summary files ----------------------------------------------------------
+
+def columns_of(rows: list[dict[str, Any]]) -> list[str]:
+    """Base columns, then ``set.*`` override columns, then metric columns (first-seen order)."""
+    seen: dict[str, None] = dict.fromkeys(BASE_COLUMNS)
+    sets: dict[str, None] = {}
+    rest: dict[str, None] = {}
+    for r in rows:
+        for k in r:
+            if k in seen:
+                continue
+            (sets if k.startswith("set.") else rest).setdefault(k, None)
+    return [*seen, *sets, *rest]
+
+
+def _json_safe(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None  # strict JSON: NaN/inf -> null
+    if isinstance(v, list):
+        return [_json_safe(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    return v
+
+
+def _csv_cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v)  # shortest text that reads back to the same float
+    if isinstance(v, (list, dict)):
+        return json.dumps(v)
+    return str(v)
+
+
+def write_summary(rows: list[dict[str, Any]], out_dir: Path, info: dict[str, Any]) -> list[Path]:
+    """summary.csv, summary.json and (pyarrow importable) summary.parquet; returns the files written."""
+    out_dir = Path(out_dir)
+    cols = columns_of(rows)
+    files = [out_dir / "summary.csv"]
+    with open(files[0], "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for r in rows:
+            w.writerow([_csv_cell(r.get(c)) for c in cols])
+    parquet = _write_parquet(rows, cols, out_dir / "summary.parquet", info)
+    (out_dir / "summary.json").write_text(json.dumps(
+        {"batch": info, "columns": cols, "rows": [_json_safe(r) for r in rows]}, indent=1, allow_nan=False))
+    files.append(out_dir / "summary.json")
+    return files + parquet
+
+
+def _write_parquet(rows: list[dict[str, Any]], cols: list[str], path: Path, info: dict[str, Any]) -> list[Path]:
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return []
+    table_rows = [{c: (json.dumps(r[c]) if isinstance(r.get(c), (list, dict)) else r.get(c)) for c in cols}
+                  for r in rows]
+    try:
+        pq.write_table(pa.Table.from_pylist(table_rows), path)
+    except (pa.ArrowException, TypeError, ValueError) as exc:
+        path.unlink(missing_ok=True)
+        info.setdefault("warnings", []).append(f"summary.parquet not written: {exc}")
+        return []
+    return [path]

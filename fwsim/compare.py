@@ -1,0 +1,433 @@
+"""Compare the metrics of two runs with tolerances; regression baselines.
+
+A metrics source is a run log (``.mcap``: metrics computed with
+:func:`fwsim.metrics.compute_metrics`), a metrics file (``.json`` from
+``fwsim metrics --json``) or a baseline file (``.yaml``, below).
+
+Tolerances, per metric (``TOLERANCE_KEYS``)::
+
+    roll_rate_err_rms_deg_s: {rel: 1.0e-5}          # |run - base| <= 1e-5 * |base|
+    height_min_m: {abs: 1.0e-3}                     # |run - base| <= 1 mm
+    sideslip_abs_max_deg: {abs: 1.0e-3, rel: 1.0e-5}  # within the larger of the two
+    bank_abs_max_deg: {min: 0, max: 45}             # bounds on the run's value only
+    end_reason: {ignore: true}                      # not compared
+    default: {rel: 1.0e-5}                          # every metric without its own entry
+
+``abs``/``rel`` give the allowed difference ``max(abs, rel * |baseline|)``;
+``min``/``max`` bound the run's value whatever the baseline; with bounds but
+no ``abs``/``rel`` only the bounds are checked; with neither the values must
+be equal. Text metrics (``status``, ``end_reason``) must match exactly unless
+ignored. NaN equals NaN. Verdicts: ``ok``, ``REGRESSION``, ``missing`` (in the
+baseline, not in the run), ``new`` (in the run only), ``ignored``; a
+comparison fails on any REGRESSION or missing metric.
+
+A baseline file (``tests/baselines/<scenario>.yaml``) holds the tolerances
+inside it, under ``tolerances:``, beside the scenario it flies and its
+metrics::
+
+    description: ...
+    scenario: ../../scenarios/autopilot_checkout.yaml   # relative to this file
+    overrides: {duration_s: 60}                         # dotted scenario paths
+    tolerances: {...}
+    # ---- written by tools/refresh_baselines.py ... ----
+    recorded: {fwsim: 0.1.0, jsbsim: ..., date: ...}
+    metrics: {...}
+
+Everything from the marker line to the end is rewritten by
+:func:`write_baseline_metrics` (``tools/refresh_baselines.py``); everything
+above it, comments included, is kept.
+"""
+from __future__ import annotations
+
+import json
+import math
+import platform
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fwsim.scenario import ScenarioError
+
+TOLERANCE_KEYS = ("abs", "rel", "min", "max", "ignore")
+DEFAULT_KEY = "default"
+BASELINE_KEYS = ("description", "scenario", "overrides", "tolerances", "recorded", "metrics")
+REFRESH_MARKER = ("# ---- written by tools/refresh_baselines.py from here to the end of the file; "
+                  "edit above this line ----")
+FAILING = ("REGRESSION", "missing")
+
+
+class CompareError(ScenarioError):
+    """A metrics, baseline or tolerance file that cannot be used (one line per problem)."""
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    abs: float | None = None
+    rel: float | None = None
+    min: float | None = None
+    max: float | None = None
+    ignore: bool = False
+
+    @property
+    def closeness(self) -> bool:
+        return self.abs is not None or self.rel is not None
+
+    @property
+    def bounds(self) -> bool:
+        return self.min is not None or self.max is not None
+
+    def allowed(self, baseline: float) -> float:
+        """The allowed |run - baseline| (0 without abs/rel)."""
+        return max(self.abs or 0.0, (self.rel or 0.0) * abs(baseline))
+
+    def describe(self) -> str:
+        if self.ignore:
+            return "ignored"
+        parts = []
+        if self.abs is not None:
+            parts.append(f"abs {self.abs:g}")
+        if self.rel is not None:
+            parts.append(f"rel {self.rel:g}")
+        if self.bounds:
+            lo = "-inf" if self.min is None else f"{self.min:g}"
+            hi = "inf" if self.max is None else f"{self.max:g}"
+            parts.append(f"in [{lo}, {hi}]")
+        return ", ".join(parts) or "exact"
+
+
+EXACT = Tolerance()
+
+
+def _number(value: Any, where: str) -> float:
+    # PyYAML reads 1e-5 (no dot) as a string: accept any text float() takes.
+    try:
+        if isinstance(value, bool):
+            raise ValueError
+        return float(value)
+    except (TypeError, ValueError):
+        raise CompareError(f"{where}: expected a number (got {value!r})") from None
+
+
+def parse_tolerances(data: Any, source: str) -> dict[str, Tolerance]:
+    """``{metric: {abs, rel, min, max, ignore}}`` -> ``{metric: Tolerance}``; unknown keys rejected."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise CompareError(f"{source}: tolerances: expected a mapping of metric -> {{abs, rel, min, max, ignore}}")
+    out = {}
+    for metric, spec in data.items():
+        where = f"{source}: tolerances.{metric}"
+        if not isinstance(spec, dict):
+            raise CompareError(f"{where}: expected a mapping with keys {list(TOLERANCE_KEYS)} (got {spec!r})")
+        unknown = set(spec) - set(TOLERANCE_KEYS)
+        if unknown:
+            raise CompareError(f"{where}.{sorted(unknown)[0]}: unknown key (allowed: {list(TOLERANCE_KEYS)})")
+        kw: dict[str, Any] = {k: _number(spec[k], f"{where}.{k}") for k in ("abs", "rel", "min", "max")
+                              if spec.get(k) is not None}
+        for k in ("abs", "rel"):
+            if kw.get(k, 0.0) < 0:
+                raise CompareError(f"{where}.{k}: must be >= 0 (got {kw[k]:g})")
+        if "ignore" in spec:
+            if not isinstance(spec["ignore"], bool):
+                raise CompareError(f"{where}.ignore: expected true or false (got {spec['ignore']!r})")
+            kw["ignore"] = spec["ignore"]
+        out[str(metric)] = Tolerance(**kw)
+    return out
+
+
+# -- comparing --------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Check:
+    metric: str
+    baseline: Any  # None when the metric is new
+    run: Any  # None when the metric is missing
+    tolerance: Tolerance
+    verdict: str  # ok | REGRESSION | missing | new | ignored
+    detail: str = ""  # why (difference, bound) for humans
+
+    @property
+    def failed(self) -> bool:
+        return self.verdict in FAILING
+
+
+def _is_nan(v: Any) -> bool:
+    return isinstance(v, float) and math.isnan(v)
+
+
+def check_metric(metric: str, baseline: Any, run: Any, tol: Tolerance) -> Check:
+    """One metric's verdict (see the module docstring for the rules)."""
+    if tol.ignore:
+        return Check(metric, baseline, run, tol, "ignored")
+    if baseline is None:
+        return Check(metric, baseline, run, tol, "new", "not in the baseline")
+    if run is None:
+        return Check(metric, baseline, run, tol, "missing", "not in the run")
+    if isinstance(baseline, str) or isinstance(run, str):
+        same = baseline == run
+        return Check(metric, baseline, run, tol, "ok" if same else "REGRESSION", "" if same else "text differs")
+    b, r = float(baseline), float(run)
+    if math.isnan(b) or math.isnan(r):
+        same = math.isnan(b) and math.isnan(r)
+        return Check(metric, baseline, run, tol, "ok" if same else "REGRESSION",
+                     "" if same else f"NaN in the {'run' if math.isnan(r) else 'baseline'} only")
+    problems = []
+    diff = r - b
+    if tol.closeness:
+        allowed = tol.allowed(b)
+        if not abs(diff) <= allowed:
+            problems.append(f"|diff| {abs(diff):.3g} > allowed {allowed:.3g}")
+    elif not tol.bounds and diff != 0:
+        problems.append("not equal")
+    if tol.min is not None and r < tol.min:
+        problems.append(f"below min {tol.min:g}")
+    if tol.max is not None and r > tol.max:
+        problems.append(f"above max {tol.max:g}")
+    return Check(metric, baseline, run, tol, "REGRESSION" if problems else "ok", "; ".join(problems))
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.10g}"
+    return str(v)
+
+
+def _fmt_diff(c: Check) -> str:
+    if isinstance(c.baseline, str) or isinstance(c.run, str) or c.baseline is None or c.run is None:
+        return ""
+    b, r = float(c.baseline), float(c.run)
+    if not (math.isfinite(b) and math.isfinite(r)):
+        return ""
+    d = r - b
+    return f"{d:+.3g}" + (f" ({d / abs(b):+.2e} rel)" if b != 0 else "")
+
+
+@dataclass
+class Comparison:
+    checks: list[Check]
+    baseline_label: str = "baseline"
+    run_label: str = "run"
+
+    @property
+    def ok(self) -> bool:
+        return not any(c.failed for c in self.checks)
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if c.failed]
+
+    def count(self, verdict: str) -> int:
+        return sum(c.verdict == verdict for c in self.checks)
+
+    def summary_line(self) -> str:
+        if self.ok:
+            extra = f", {self.count('new')} new" if self.count("new") else ""
+            return f"OK: {self.count('ok')} metrics within tolerance{extra}"
+        return (f"FAIL: {self.count('REGRESSION')} regression(s), {self.count('missing')} missing "
+                f"(baseline {self.baseline_label}, run {self.run_label})")
+
+    def rows(self) -> list[tuple[str, str, str, str, str, str]]:
+        """(metric, baseline, run, diff, tolerance, verdict + detail) as text."""
+        return [(c.metric, _fmt(c.baseline), _fmt(c.run), _fmt_diff(c), c.tolerance.describe(),
+                 c.verdict + (f": {c.detail}" if c.detail and c.failed else "")) for c in self.checks]
+
+    def format_text(self, failures_only: bool = False) -> str:
+        """A fixed-width table (for test failures and logs), then the summary line."""
+        head = ("metric", "baseline", "run", "diff", "tolerance", "verdict")
+        rows = [r for r, c in zip(self.rows(), self.checks) if c.failed or not failures_only]
+        widths = [max(len(x) for x in col) for col in zip(head, *rows)]
+        lines = [f"baseline: {self.baseline_label}", f"run:      {self.run_label}",
+                 "  ".join(h.ljust(w) for h, w in zip(head, widths)),
+                 "  ".join("-" * w for w in widths)]
+        lines += ["  ".join(x.ljust(w) for x, w in zip(r, widths)).rstrip() for r in rows]
+        lines.append(self.summary_line())
+        return "\n".join(lines)
+
+
+def compare_metrics(baseline: dict[str, Any], run: dict[str, Any], tolerances: dict[str, Tolerance] | None = None,
+                    baseline_label: str = "baseline", run_label: str = "run") -> Comparison:
+    """Every metric of either side, in the baseline's order then the run's new ones."""
+    tolerances = tolerances or {}
+    default = tolerances.get(DEFAULT_KEY, EXACT)
+    names = list(dict.fromkeys([*baseline, *run]))
+    checks = []
+    for name in names:
+        tol = tolerances.get(name)
+        if tol is None:
+            text = isinstance(baseline.get(name), str) or isinstance(run.get(name), str)
+            tol = EXACT if text else default
+        checks.append(check_metric(name, baseline.get(name), run.get(name), tol))
+    return Comparison(checks, baseline_label, run_label)
+
+
+# -- metrics sources --------------------------------------------------------
+
+@dataclass
+class MetricsSource:
+    metrics: dict[str, Any]
+    tolerances: dict[str, Tolerance] = field(default_factory=dict)
+    label: str = ""
+
+
+def _clean(metrics: dict[str, Any], source: str) -> dict[str, Any]:
+    out = {}
+    for k, v in metrics.items():
+        if v is None:
+            v = math.nan  # null in JSON/YAML: a NaN metric
+        elif isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise CompareError(f"{source}: metrics.{k}: expected a number or text (got {v!r})")
+        elif isinstance(v, int):
+            v = float(v)
+        out[str(k)] = v
+    return out
+
+
+def load_metrics(path: str | Path) -> MetricsSource:
+    """Metrics (and, for a baseline, its tolerances) from a .mcap, .json or .yaml file."""
+    path = Path(path)
+    if not path.is_file():
+        raise CompareError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        from fwsim.log import read_log
+        from fwsim.metrics import compute_metrics
+        try:
+            log = read_log(path)
+        except ValueError as exc:
+            raise CompareError(str(exc)) from None
+        meta = log.metadata.get("fwsim", {})
+        label = f"{path} (scenario {meta.get('scenario', '?')}, seed {meta.get('seed', '?')})"
+        return MetricsSource(compute_metrics(log), {}, label)
+    if suffix == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except ValueError as exc:
+            raise CompareError(f"{path}: not valid JSON: {exc}") from None
+        if isinstance(data, dict) and isinstance(data.get("metrics"), dict):
+            data = data["metrics"]
+        if not isinstance(data, dict):
+            raise CompareError(f"{path}: expected a JSON object of metric -> value (as `fwsim metrics --json`)")
+        return MetricsSource(_clean(data, str(path)), {}, str(path))
+    if suffix in (".yaml", ".yml"):
+        b = load_baseline(path)
+        return MetricsSource(b.metrics, b.tolerances, str(path))
+    raise CompareError(f"{path}: unsupported file type {suffix!r} (use .mcap, .json or a baseline .yaml)")
+
+
+def load_tolerance_file(path: str | Path) -> dict[str, Tolerance]:
+    """A YAML file with a ``tolerances:`` mapping (or just the mapping)."""
+    path = Path(path)
+    if not path.is_file():
+        raise CompareError(f"{path}: no such tolerance file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise CompareError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    if isinstance(data, dict) and "tolerances" in data:
+        data = data["tolerances"]
+    return parse_tolerances(data, str(path))
+
+
+def compare_files(baseline: str | Path, run: str | Path, tolerances: str | Path | None = None) -> Comparison:
+    """``fwsim compare``: the baseline's own tolerances, overridden per metric by ``tolerances``."""
+    base, new = load_metrics(baseline), load_metrics(run)
+    tol = dict(base.tolerances)
+    if tolerances is not None:
+        tol.update(load_tolerance_file(tolerances))
+    return compare_metrics(base.metrics, new.metrics, tol, base.label, new.label)
+
+
+# -- regression baselines -----------------------------------------------------
+
+@dataclass
+class Baseline:
+    path: Path
+    scenario: Path  # resolved scenario file
+    overrides: dict[str, Any]
+    tolerances: dict[str, Tolerance]
+    metrics: dict[str, Any]
+    description: str = ""
+    recorded: dict[str, Any] = field(default_factory=dict)
+
+
+def load_baseline(path: str | Path, require_metrics: bool = True) -> Baseline:
+    """Read a baseline file; ``require_metrics=False`` accepts a new one without metrics yet."""
+    path = Path(path)
+    if not path.is_file():
+        raise CompareError(f"{path}: no such baseline file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise CompareError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict):
+        raise CompareError(f"{path}: expected a mapping with keys {list(BASELINE_KEYS)}")
+    unknown = set(data) - set(BASELINE_KEYS)
+    if unknown:
+        raise CompareError(f"{path}: {sorted(unknown)[0]}: unknown key (allowed: {list(BASELINE_KEYS)})")
+    if "scenario" not in data:
+        raise CompareError(f"{path}: scenario: missing (the scenario file this baseline flies)")
+    metrics = data.get("metrics")
+    if metrics is None and not require_metrics:
+        metrics = {}
+    if not isinstance(metrics, dict):
+        raise CompareError(f"{path}: metrics: missing; run tools/refresh_baselines.py {path}")
+    overrides = data.get("overrides") or {}
+    if not isinstance(overrides, dict):
+        raise CompareError(f"{path}: overrides: expected a mapping of scenario field path -> value")
+    return Baseline(path, (path.parent / str(data["scenario"])).resolve(), overrides,
+                    parse_tolerances(data.get("tolerances"), str(path)), _clean(metrics, str(path)),
+                    str(data.get("description") or ""), data.get("recorded") or {})
+
+
+def fly_baseline(baseline: Baseline, log_path: str | Path) -> dict[str, Any]:
+    """Fly the baseline's scenario with its overrides; the metrics of that run."""
+    from fwsim.loop import run
+    from fwsim.metrics import compute_metrics
+    from fwsim.scenario import load_scenario
+
+    scenario, text = load_scenario(baseline.scenario, baseline.overrides)
+    result = run(scenario, text, Path(log_path))
+    return compute_metrics(result.log_path)
+
+
+def check_baseline(baseline: Baseline, log_path: str | Path) -> Comparison:
+    """Re-fly a baseline and compare the run's metrics with it."""
+    metrics = fly_baseline(baseline, log_path)
+    return compare_metrics(baseline.metrics, metrics, baseline.tolerances, str(baseline.path),
+                           f"{log_path} (re-flown)")
+
+
+def recorded_info() -> dict[str, str]:
+    import jsbsim
+
+    import fwsim
+    return {"fwsim": fwsim.__version__, "jsbsim": jsbsim.__version__, "python": platform.python_version(),
+            "machine": platform.machine(), "date": datetime.now(timezone.utc).date().isoformat()}
+
+
+def write_baseline_metrics(path: str | Path, metrics: dict[str, Any], recorded: dict[str, Any] | None = None) -> None:
+    """Rewrite the part of a baseline file after :data:`REFRESH_MARKER` with these metrics.
+
+    The marker and the generated block are appended when the file has no
+    marker yet (a new baseline: write its description, scenario, overrides
+    and tolerances by hand, then refresh).
+    """
+    path = Path(path)
+    text = path.read_text()
+    lines = text.splitlines()
+    if REFRESH_MARKER in lines:
+        head = lines[: lines.index(REFRESH_MARKER)]
+    else:
+        if any(line.startswith(("metrics:", "recorded:")) for line in lines):
+            raise CompareError(f"{path}: has metrics but no marker line; put {REFRESH_MARKER!r} above them")
+        head = lines
+    values = {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in metrics.items()}
+    block = yaml.safe_dump({"recorded": recorded if recorded is not None else recorded_info(), "metrics": values},
+                           sort_keys=False, default_flow_style=False, width=1000)
+    path.write_text("\n".join(head).rstrip("\n") + "\n" + REFRESH_MARKER + "\n" + block)
+    load_baseline(path)  # what was written must read back

@@ -1,0 +1,374 @@
+"""Replay a run's MCAP log as a Rerun recording (``.rrd``), with a default layout.
+
+Everything goes on one timeline, ``sim_time`` (seconds from the start of the
+run). Entities (world frame ENU, metres; ``world`` is Z-up):
+
+    world/uav                 Transform3D: pose of the body (FRD) in the world
+    world/uav/body            Boxes3D: fuselage and wing (drawn ``marker_scale`` times life size)
+    world/uav/axes            Arrows3D: body x (forward, red), y (right, green), z (down, blue)
+    world/uav_path            LineStrips3D: the whole flight, coloured by flight-software phase
+    world/target, .../hull    Transform3D + Boxes3D of the ship; world/target_path
+    world/camera              Transform3D + Pinhole (frustum) of the gimbal camera
+    world/target_estimate     Points3D: the flight software's target estimate (/fsw/estimate)
+    camera/image              EncodedImage: rendered camera frames (with camera/detection boxes)
+    plots/...                 Scalars: airspeed, altitude, roll/pitch, inner-loop set-points vs actual,
+                              distance to the target, gimbal angles, target estimate error
+    events                    TextLog: the run's /events
+    scenario                  TextDocument: the scenario file the run flew
+
+Each group is a *layer* (:data:`LAYERS`): a function that logs its entities
+when the topics it needs are in the log and returns the blueprint views it
+adds; a layer without its topics is skipped and reported. Add one with the
+:func:`layer` decorator.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from fwsim.log.reader import RunLog, read_log
+
+TIMELINE = "sim_time"
+STATE_TOPIC = "/uav/state"
+POSE_TOPIC = "/uav/pose"
+AUTOPILOT_TOPIC = "/autopilot/status"
+FSW_TOPIC = "/fsw/status"
+TARGET_TOPIC = "/target/state"
+GIMBAL_TOPIC = "/gimbal/state"
+TF_TOPIC = "/tf"
+CALIBRATION_TOPIC = "/camera/calibration"
+IMAGE_TOPIC = "/camera/image"
+DETECTION_TOPIC = "/camera/detection"
+CAMERA_FRAME_TOPIC = "/camera/frame"
+EVENTS_TOPIC = "/events"
+ESTIMATE_TOPIC = "/fsw/estimate"
+
+#: The paper's UAV (fuselage 1 m, span 2.4 m) and ship (55 x 25 x 25 m).
+UAV_LENGTH_M, UAV_SPAN_M = 1.0, 2.4
+PHASE_COLOURS = [(150, 150, 150), (31, 119, 180), (255, 127, 14), (214, 39, 40), (44, 160, 44), (148, 103, 189)]
+
+
+@dataclass
+class ReplayOptions:
+    marker_scale: float = 10.0  # UAV body drawn this many times life size (a 1 m fuselage is invisible at 1 km)
+    frustum_m: float = 60.0  # how far the camera frustum is drawn
+    application_id: str = "fwsim"
+
+
+@dataclass
+class ReplayResult:
+    rrd_path: Path
+    layers: list[str] = field(default_factory=list)  # logged
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (layer, why)
+
+
+@dataclass(frozen=True)
+class Layer:
+    name: str
+    needs: tuple[str, ...]
+    log: Callable[[RunLog, rr.RecordingStream, ReplayOptions], list]  # returns blueprint views
+
+
+LAYERS: dict[str, Layer] = {}
+
+
+def layer(name: str, needs: tuple[str, ...]):
+    """Register ``fn(log, rec, options) -> [blueprint views]`` as a replay layer."""
+    def register(fn):
+        LAYERS[name] = Layer(name, tuple(needs), fn)
+        return fn
+    return register
+
+
+class SkipLayer(Exception):
+    """Raised by a layer that has its topics but not the data it needs."""
+
+
+def _time(t_s: np.ndarray) -> list[rr.TimeColumn]:
+    return [rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=float))]
+
+
+def _scalars(rec: rr.RecordingStream, path: str, t_s: np.ndarray, values: np.ndarray, name: str,
+             colour: tuple[int, int, int] | None = None, dashed_setpoint: bool = False) -> None:
+    """One time series: its style (static) and its values."""
+    values = np.asarray(values, dtype=float)
+    style = rr.SeriesLines(names=name, colors=[colour] if colour else None, widths=1.0 if dashed_setpoint else 2.0)
+    rec.log(path, style, static=True)
+    rec.send_columns(path, indexes=_time(t_s), columns=rr.Scalars.columns(scalars=values))
+
+
+def _tf(log: RunLog, child: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(t_s, translation (n, 3), quaternion xyzw (n, 4)) of one child frame on /tf."""
+    if not log.topics.get(TF_TOPIC):
+        return None
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+    t, pos, quat = [], [], []
+    for _, data in log.raw(TF_TOPIC):
+        m = FrameTransform.FromString(data)
+        if m.child_frame_id != child:
+            continue
+        t.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
+        pos.append((m.translation.x, m.translation.y, m.translation.z))
+        quat.append((m.rotation.x, m.rotation.y, m.rotation.z, m.rotation.w))
+    if not t:
+        return None
+    return np.array(t), np.array(pos), np.array(quat)
+
+
+def _phase_strips(log: RunLog, t: np.ndarray, pos: np.ndarray) -> tuple[list[np.ndarray], list, list[str]]:
+    """The path cut into one strip per stretch of constant phase."""
+    if not log.topics.get(FSW_TOPIC) or "phase" not in log.table(FSW_TOPIC):
+        return [pos], [PHASE_COLOURS[1]], ["path"]
+    fsw = log.table(FSW_TOPIC)
+    phase = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
+    names = {int(p): str(n) for p, n in zip(phase, fsw.get("phase_name", phase))}
+    i = np.clip(np.searchsorted(fsw["t_s"], t + 1e-9, side="right") - 1, 0, len(phase) - 1)
+    ph = phase[i]
+    cuts = np.flatnonzero(np.diff(ph)) + 1
+    strips, colours, labels = [], [], []
+    for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(ph)]):
+        strips.append(pos[a: min(b + 1, len(pos))])  # overlap one point so the strips join
+        colours.append(PHASE_COLOURS[ph[a] % len(PHASE_COLOURS)])
+        labels.append(f"phase {ph[a]}: {names.get(int(ph[a]), '?')}")
+    return strips, colours, labels
+
+
+# -- layers -------------------------------------------------------------------
+
+@layer("uav", needs=(POSE_TOPIC,))
+def _uav(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    t, pos, q_wxyz = log.poses()  # q_enu_from_frd: body FRD into world ENU
+    quat = q_wxyz[:, [1, 2, 3, 0]]  # Rerun wants x, y, z, w
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    strips, colours, labels = _phase_strips(log, t, pos)
+    rec.log("world/uav_path", rr.LineStrips3D(strips, colors=colours, labels=labels, radii=rr.Radius.ui_points(1.5)),
+            static=True)
+    rec.send_columns("world/uav", indexes=_time(t),
+                     columns=rr.Transform3D.columns(translation=pos, quaternion=quat))
+    s = opt.marker_scale
+    rec.log("world/uav/body", rr.Boxes3D(
+        centers=[[0.0, 0.0, 0.0], [0.05 * s, 0.0, 0.0]],
+        half_sizes=[[0.5 * UAV_LENGTH_M * s, 0.06 * s, 0.06 * s], [0.12 * s, 0.5 * UAV_SPAN_M * s, 0.015 * s]],
+        colors=[(230, 230, 230), (200, 200, 255)], fill_mode="solid", labels=["fuselage", "wing"]), static=True)
+    L = 1.2 * UAV_LENGTH_M * s
+    rec.log("world/uav/axes", rr.Arrows3D(vectors=[[L, 0, 0], [0, L, 0], [0, 0, L]],
+                                          colors=[(255, 0, 0), (0, 200, 0), (0, 0, 255)],
+                                          labels=["x fwd", "y right", "z down"]), static=True)
+    return [rrb.Spatial3DView(origin="world", name="3D (ENU, body axes FRD)")]
+
+
+@layer("target", needs=(TARGET_TOPIC,))
+def _target(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    tg = log.table(TARGET_TOPIC)
+    pos = tg["pos_enu_m"]
+    rec.log("world/target_path", rr.LineStrips3D([pos], colors=[(23, 190, 207)], radii=rr.Radius.ui_points(1.5)),
+            static=True)
+    tf = _tf(log, "ship")
+    if tf is not None:  # the ship frame (bow, port, up) as the loop logged it
+        t, p, q = tf
+    else:  # from the heading: the ship frame is ENU turned about z by (pi/2 - heading)
+        t, p = tg["t_s"], pos
+        half = 0.5 * (np.pi / 2 - tg["heading_ned_rad"])
+        q = np.column_stack([np.zeros_like(half), np.zeros_like(half), np.sin(half), np.cos(half)])
+    rec.send_columns("world/target", indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
+    L, W, H = _ship_size(log)
+    rec.log("world/target/hull", rr.Boxes3D(centers=[[0, 0, 0.5 * H]], half_sizes=[[0.5 * L, 0.5 * W, 0.5 * H]],
+                                            colors=[(23, 190, 207)], labels=["ship"]), static=True)
+    return []
+
+
+def _ship_size(log: RunLog) -> tuple[float, float, float]:
+    import yaml
+    try:
+        tgt = (yaml.safe_load(log.scenario_text) or {}).get("target") or {}
+        return float(tgt.get("length_m", 55.0)), float(tgt.get("width_m", 25.0)), float(tgt.get("height_m", 25.0))
+    except (yaml.YAMLError, AttributeError, TypeError, ValueError):
+        return 55.0, 25.0, 25.0
+
+
+@layer("camera", needs=(TF_TOPIC, CALIBRATION_TOPIC))
+def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+    tf = _tf(log, "camera")
+    if tf is None:
+        raise SkipLayer("no 'camera' frame on /tf")
+    t, p, q = tf
+    cal = CameraCalibration.FromString(log.raw(CALIBRATION_TOPIC)[0][1])
+    K = np.array(cal.K, dtype=float).reshape(3, 3)
+    rec.send_columns("world/camera", indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
+    rec.log("world/camera", rr.Pinhole(image_from_camera=K, resolution=[cal.width, cal.height],
+                                       camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=opt.frustum_m),
+            static=True)
+    views = []
+    scale = 1.0
+    if log.topics.get(IMAGE_TOPIC):
+        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+        times, blobs = [], []
+        for _, data in log.raw(IMAGE_TOPIC):
+            m = CompressedImage.FromString(data)
+            times.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
+            blobs.append(bytes(m.data))
+        width = _jpeg_width(blobs[0])
+        scale = width / cal.width if width else 1.0
+        for ti, blob in zip(times, blobs):
+            rec.set_time(TIMELINE, duration=ti)
+            rec.log("camera/image", rr.EncodedImage(contents=blob, media_type="image/jpeg"))
+        rec.reset_time()
+    if log.topics.get(DETECTION_TOPIC):
+        det = log.table(DETECTION_TOPIC)
+        found = det["detected"].astype(bool) if "detected" in det else np.isfinite(det["u_px"])
+        for ti, ok, box in zip(det["t_s"], found, det["bbox_px"]):
+            rec.set_time(TIMELINE, duration=float(ti))
+            if ok and np.all(np.isfinite(box)):
+                rec.log("camera/detection", rr.Boxes2D(mins=[box[:2] * scale], sizes=[(box[2:] - box[:2]) * scale],
+                                                       colors=[(255, 60, 60)], labels=["detection"]))
+            else:
+                rec.log("camera/detection", rr.Clear(recursive=False))
+        rec.reset_time()
+    if log.topics.get(IMAGE_TOPIC) or log.topics.get(DETECTION_TOPIC):
+        views.append(rrb.Spatial2DView(origin="camera", name="camera"))
+    return views
+
+
+def _jpeg_width(blob: bytes) -> int | None:
+    try:
+        import cv2
+        img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED)
+        return int(img.shape[1]) if img is not None else None
+    except Exception:  # noqa: BLE001 - no scale then
+        return None
+
+
+@layer("estimate", needs=(ESTIMATE_TOPIC,))
+def _estimate(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    est = log.table(ESTIMATE_TOPIC)
+    if "pos_enu_m" not in est:
+        raise SkipLayer(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+    t, pos = est["t_s"], est["pos_enu_m"]
+    ok = np.all(np.isfinite(pos), axis=1)
+    rec.send_columns("world/target_estimate", indexes=_time(t[ok]),
+                     columns=rr.Points3D.columns(positions=pos[ok], radii=np.full(ok.sum(), 4.0),
+                                                 colors=np.tile([255, 0, 255], (ok.sum(), 1))))
+    views = []
+    if log.topics.get(TARGET_TOPIC):
+        tg = log.table(TARGET_TOPIC)
+        truth = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
+        _scalars(rec, "plots/estimate/position_error", t, np.linalg.norm(pos - truth, axis=1),
+                 "|estimate - truth| [m]", (255, 0, 255))
+        views.append(rrb.TimeSeriesView(origin="plots/estimate", name="target estimate error [m]"))
+    return views
+
+
+@layer("flight_plots", needs=(STATE_TOPIC,))
+def _flight_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    st = log.table(STATE_TOPIC)
+    t = st["t_s"]
+    _scalars(rec, "plots/airspeed/truth", t, st["airspeed_m_s"], "airspeed (truth)", (31, 119, 180))
+    _scalars(rec, "plots/altitude/height", t, st["height_above_sea_m"], "height above sea", (44, 160, 44))
+    eul = np.degrees(st["euler_ned_rad"])
+    _scalars(rec, "plots/attitude/roll", t, eul[:, 0], "roll φ [deg]", (214, 39, 40))
+    _scalars(rec, "plots/attitude/pitch", t, eul[:, 1], "pitch θ [deg]", (31, 119, 180))
+    return [rrb.TimeSeriesView(origin="plots/airspeed", name="airspeed [m/s]"),
+            rrb.TimeSeriesView(origin="plots/altitude", name="height [m]"),
+            rrb.TimeSeriesView(origin="plots/attitude", name="roll, pitch [deg]")]
+
+
+@layer("inner_loops", needs=(AUTOPILOT_TOPIC,))
+def _inner_loops(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    ap = log.table(AUTOPILOT_TOPIC)
+    t = ap["t_s"]
+    sp, act = np.degrees(ap["body_rates_sp_frd_rad_s"]), np.degrees(ap["body_rates_frd_rad_s"])
+    _scalars(rec, "plots/airspeed/setpoint", t, ap["airspeed_sp_m_s"], "airspeed set-point", (255, 127, 14), True)
+    _scalars(rec, "plots/rates/p/actual", t, act[:, 0], "p", (31, 119, 180))
+    _scalars(rec, "plots/rates/p/setpoint", t, sp[:, 0], "p set-point", (255, 127, 14), True)
+    _scalars(rec, "plots/rates/q/actual", t, act[:, 1], "q", (31, 119, 180))
+    _scalars(rec, "plots/rates/q/setpoint", t, sp[:, 1], "q set-point", (255, 127, 14), True)
+    return [rrb.TimeSeriesView(origin="plots/rates/p", name="roll rate p [deg/s]"),
+            rrb.TimeSeriesView(origin="plots/rates/q", name="pitch rate q [deg/s]")]
+
+
+@layer("target_plots", needs=(STATE_TOPIC, TARGET_TOPIC))
+def _target_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    st, tg = log.table(STATE_TOPIC), log.table(TARGET_TOPIC)
+    t = st["t_s"]
+    tp = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
+    _scalars(rec, "plots/target/distance", t, np.linalg.norm(st["pos_enu_m"] - tp, axis=1), "distance [m]")
+    return [rrb.TimeSeriesView(origin="plots/target", name="distance to target [m]")]
+
+
+@layer("gimbal_plots", needs=(GIMBAL_TOPIC,))
+def _gimbal_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    g = log.table(GIMBAL_TOPIC)
+    _scalars(rec, "plots/gimbal/pan", g["t_s"], np.degrees(g["pan_rad"]), "pan [deg]", (148, 103, 189))
+    _scalars(rec, "plots/gimbal/tilt", g["t_s"], np.degrees(g["tilt_rad"]), "tilt [deg]", (140, 86, 75))
+    return [rrb.TimeSeriesView(origin="plots/gimbal", name="gimbal [deg]")]
+
+
+@layer("events", needs=(EVENTS_TOPIC,))
+def _events(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    events = log.events()
+    levels = {"DEBUG": "DEBUG", "INFO": "INFO", "WARNING": "WARN", "ERROR": "ERROR", "FATAL": "CRITICAL"}
+    rec.send_columns("events", indexes=_time(np.array([e[0] for e in events])),
+                     columns=rr.TextLog.columns(text=[e[2] for e in events],
+                                                level=[levels.get(e[1], "INFO") for e in events]))
+    return [rrb.TextLogView(origin="events", name="events")]
+
+
+# -- the recording ----------------------------------------------------------
+
+def export_rrd(log: RunLog | str | Path, rrd_path: str | Path, options: ReplayOptions | None = None) -> ReplayResult:
+    """Write the log as a Rerun recording with a default blueprint; returns what was logged."""
+    if not isinstance(log, RunLog):
+        log = read_log(log)
+    opt = options or ReplayOptions()
+    rrd_path = Path(rrd_path)
+    rrd_path.parent.mkdir(parents=True, exist_ok=True)
+    meta = log.metadata.get("fwsim", {})
+    # No sink yet: the stream buffers what is logged until save(), which then
+    # writes it with the default blueprint built from the layers that ran.
+    rec = rr.RecordingStream(opt.application_id, recording_id=log.path.stem)
+    res = ReplayResult(rrd_path)
+    views: list = []
+    try:
+        if log.scenario_text:
+            rec.log("scenario", rr.TextDocument(f"```yaml\n{log.scenario_text}\n```", media_type="text/markdown"),
+                    static=True)
+        rec.log("run", rr.TextDocument(
+            f"status: {log.status}\nreason: {log.reason}\nscenario: {meta.get('scenario', '?')}, "
+            f"seed {meta.get('seed', '?')}\nfwsim {meta.get('fwsim_version', '?')}, "
+            f"jsbsim {meta.get('jsbsim_version', '?')}\nlog: {log.path}"), static=True)
+        for ly in LAYERS.values():
+            missing = [t for t in ly.needs if not log.topics.get(t)]
+            if missing:
+                res.skipped.append((ly.name, f"no {', '.join(missing)} in this log"))
+                continue
+            try:
+                views += [(ly.name, v) for v in ly.log(log, rec, opt)]
+            except SkipLayer as exc:
+                res.skipped.append((ly.name, str(exc)))
+                continue
+            res.layers.append(ly.name)
+        rec.save(rrd_path, default_blueprint=default_blueprint(views))
+        rec.flush()
+    finally:
+        rec.disconnect()
+    return res
+
+
+def default_blueprint(views: list[tuple[str, object]]) -> rrb.Blueprint:
+    """3D view (and camera, events) on the left, the time series stacked on the right."""
+    spatial = [v for _, v in views if not isinstance(v, (rrb.TimeSeriesView, rrb.TextLogView))]
+    series = [v for _, v in views if isinstance(v, rrb.TimeSeriesView)]
+    texts = [v for _, v in views if isinstance(v, rrb.TextLogView)]
+    left = spatial + texts or [rrb.TextDocumentView(origin="run", name="run")]
+    shares = [3.0 if isinstance(v, rrb.Spatial3DView) else 1.0 for v in left]
+    columns = [rrb.Vertical(*left, row_shares=shares)]
+    if series:
+        columns.append(rrb.Vertical(*series))
+    return rrb.Blueprint(rrb.Horizontal(*columns, column_shares=[3, 2][: len(columns)]),
+                         rrb.TimePanel(state="expanded"), collapse_panels=False)

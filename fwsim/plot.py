@@ -1,0 +1,407 @@
+"""Figures of one run, drawn from its log (PNG, matplotlib without a display).
+
+Every figure is a function registered with :func:`figure`, naming the topics
+it needs; :func:`plot_log` draws those whose topics are in the log and
+reports the others as skipped with the reason. A figure can also skip itself
+on the data (``raise SkipFigure("no accel-mode ticks")``). To add one of the
+paper's figures::
+
+    @figure("tilt_angle", needs=(GIMBAL_TOPIC,), title="Camera tilt angle")
+    def _tilt_angle(log: RunLog) -> Figure:
+        fig, axes = _figure(1)
+        ...
+        return fig
+
+Figures are built with ``matplotlib.figure.Figure`` directly (no pyplot, no
+global backend), so plotting works in any process and thread.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from fwsim.log import RunLog, read_log
+
+STATE_TOPIC = "/uav/state"
+AUTOPILOT_TOPIC = "/autopilot/status"
+FSW_TOPIC = "/fsw/status"
+TARGET_TOPIC = "/target/state"
+GIMBAL_TOPIC = "/gimbal/state"
+DETECTION_TOPIC = "/camera/detection"
+CALIBRATION_TOPIC = "/camera/calibration"
+ESTIMATE_TOPIC = "/fsw/estimate"  # the flight software's target estimate (UKF)
+IBVS_TOPIC = "/fsw/ibvs"  # the gimbal controller's own pixel error
+
+PHASE_COLOURS = ("tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:brown", "tab:pink",
+                 "tab:gray", "tab:olive")
+DPI = 110
+
+
+class SkipFigure(Exception):
+    """Raised by a figure function when the log has the topics but not the data it needs."""
+
+
+@dataclass(frozen=True)
+class FigureSpec:
+    name: str  # file name without .png
+    needs: tuple[str, ...]  # topics that must be in the log (with messages)
+    title: str
+    draw: Callable[[RunLog], Figure]
+
+
+FIGURES: dict[str, FigureSpec] = {}
+
+
+def figure(name: str, needs: tuple[str, ...], title: str):
+    """Register a figure function ``draw(log) -> Figure``."""
+    def register(fn: Callable[[RunLog], Figure]) -> Callable[[RunLog], Figure]:
+        FIGURES[name] = FigureSpec(name, tuple(needs), title, fn)
+        return fn
+    return register
+
+
+@dataclass
+class PlotResult:
+    written: list[Path] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (figure, why)
+    failed: list[tuple[str, str]] = field(default_factory=list)  # (figure, error)
+
+
+def plot_log(log: RunLog | str | Path, out_dir: str | Path, only: list[str] | None = None) -> PlotResult:
+    """Draw every registered figure (or ``only`` these) into ``out_dir/<name>.png``.
+
+    A figure whose topics are missing, or that raises :class:`SkipFigure`, is
+    skipped with the reason; one that raises anything else is reported in
+    ``failed`` and the others are still drawn.
+    """
+    if not isinstance(log, RunLog):
+        log = read_log(log)
+    unknown = [n for n in only or [] if n not in FIGURES]
+    if unknown:
+        raise ValueError(f"unknown figure(s) {unknown}; known: {list(FIGURES)}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    res = PlotResult()
+    for spec in FIGURES.values():
+        if only and spec.name not in only:
+            continue
+        missing = [t for t in spec.needs if not log.topics.get(t)]
+        if missing:
+            res.skipped.append((spec.name, f"no {', '.join(missing)} in this log"))
+            continue
+        try:
+            fig = spec.draw(log)
+        except SkipFigure as exc:
+            res.skipped.append((spec.name, str(exc)))
+            continue
+        except Exception as exc:  # noqa: BLE001 - one broken figure does not stop the others
+            res.failed.append((spec.name, f"{type(exc).__name__}: {exc}"))
+            continue
+        fig.suptitle(f"{spec.title} — {_run_label(log)}", fontsize=10)
+        path = out_dir / f"{spec.name}.png"
+        fig.savefig(path, dpi=DPI)
+        res.written.append(path)
+    return res
+
+
+def figure_names() -> list[str]:
+    return list(FIGURES)
+
+
+# -- helpers ----------------------------------------------------------------
+
+def _run_label(log: RunLog) -> str:
+    meta = log.metadata.get("fwsim", {})
+    return f"{meta.get('scenario', log.path.stem)} (seed {meta.get('seed', '?')}, {log.status})"
+
+
+def _figure(rows: int, cols: int = 1, height: float = 2.2, sharex: bool = True) -> tuple[Figure, np.ndarray]:
+    fig = Figure(figsize=(8.0 if cols == 1 else 11.0, 1.2 + height * rows), layout="constrained")
+    axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
+    for ax in axes.ravel():
+        ax.grid(True, alpha=0.3)
+    return fig, axes[:, 0] if cols == 1 else axes
+
+
+def _at(t_src: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The latest ``values`` sample at or before each time ``t`` (zero-order hold)."""
+    i = np.searchsorted(t_src, t + 1e-9, side="right") - 1
+    return values[np.clip(i, 0, len(values) - 1)]
+
+
+def _interp3(t: np.ndarray, t_src: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.interp(t, t_src, v[:, k]) for k in range(v.shape[1])])
+
+
+def _phases(log: RunLog, t: np.ndarray) -> tuple[np.ndarray, dict[int, str]] | None:
+    """A phase index at each time ``t`` and ``{index: label}``, if /fsw/status is logged.
+
+    Indices number the distinct (phase, phase_name) pairs in order of first
+    appearance, so sub-phases (``acquisition:search``, ``acquisition:orbit``)
+    get their own colours.
+    """
+    if not log.topics.get(FSW_TOPIC):
+        return None
+    fsw = log.table(FSW_TOPIC)
+    if "phase" not in fsw:
+        return None
+    phase = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
+    names = fsw["phase_name"] if "phase_name" in fsw else np.full(len(phase), "", dtype=object)
+    keys: dict[tuple[int, str], int] = {}
+    index = np.array([keys.setdefault((int(p), str(n)), len(keys)) for p, n in zip(phase, names)], dtype=int)
+    labels = {i: f"phase {p}: {n}" if n else f"phase {p}" for (p, n), i in keys.items()}
+    return _at(fsw["t_s"], index, t), labels
+
+
+def _coloured_path(ax, x: np.ndarray, y: np.ndarray, phase: tuple | None, label: str = "UAV") -> None:
+    """A path coloured by phase (one legend entry per phase), or one colour."""
+    if phase is None:
+        ax.plot(x, y, color=PHASE_COLOURS[0], lw=1.2, label=label)
+    else:
+        ph, names = phase
+        segs = np.stack([np.column_stack([x[:-1], y[:-1]]), np.column_stack([x[1:], y[1:]])], axis=1)
+        colours = [PHASE_COLOURS[p % len(PHASE_COLOURS)] for p in ph[:-1]]
+        ax.add_collection(LineCollection(segs, colors=colours, linewidths=1.4))
+        for p in sorted(set(ph.tolist())):
+            ax.plot([], [], color=PHASE_COLOURS[p % len(PHASE_COLOURS)], lw=1.4, label=names.get(p, "?"))
+        ax.autoscale_view()
+    ax.plot(x[:1], y[:1], "o", color="k", ms=4, label="start")
+    ax.plot(x[-1:], y[-1:], "x", color="k", ms=6, label="end")
+
+
+def _target_track(log: RunLog, ax, axis: int) -> None:
+    if log.topics.get(TARGET_TOPIC):
+        p = log.table(TARGET_TOPIC)["pos_enu_m"]
+        ax.plot(p[:, 0], p[:, axis], color="tab:cyan", lw=2.0, label="target")
+        ax.plot(p[-1:, 0], p[-1:, axis], "s", color="tab:cyan", ms=5)
+
+
+# -- figures from the state and the inner loops ---------------------------------
+
+@figure("trajectory_xy", needs=(STATE_TOPIC,), title="Trajectory, top view (x East, y North)")
+def _trajectory_xy(log: RunLog) -> Figure:
+    st = log.table(STATE_TOPIC)
+    pos = st["pos_enu_m"]
+    fig, (ax,) = _figure(1, height=5.5)
+    _coloured_path(ax, pos[:, 0], pos[:, 1], _phases(log, st["t_s"]))
+    _target_track(log, ax, 1)
+    ax.set_xlabel("x East [m]")
+    ax.set_ylabel("y North [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+@figure("trajectory_xz", needs=(STATE_TOPIC,), title="Trajectory, side view (x East, z Up)")
+def _trajectory_xz(log: RunLog) -> Figure:
+    st = log.table(STATE_TOPIC)
+    pos = st["pos_enu_m"]
+    fig, (ax,) = _figure(1, height=4.0)
+    _coloured_path(ax, pos[:, 0], pos[:, 2], _phases(log, st["t_s"]))
+    _target_track(log, ax, 2)
+    ax.set_xlabel("x East [m]")
+    ax.set_ylabel("z Up [m]")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+@figure("altitude_airspeed", needs=(STATE_TOPIC,), title="Altitude and airspeed")
+def _altitude_airspeed(log: RunLog) -> Figure:
+    st = log.table(STATE_TOPIC)
+    t = st["t_s"]
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, st["height_above_sea_m"], label="height above sea")
+    a1.set_ylabel("height [m]")
+    a2.plot(t, st["airspeed_m_s"], label="airspeed (truth)")
+    if log.topics.get(AUTOPILOT_TOPIC):
+        ap = log.table(AUTOPILOT_TOPIC)
+        a2.plot(ap["t_s"], ap["airspeed_sp_m_s"], "--", label="set-point")
+    a2.set_ylabel("airspeed [m/s]")
+    a2.set_xlabel("sim time [s]")
+    a2.legend(fontsize=8)
+    return fig
+
+
+@figure("attitude", needs=(STATE_TOPIC,), title="Attitude (roll, pitch, yaw; NED Euler angles)")
+def _attitude(log: RunLog) -> Figure:
+    st = log.table(STATE_TOPIC)
+    t, eul = st["t_s"], np.degrees(st["euler_ned_rad"])
+    fig, axes = _figure(3)
+    for ax, k, name in zip(axes, range(3), ("roll φ", "pitch θ", "yaw ψ")):
+        ax.plot(t, eul[:, k])
+        ax.set_ylabel(f"{name} [deg]")
+    axes[-1].set_xlabel("sim time [s]")
+    return fig
+
+
+@figure("inner_loops", needs=(AUTOPILOT_TOPIC,), title="Inner loops: set-points vs actual")
+def _inner_loops(log: RunLog) -> Figure:
+    ap = log.table(AUTOPILOT_TOPIC)
+    t = ap["t_s"]
+    sp, act = np.degrees(ap["body_rates_sp_frd_rad_s"]), np.degrees(ap["body_rates_frd_rad_s"])
+    fig, axes = _figure(3)
+    for ax, k, name in zip(axes, (0, 1), ("roll rate p", "pitch rate q")):
+        ax.plot(t, act[:, k], label="actual")
+        ax.plot(t, sp[:, k], "--", label="set-point")
+        ax.set_ylabel(f"{name} [deg/s]")
+    axes[2].plot(t, ap["airspeed_m_s"], label="actual")
+    axes[2].plot(t, ap["airspeed_sp_m_s"], "--", label="set-point")
+    axes[2].set_ylabel("airspeed [m/s]")
+    axes[2].set_xlabel("sim time [s]")
+    axes[0].legend(fontsize=8)
+    return fig
+
+
+@figure("accel_tracking", needs=(AUTOPILOT_TOPIC,), title="Acceleration mode: commanded vs achieved (ENU)")
+def _accel_tracking(log: RunLog) -> Figure:
+    ap = log.table(AUTOPILOT_TOPIC)
+    mode = ap.get("mode")
+    accel = np.array([m == "accel" for m in mode]) if mode is not None else np.zeros(0, bool)
+    if not accel.any():
+        raise SkipFigure("no acceleration-mode ticks in /autopilot/status")
+    t = ap["t_s"]
+    sp = np.where(accel[:, None], ap["accel_sp_enu_m_s2"], np.nan)
+    act = np.where(accel[:, None], ap["accel_enu_m_s2"], np.nan)
+    fig, axes = _figure(3)
+    for ax, k, name in zip(axes, range(3), ("East", "North", "Up")):
+        ax.plot(t, act[:, k], label="achieved")
+        ax.plot(t, sp[:, k], "--", label="commanded")
+        ax.set_ylabel(f"a {name} [m/s²]")
+    axes[-1].set_xlabel("sim time [s]")
+    axes[0].legend(fontsize=8)
+    return fig
+
+
+@figure("velocity_direction", needs=(STATE_TOPIC,),
+        title="Velocity direction: flight-path angle and course (NED Euler angles of the velocity)")
+def _velocity_direction(log: RunLog) -> Figure:
+    st = log.table(STATE_TOPIC)
+    t, v = st["t_s"], st["vel_enu_m_s"]
+    gamma = np.degrees(np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1])))  # positive climbing
+    course = np.degrees(np.arctan2(v[:, 0], v[:, 1]))  # clockwise from North
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, gamma)
+    a1.set_ylabel("flight path γ [deg]")
+    a2.plot(t, course)
+    a2.set_ylabel("course χ [deg]")
+    a2.set_xlabel("sim time [s]")
+    return fig
+
+
+# -- figures of the paper that need the target, gimbal, camera, estimator --------
+
+@figure("distance_to_target", needs=(STATE_TOPIC, TARGET_TOPIC), title="Distance from the UAV to the target")
+def _distance_to_target(log: RunLog) -> Figure:
+    st, tg = log.table(STATE_TOPIC), log.table(TARGET_TOPIC)
+    t = st["t_s"]
+    rel = st["pos_enu_m"] - _interp3(t, tg["t_s"], tg["pos_enu_m"])
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, np.linalg.norm(rel, axis=1), label="range")
+    a1.plot(t, np.hypot(rel[:, 0], rel[:, 1]), "--", label="horizontal")
+    a1.set_ylabel("distance [m]")
+    a1.legend(fontsize=8)
+    a2.plot(t, rel[:, 2])
+    a2.set_ylabel("height above target [m]")
+    a2.set_xlabel("sim time [s]")
+    return fig
+
+
+@figure("gimbal_angles", needs=(GIMBAL_TOPIC,), title="Gimbal pan and tilt angles")
+def _gimbal_angles(log: RunLog) -> Figure:
+    g = log.table(GIMBAL_TOPIC)
+    t = g["t_s"]
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, np.degrees(g["pan_rad"]))
+    a1.set_ylabel("pan [deg]")
+    a2.plot(t, np.degrees(g["tilt_rad"]))
+    a2.set_ylabel("tilt [deg]")
+    a2.set_xlabel("sim time [s]")
+    return fig
+
+
+def _principal_point(log: RunLog) -> tuple[float, float] | None:
+    if not log.topics.get(CALIBRATION_TOPIC):
+        return None
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+    cal = CameraCalibration.FromString(log.raw(CALIBRATION_TOPIC)[0][1])
+    return float(cal.K[2]), float(cal.K[5])
+
+
+@figure("pixel_errors", needs=(DETECTION_TOPIC,), title="Target pixel error from the image centre")
+def _pixel_errors(log: RunLog) -> Figure:
+    det = log.table(DETECTION_TOPIC)
+    centre = _principal_point(log)
+    if centre is None:
+        raise SkipFigure(f"no {CALIBRATION_TOPIC} (principal point) in this log")
+    found = det["detected"].astype(bool) if "detected" in det else np.isfinite(det["u_px"])
+    if not found.any():
+        raise SkipFigure("the detector never found the target")
+    t = det["t_s"]
+    eu = np.where(found, det["u_px"] - centre[0], np.nan)
+    ev = np.where(found, det["v_px"] - centre[1], np.nan)
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, eu, ".", ms=2, label="detection - principal point")
+    a1.set_ylabel("u - cx [px]")
+    a2.plot(t, ev, ".", ms=2)
+    a2.set_ylabel("v - cy [px]")
+    if log.topics.get(IBVS_TOPIC) and "pixel_err_px" in log.table(IBVS_TOPIC):
+        ib = log.table(IBVS_TOPIC)
+        a1.plot(ib["t_s"], ib["pixel_err_px"][:, 0], lw=1.0, label=f"{IBVS_TOPIC} pixel_err_px")
+        a2.plot(ib["t_s"], ib["pixel_err_px"][:, 1], lw=1.0)
+    a1.legend(fontsize=8)
+    a2.set_xlabel("sim time [s]")
+    a2.set_xlim(t[0], t[-1])  # the whole run, also where the target was not detected
+    a1.set_title(f"detected in {found.sum()} of {found.size} frames", fontsize=9)
+    return fig
+
+
+@figure("target_estimate", needs=(ESTIMATE_TOPIC, TARGET_TOPIC), title="Target estimate vs truth, ±2σ")
+def _target_estimate(log: RunLog) -> Figure:
+    est, tg = log.table(ESTIMATE_TOPIC), log.table(TARGET_TOPIC)
+    if "pos_enu_m" not in est:
+        raise SkipFigure(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+    t = est["t_s"]
+    fig, axes = _figure(2, 2, height=2.6)
+    for col, (fld, std_fld, what, unit) in enumerate((("pos_enu_m", "pos_std_m", "position", "m"),
+                                                     ("vel_enu_m_s", "vel_std_m_s", "velocity", "m/s"))):
+        if fld not in est:
+            continue
+        std = est.get(std_fld)
+        for row, axis in enumerate(("East", "North")):
+            ax = axes[row, col]
+            ax.plot(t, np.interp(t, tg["t_s"], tg[fld][:, row]), "k--", lw=1.0, label="truth")
+            ax.plot(t, est[fld][:, row], lw=1.2, label="estimate")
+            if std is not None:
+                lo, hi = est[fld][:, row] - 2 * std[:, row], est[fld][:, row] + 2 * std[:, row]
+                ax.fill_between(t, lo, hi, alpha=0.25, lw=0, label="±2σ")
+            ax.set_ylabel(f"{what} {axis} [{unit}]", fontsize=9)
+    for ax in axes[-1]:
+        ax.set_xlabel("sim time [s]")
+    axes[0, 0].legend(fontsize=8)
+    return fig
+
+
+@figure("target_estimate_error", needs=(ESTIMATE_TOPIC, TARGET_TOPIC),
+        title="Target estimate error (estimate - truth)")
+def _target_estimate_error(log: RunLog) -> Figure:
+    est, tg = log.table(ESTIMATE_TOPIC), log.table(TARGET_TOPIC)
+    if "pos_enu_m" not in est:
+        raise SkipFigure(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+    t = est["t_s"]
+    fig, (a1, a2) = _figure(2)
+    a1.plot(t, np.linalg.norm(est["pos_enu_m"] - _interp3(t, tg["t_s"], tg["pos_enu_m"]), axis=1),
+            label="|position error|")
+    if "pos_std_m" in est:
+        a1.plot(t, 2 * np.linalg.norm(est["pos_std_m"], axis=1), "--", label="2σ (norm)")
+    a1.set_ylabel("position error [m]")
+    a1.legend(fontsize=8)
+    if "vel_enu_m_s" in est:
+        a2.plot(t, np.linalg.norm(est["vel_enu_m_s"] - _interp3(t, tg["t_s"], tg["vel_enu_m_s"]), axis=1))
+    a2.set_ylabel("velocity error [m/s]")
+    a2.set_xlabel("sim time [s]")
+    return fig

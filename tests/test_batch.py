@@ -1,0 +1,215 @@
+"""fwsim batch: spec expansion, process pool, failures as rows, resume, Ray."""
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fwsim import SCENARIO_DIR
+from fwsim.batch import BASE_COLUMNS, BatchSpecError, load_spec, run_batch, run_id, run_one
+from fwsim.log import read_log
+
+CHECKOUT = (SCENARIO_DIR / "autopilot_checkout.yaml").as_posix()
+
+
+def write_spec(tmp_path: Path, text: str, name: str = "spec.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def assert_same_row(a: dict, b: dict, skip=()) -> None:
+    """Equal rows (NaN equals NaN), apart from the ``skip`` columns."""
+    assert set(a) - set(skip) == set(b) - set(skip)
+    for k in set(a) - set(skip):
+        same = a[k] == b[k] or (isinstance(a[k], float) and isinstance(b[k], float)
+                                and math.isnan(a[k]) and math.isnan(b[k]))
+        assert same, f"{a['id']}: {k}: {a[k]!r} != {b[k]!r}"
+
+
+def crash_on_seed_2(job):
+    """A run function whose worker process dies for seed 2 (as a segfault would)."""
+    if job.seed == 2:
+        os._exit(3)
+    return run_one(job)
+
+
+# -- the spec -------------------------------------------------------------------
+
+def test_spec_expands_to_the_cartesian_product_with_stable_ids(tmp_path):
+    (tmp_path / "sc").mkdir()
+    (tmp_path / "sc" / "co.yaml").write_text(Path(CHECKOUT).read_text())
+    spec = write_spec(tmp_path, """
+runs:
+  - scenario: sc/co.yaml            # relative to the spec
+    seeds: {range: [1, 4]}          # 1, 2, 3
+    grid: {initial.airspeed_m_s: [20, 24], initial.heading_deg: [0, 90]}
+    set: {duration_s: 5}
+  - scenario: sc/co.yaml
+""")
+    name, jobs = load_spec(spec, tmp_path / "out")
+    assert name == "spec"
+    assert len(jobs) == 3 * 2 * 2 + 1
+    assert len({j.id for j in jobs}) == len(jobs)
+    first = jobs[0]
+    assert first.overrides == {"duration_s": 5, "initial.airspeed_m_s": 20, "initial.heading_deg": 0}
+    assert [j.seed for j in jobs[:3]] == [1, 2, 3]
+    assert first.scenario_file == str((tmp_path / "sc" / "co.yaml").resolve())
+    assert first.log_path == str((tmp_path / "out" / "logs" / f"{first.id}.mcap").resolve())
+    # The last entry: no seeds, no grid: the scenario's own seed (1) and no overrides.
+    assert jobs[-1].seed == 1 and jobs[-1].overrides == {}
+    # Ids are pinned: name, seed, SHA-256 of the canonical overrides (resume relies on it).
+    assert first.id == run_id("autopilot_checkout", 1, {"initial.heading_deg": 0, "initial.airspeed_m_s": 20,
+                                                          "duration_s": 5})
+    assert run_id("autopilot_checkout", 3, {}) == "autopilot_checkout-s3-44136fa3"
+    assert load_spec(spec, tmp_path / "out")[1] == jobs  # same spec, same ids
+
+
+@pytest.mark.parametrize("body, message", [
+    ("runs: []", "non-empty 'runs:'"),
+    ("runs: [{scenario: SC}]\nfoo: 1", "foo: unknown key"),
+    ("runs: [{scenario: SC, seed: [1]}]", "runs.0.seed: unknown key"),
+    ("runs: [{scenario: nope.yaml}]", "runs.0.scenario: no such scenario file"),
+    ("runs: [{scenario: SC, seeds: {range: [1]}}]", "runs.0.seeds.range"),
+    ("runs: [{scenario: SC, seeds: [-1]}]", "runs.0.seeds"),
+    ("runs: [{scenario: SC, grid: {initial.airspeed_m_s: 20}}]", "grid.initial.airspeed_m_s: expected a non-empty list"),
+    ("runs: [{scenario: SC, seeds: [1], set: {seed: 2}}]", "not both"),
+    ("runs: [{scenario: SC, grid: {initial.airspeed_m_s: [-5]}}]", "initial.airspeed_m_s: Input should be greater"),
+    ("runs: [{scenario: SC, seeds: [1, 1]}]", "more than once"),
+])
+def test_spec_errors_are_one_line(tmp_path, body, message):
+    spec = write_spec(tmp_path, body.replace("SC", CHECKOUT))
+    with pytest.raises(BatchSpecError, match=message) as err:
+        load_spec(spec, tmp_path / "out")
+    assert "\n" not in str(err.value)
+
+
+# -- flying a batch ---------------------------------------------------------------
+
+SPEC = f"""
+name: small
+runs:
+  - scenario: {CHECKOUT}
+    seeds: [1, 2]
+    grid: {{initial.airspeed_m_s: [20, 9]}}    # 9 m/s: JSBSim cannot trim, the run fails
+    set: {{duration_s: 5}}
+"""
+
+
+@pytest.fixture(scope="module")
+def pool_batch(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("batch")
+    spec = write_spec(tmp, SPEC)
+    rows_seen = []
+    result = run_batch(spec, tmp / "out", workers=2, on_row=rows_seen.append)
+    return spec, tmp / "out", result, rows_seen
+
+
+def test_batch_rows_and_summary_files(pool_batch):
+    spec, out, result, rows_seen = pool_batch
+    assert len(result.rows) == 4 and len(rows_seen) == 4
+    by_speed = {r["set.initial.airspeed_m_s"]: [] for r in result.rows}
+    for r in result.rows:
+        by_speed[r["set.initial.airspeed_m_s"]].append(r)
+    for r in by_speed[20]:
+        assert r["status"] == "completed" and r["error"] == "" and r["reason"] == "duration reached"
+        assert r["flight_time_s"] == pytest.approx(5.0, abs=1e-6)
+        assert r["wall_time_s"] > 0 and not r["resumed"]
+        assert (out / r["log"]).is_file() and read_log(out / r["log"]).status == "completed"
+    for r in by_speed[9]:  # a run that raised: a failed row with its error, the batch goes on
+        assert r["status"] == "failed" and "trim failed" in r["error"] and "trim failed" in r["reason"]
+        assert (out / r["log"]).with_suffix(".console.txt").is_file()  # JSBSim's own message, not on the terminal
+    assert [r["id"] for r in result.rows] == [j.id for j in load_spec(spec, out)[1]]  # spec order
+    assert {p.name for p in result.files} >= {"summary.csv", "summary.json"}
+
+    with open(out / "summary.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [r["id"] for r in table] == [r["id"] for r in result.rows]
+    assert list(table[0])[: len(BASE_COLUMNS)] == list(BASE_COLUMNS)
+    assert float(table[0]["roll_rate_err_rms_deg_s"]) == result.rows[0]["roll_rate_err_rms_deg_s"]  # full precision
+    data = json.loads((out / "summary.json").read_text())
+    assert data["batch"]["runs"] == 4 and data["batch"]["failed"] == 2 and data["batch"]["name"] == "small"
+    assert [r["id"] for r in data["rows"]] == [r["id"] for r in result.rows]
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        assert not (out / "summary.parquet").exists()
+    else:
+        assert pq.read_table(out / "summary.parquet").num_rows == 4
+
+
+def test_resume_keeps_finished_logs_and_flies_the_rest(pool_batch, tmp_path):
+    spec, out, result, _ = pool_batch
+    resumed_out = tmp_path / "out"
+    # Copy the batch; then lose one completed log and cut another one short (a hard kill).
+    (resumed_out / "logs").mkdir(parents=True)
+    for f in (out / "logs").iterdir():
+        (resumed_out / "logs" / f.name).write_bytes(f.read_bytes())
+    (resumed_out / "summary.json").write_text((out / "summary.json").read_text())
+    done = [r for r in result.rows if r["status"] == "completed"]
+    (resumed_out / done[0]["log"]).unlink()
+    cut = resumed_out / done[1]["log"]
+    data = cut.read_bytes()
+    cut.write_bytes(data[: data.index(b"run_status")])  # cut before the status record
+    assert read_log(cut).status == "unknown"
+    kept = {r["id"]: (resumed_out / r["log"]).stat().st_mtime_ns for r in result.rows if r["status"] == "failed"}
+
+    flown = []
+    again = run_batch(spec, resumed_out, workers=2, resume=True, on_row=lambda r: flown.append(r["id"]))
+    assert sorted(flown) == sorted([done[0]["id"], done[1]["id"]])
+    assert again.resumed == 2
+    for old, new in zip(result.rows, again.rows):
+        assert new["resumed"] == (new["id"] in kept)
+        assert_same_row(new, old, skip=("wall_time_s", "resumed"))
+        if new["resumed"]:
+            assert new["wall_time_s"] == old["wall_time_s"]  # from the previous summary.json
+    for rid, mtime in kept.items():
+        assert (resumed_out / "logs" / f"{rid}.mcap").stat().st_mtime_ns == mtime
+
+
+def test_a_dying_worker_is_a_failed_row(tmp_path):
+    spec = write_spec(tmp_path, f"runs: [{{scenario: {CHECKOUT}, seeds: [1, 2], set: {{duration_s: 3}}}}]")
+    result = run_batch(spec, tmp_path / "out", workers=2, run_fn=crash_on_seed_2)
+    rows = {r["seed"]: r for r in result.rows}
+    assert rows[1]["status"] == "completed"
+    assert rows[2]["status"] == "failed" and "worker process died" in rows[2]["error"]
+    assert len(json.loads((tmp_path / "out" / "summary.json").read_text())["rows"]) == 2
+
+
+def test_cli_batch(tmp_path):
+    spec = write_spec(tmp_path, f"runs: [{{scenario: {CHECKOUT}, seeds: [1, 2], set: {{duration_s: 3}}}}]")
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(spec), "--out", str(tmp_path / "o"),
+                           "--workers", "2", "--quiet"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "2 completed, 0 failed" in proc.stderr and "summary.csv" in proc.stdout
+    bad = write_spec(tmp_path, "runs: [{scenario: nope.yaml}]", "bad.yaml")
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(bad), "--out", str(tmp_path / "o2")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "no such scenario file" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_ray_rows_equal_process_pool_rows(pool_batch, tmp_path):
+    ray = pytest.importorskip("ray", reason="ray is not installed (pip install 'fwsim[ray]')")
+    _, _, pool_result, _ = pool_batch
+    spec = write_spec(tmp_path, f"""
+runs:
+  - scenario: {CHECKOUT}
+    seeds: [1, 2]
+    grid: {{initial.airspeed_m_s: [20]}}
+    set: {{duration_s: 5}}
+""")
+    ray.init(num_cpus=2, include_dashboard=False)
+    try:
+        result = run_batch(spec, tmp_path / "out", ray_address="auto")  # uses the instance started here
+    finally:
+        ray.shutdown()
+    pool_rows = {r["id"]: r for r in pool_result.rows}
+    assert len(result.rows) == 2
+    for row in result.rows:
+        assert row["status"] == "completed"
+        assert_same_row(row, pool_rows[row["id"]], skip=("wall_time_s",))  # same overrides, same id
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["batch"]["executor"] == "ray (auto)"

@@ -1,0 +1,230 @@
+"""fwsim compare: tolerance rules, metrics sources, the CLI; regression baselines."""
+import importlib.util
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from fwsim import PROJECT_ROOT, SCENARIO_DIR
+from fwsim.compare import (
+    REFRESH_MARKER, CompareError, Tolerance, check_baseline, check_metric, compare_files, compare_metrics,
+    load_baseline, load_metrics, parse_tolerances, write_baseline_metrics,
+)
+from fwsim.loop import run
+from fwsim.scenario import load_scenario
+
+BASELINE_DIR = PROJECT_ROOT / "tests" / "baselines"
+BASELINES = sorted(BASELINE_DIR.glob("*.yaml"))
+CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
+
+
+def fwsim_cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "fwsim.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def fwsim_main(capsys, *args):
+    """``fwsim ARGS`` in this process (faster than a subprocess): (exit code, stdout, stderr)."""
+    from fwsim.cli import main
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def refresh_tool():
+    spec = importlib.util.spec_from_file_location("refresh_baselines", PROJECT_ROOT / "tools" / "refresh_baselines.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+# -- tolerance rules --------------------------------------------------------------
+
+@pytest.mark.parametrize("tol, base, run_value, verdict", [
+    (Tolerance(abs=0.1), 1.0, 1.09, "ok"),
+    (Tolerance(abs=0.1), 1.0, 1.11, "REGRESSION"),
+    (Tolerance(rel=1e-3), 1000.0, 1000.9, "ok"),
+    (Tolerance(rel=1e-3), 1000.0, 998.9, "REGRESSION"),
+    (Tolerance(abs=1.0, rel=1e-3), 10.0, 10.9, "ok"),  # the larger of the two
+    (Tolerance(abs=1e-3, rel=0.5), 10.0, 14.0, "ok"),
+    (Tolerance(min=0.0, max=5.0), 1.0, 4.0, "ok"),  # bounds only: the baseline value does not matter
+    (Tolerance(min=0.0, max=5.0), 1.0, 5.5, "REGRESSION"),
+    (Tolerance(abs=10.0, max=5.0), 1.0, 5.5, "REGRESSION"),  # both must hold
+    (Tolerance(), 1.0, 1.0, "ok"),  # no tolerance: exact
+    (Tolerance(), 1.0, 1.0 + 1e-15, "REGRESSION"),
+    (Tolerance(abs=1.0), math.nan, math.nan, "ok"),
+    (Tolerance(abs=1.0), 1.0, math.nan, "REGRESSION"),
+    (Tolerance(abs=1.0), math.nan, 1.0, "REGRESSION"),
+    (Tolerance(), "completed", "completed", "ok"),
+    (Tolerance(), "completed", "failed", "REGRESSION"),
+    (Tolerance(ignore=True), "a", "b", "ignored"),
+    (Tolerance(abs=1.0), 1.0, None, "missing"),
+    (Tolerance(abs=1.0), None, 1.0, "new"),
+])
+def test_check_metric_rules(tol, base, run_value, verdict):
+    assert check_metric("m", base, run_value, tol).verdict == verdict
+
+
+def test_default_tolerance_applies_to_numbers_not_text():
+    tol = parse_tolerances({"default": {"rel": 0.1}, "x": {"abs": 0.0}}, "t")
+    cmp = compare_metrics({"x": 1.0, "y": 1.0, "status": "completed"},
+                          {"x": 1.05, "y": 1.05, "status": "failed"}, tol)
+    verdicts = {c.metric: c.verdict for c in cmp.checks}
+    assert verdicts == {"x": "REGRESSION", "y": "ok", "status": "REGRESSION"}
+    assert not cmp.ok and len(cmp.failures) == 2
+
+
+def test_new_metrics_do_not_fail_missing_ones_do():
+    assert compare_metrics({"a": 1.0}, {"a": 1.0, "b": 2.0}).ok
+    cmp = compare_metrics({"a": 1.0, "b": 2.0}, {"a": 1.0})
+    assert not cmp.ok and cmp.failures[0].metric == "b" and cmp.failures[0].verdict == "missing"
+
+
+def test_tolerance_file_errors_are_one_line_and_yaml_exponents_read():
+    # PyYAML reads 1e-5 (no dot) as text: it must still be a number here.
+    tol = parse_tolerances(yaml.safe_load("m: {rel: 1e-5, abs: 2}"), "t.yaml")
+    assert tol["m"] == Tolerance(abs=2.0, rel=1e-5)
+    for bad, what in [({"m": {"rle": 1}}, "tolerances.m.rle: unknown key"),
+                      ({"m": {"rel": "x"}}, "tolerances.m.rel: expected a number"),
+                      ({"m": {"abs": -1}}, "tolerances.m.abs: must be >= 0"),
+                      ({"m": 3}, "tolerances.m: expected a mapping")]:
+        with pytest.raises(CompareError, match=what):
+            parse_tolerances(bad, "t.yaml")
+
+
+def test_format_text_names_metric_values_and_tolerance():
+    cmp = compare_metrics({"roll_rate_err_rms_deg_s": 3.5}, {"roll_rate_err_rms_deg_s": 3.9},
+                          {"roll_rate_err_rms_deg_s": Tolerance(rel=1e-5)}, "base.yaml", "run.mcap")
+    text = cmp.format_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith("roll_rate_err_rms_deg_s"))
+    for part in ("3.5", "3.9", "+0.4", "rel 1e-05", "REGRESSION"):
+        assert part in line
+    assert "base.yaml" in text and "run.mcap" in text and text.splitlines()[-1].startswith("FAIL")
+
+
+# -- metrics sources and the CLI ------------------------------------------------
+
+@pytest.fixture(scope="module")
+def short_logs(tmp_path_factory):
+    """Two short checkout runs: the reference and one with a weak roll-rate loop."""
+    tmp = tmp_path_factory.mktemp("compare")
+    out = {}
+    for name, extra in (("ref", {}), ("weak", {"aircraft.autopilot_gains.roll_rate_kp": 0.05})):
+        scenario, text = load_scenario(CHECKOUT, {"duration_s": 15, **extra})
+        out[name] = run(scenario, text, tmp / f"{name}.mcap").log_path
+    return out
+
+
+def test_sources_mcap_json_and_baseline_agree(short_logs, tmp_path):
+    proc = fwsim_cli("metrics", short_logs["ref"], "--json")
+    assert proc.returncode == 0, proc.stderr
+    (tmp_path / "ref.json").write_text(proc.stdout)
+    from_log = load_metrics(short_logs["ref"]).metrics
+    from_json = load_metrics(tmp_path / "ref.json").metrics
+    assert from_log.keys() == from_json.keys()
+    for k, v in from_log.items():
+        assert from_json[k] == v or (isinstance(v, float) and math.isnan(v) and math.isnan(from_json[k])), k
+    assert compare_files(short_logs["ref"], tmp_path / "ref.json").ok
+    (tmp_path / "ref.txt").write_text("{}")
+    with pytest.raises(CompareError, match="unsupported file type"):
+        load_metrics(tmp_path / "ref.txt")
+
+
+def test_cli_compare_same_run_passes(short_logs, capsys):
+    code, out, err = fwsim_main(capsys, "compare", short_logs["ref"], short_logs["ref"])
+    assert code == 0, out + err
+    assert "REGRESSION" not in out and "OK:" in out
+
+
+def test_cli_compare_perturbed_run_fails_with_a_readable_table(short_logs, tmp_path):
+    tol = tmp_path / "tol.yaml"
+    tol.write_text("tolerances:\n  default: {rel: 1.0e-5}\n  end_reason: {ignore: true}\n")
+    proc = fwsim_cli("compare", short_logs["ref"], short_logs["weak"], "--tolerances", tol)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    row = next(ln for ln in proc.stdout.splitlines() if "roll_rate_err_rms_deg_s" in ln)
+    assert "REGRESSION" in row and "rel 1e-05" in row
+    assert "FAIL:" in proc.stdout
+
+
+def test_cli_compare_missing_metric_fails_and_bad_input_is_exit_2(short_logs, tmp_path, capsys):
+    base = dict(load_metrics(short_logs["ref"]).metrics, made_up_metric_m=1.0)
+    (tmp_path / "base.json").write_text(json.dumps(base))
+    code, out, _ = fwsim_main(capsys, "compare", tmp_path / "base.json", short_logs["ref"])
+    assert code == 1 and "missing" in out
+    code, _, err = fwsim_main(capsys, "compare", tmp_path / "nope.yaml", short_logs["ref"])
+    assert code == 2 and "no such file" in err
+    (tmp_path / "bad.mcap").write_text("not a log")
+    code, _, err = fwsim_main(capsys, "compare", tmp_path / "bad.mcap", short_logs["ref"])
+    assert code == 2 and "not an MCAP file" in err
+
+
+# -- regression baselines ---------------------------------------------------------
+
+def test_baseline_files_are_complete():
+    assert {p.stem for p in BASELINES} >= {"autopilot_checkout", "paper_mission"}
+    for path in BASELINES:
+        b = load_baseline(path)
+        assert b.scenario.is_file(), path
+        assert b.metrics.get("status") == "completed", path
+        assert b.tolerances, f"{path}: no tolerances"
+        assert REFRESH_MARKER in path.read_text().splitlines()
+    assert load_baseline(BASELINE_DIR / "paper_mission.yaml").overrides == {"duration_s": 60}
+
+
+@pytest.mark.parametrize("path", BASELINES, ids=[p.stem for p in BASELINES])
+def test_baseline_still_holds(path, tmp_path):
+    """Re-fly the baseline's scenario; every metric within its tolerance.
+
+    If a change is intended, run `python tools/refresh_baselines.py` and
+    commit the new numbers with the change.
+    """
+    cmp = check_baseline(load_baseline(path), tmp_path / f"{path.stem}.mcap")
+    assert cmp.ok, ("\n" + cmp.format_text(failures_only=True)
+                    + "\nIf intended: python tools/refresh_baselines.py " + str(path.relative_to(PROJECT_ROOT)))
+
+
+def test_baseline_catches_a_gain_change(tmp_path):
+    """The checkout baseline's tolerances see a 4 % roll-rate gain change (and say where)."""
+    b = load_baseline(BASELINE_DIR / "autopilot_checkout.yaml")
+    b.overrides = {**b.overrides, "aircraft.autopilot_gains.roll_rate_kp": 0.26}  # default 0.25
+    cmp = check_baseline(b, tmp_path / "gain.mcap")
+    assert not cmp.ok
+    assert "roll_rate_err_rms_deg_s" in {c.metric for c in cmp.failures}
+    assert "roll_rate_err_rms_deg_s" in cmp.format_text(failures_only=True)
+
+
+def test_refresh_rewrites_metrics_and_keeps_the_rest(tmp_path, capsys):
+    src = BASELINE_DIR / "autopilot_checkout.yaml"
+    dst = tmp_path / "autopilot_checkout.yaml"
+    shutil.copy(src, dst)
+    # The scenario path is relative to the baseline file: point it at the real one.
+    text = dst.read_text().replace("../../scenarios/", f"{SCENARIO_DIR.as_posix()}/")
+    dst.write_text(text.replace("overrides: {}", "overrides: {duration_s: 5}"))
+    head = dst.read_text().split(REFRESH_MARKER)[0]
+    tool = refresh_tool()
+    assert tool.main([str(dst)]) == 0
+    out = capsys.readouterr().out
+    assert "REGRESSION" in out and f"wrote {dst}" in out  # the table of what moved (5 s instead of 60 s)
+    assert dst.read_text().split(REFRESH_MARKER)[0] == head  # comments and tolerances kept
+    b = load_baseline(dst)
+    assert b.metrics["flight_time_s"] == pytest.approx(5.0, abs=1e-6)
+    assert b.tolerances == load_baseline(src).tolerances
+    assert tool.main(["--check", str(dst)]) == 0
+    assert "OK:" in capsys.readouterr().out
+
+
+def test_write_baseline_metrics_round_trips(tmp_path):
+    path = tmp_path / "b.yaml"
+    path.write_text("scenario: x.yaml\ntolerances:\n  default: {rel: 1.0e-5}\n")
+    metrics = {"status": "completed", "a": 1e-10, "b": 59.999999999997236, "c": math.nan, "d": 1e20}
+    write_baseline_metrics(path, metrics, recorded={"fwsim": "test"})
+    write_baseline_metrics(path, metrics, recorded={"fwsim": "test"})  # idempotent
+    b = load_baseline(path)
+    assert path.read_text().count(REFRESH_MARKER) == 1
+    assert b.metrics["a"] == 1e-10 and b.metrics["b"] == 59.999999999997236 and b.metrics["d"] == 1e20
+    assert math.isnan(b.metrics["c"]) and b.metrics["status"] == "completed"

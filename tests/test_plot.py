@@ -1,0 +1,90 @@
+"""fwsim plot: PNG figures from a log; figures whose topics are absent are skipped."""
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from fwsim import SCENARIO_DIR
+from fwsim.log import LogWriter, read_log
+from fwsim.loop import run
+from fwsim.messages import AirframeState
+from fwsim.plot import FIGURES, plot_log
+from fwsim.scenario import load_scenario
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def mission_log(tmp_path_factory):
+    """10 s of the paper mission: state, inner loops, phases, target, gimbal, detections."""
+    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"duration_s": 10})
+    return run(scenario, text, tmp_path_factory.mktemp("plot") / "mission.mcap").log_path
+
+
+def state_only_log(path, n=60):
+    """A log with nothing but the UAV state (and its pose): no inner loops, no target."""
+    with LogWriter(path, metadata={"scenario": "state-only", "seed": "0"}, scenario_text="name: state-only\n") as log:
+        for i in range(n):
+            t = i / 30.0
+            log.write_state(AirframeState(
+                t_s=t, pos_enu_m=np.array([22.0 * t, 0.0, 500.0 + t]), vel_enu_m_s=np.array([22.0, 0.0, 1.0]),
+                euler_ned_rad=np.array([0.1 * np.sin(t), 0.05, np.pi / 2]), body_rates_frd_rad_s=np.zeros(3),
+                airspeed_m_s=22.0, alpha_rad=0.04, beta_rad=0.0, specific_force_frd_m_s2=np.array([0, 0, -9.81]),
+                throttle_norm=0.3, surfaces_rad=np.zeros(3), height_above_sea_m=500.0 + t))
+    return path
+
+
+def test_plots_of_a_short_run_are_real_pngs(mission_log, tmp_path):
+    res = plot_log(mission_log, tmp_path / "plots")
+    assert not res.failed, res.failed
+    names = {p.stem for p in res.written}
+    assert names >= {"trajectory_xy", "trajectory_xz", "altitude_airspeed", "attitude", "inner_loops",
+                     "velocity_direction", "distance_to_target", "gimbal_angles"}
+    for path in res.written:
+        assert path.read_bytes()[:8] == PNG_MAGIC, path
+        img = imread(path)
+        assert img.shape[0] > 300 and img.shape[1] > 500, path
+        assert img[..., :3].std() > 0.01, f"{path} is blank"
+    skipped = dict(res.skipped)
+    # No acceleration-mode ticks in this run: skipped on the data, with the reason.
+    assert "acceleration" in skipped["accel_tracking"]
+    assert names | set(skipped) == set(FIGURES) and not names & set(skipped)
+    log = read_log(mission_log)
+    for name, why in skipped.items():  # a figure skipped for a topic really lacks it
+        if why.startswith("no /"):
+            assert any(not log.topics.get(t) for t in FIGURES[name].needs), (name, why)
+
+
+def test_a_log_missing_topics_skips_those_figures(tmp_path):
+    res = plot_log(state_only_log(tmp_path / "state.mcap"), tmp_path / "plots")
+    assert not res.failed, res.failed
+    assert {p.stem for p in res.written} == {"trajectory_xy", "trajectory_xz", "altitude_airspeed", "attitude",
+                                             "velocity_direction"}
+    skipped = dict(res.skipped)
+    assert skipped["inner_loops"] == "no /autopilot/status in this log"
+    assert "/target/state" in skipped["distance_to_target"] and "/gimbal/state" in skipped["gimbal_angles"]
+    assert "/camera/detection" in skipped["pixel_errors"]
+    assert "/fsw/estimate" in skipped["target_estimate"] and "/fsw/estimate" in skipped["target_estimate_error"]
+
+
+def test_cli_plot_lists_files_and_skips(mission_log, tmp_path, capsys):
+    from fwsim.cli import main
+    code = main(["plot", str(mission_log), "--out", str(tmp_path), "--only", "trajectory_xy,inner_loops,accel_tracking"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert out.split() == [str(tmp_path / "trajectory_xy.png"), str(tmp_path / "inner_loops.png")]
+    assert "skipped accel_tracking: no acceleration-mode ticks" in err
+    assert main(["plot", str(mission_log), "--only", "nope"]) == 2
+    assert "unknown figure" in capsys.readouterr().err
+
+
+def test_phase_colouring_uses_fsw_status(mission_log):
+    """Colours follow (phase, phase_name) from /fsw/status, held until the next status."""
+    from fwsim.plot import _phases
+    log = read_log(mission_log)
+    fsw, st = log.table("/fsw/status"), log.table("/uav/state")
+    index, labels = _phases(log, st["t_s"])
+    pairs = list(dict.fromkeys(zip(fsw["phase"].astype(int).tolist(), fsw["phase_name"].tolist())))
+    assert labels == {i: f"phase {p}: {n}" for i, (p, n) in enumerate(pairs)}
+    assert len(index) == len(st["t_s"]) and index[0] == 0
+    last = pairs.index((int(fsw["phase"][-1]), fsw["phase_name"][-1]))
+    assert index[-1] == last
