@@ -82,6 +82,33 @@ def detection_frame_ms(frames: int = 600) -> tuple[float, float]:
     return float(np.median(ms)), float(np.percentile(ms, 99))
 
 
+def log_writer_us(n: int = 3000) -> tuple[float, float]:
+    """(microseconds per write_state, per JSON message) of the MCAP writer."""
+    import numpy as np
+
+    from fwsim.log import LogWriter
+    from fwsim.messages import ActuatorCommand, AirframeState
+    st = AirframeState(0.0, np.array([1.0, 2, 3]), np.array([20.0, 1, 0]), np.array([0.1, 0.05, 1.0]),
+                       np.zeros(3), 22.0, 0.05, 0.0, np.array([0, 0, -9.8]), 0.3, np.zeros(3), 3.0)
+    act = ActuatorCommand(0.0, 0.1, -0.05, 0.0, 0.3)
+    with tempfile.TemporaryDirectory() as tmp:
+        with LogWriter(Path(tmp) / "w.mcap", metadata={}, scenario_text="") as log:
+            t0 = time.perf_counter()
+            for _ in range(n):
+                log.write_state(st)
+            t1 = time.perf_counter()
+            for _ in range(n):
+                log.write("/actuators", act)
+            t2 = time.perf_counter()
+    return (t1 - t0) / n * 1e6, (t2 - t1) / n * 1e6
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process so far (Linux: ru_maxrss is in KiB)."""
+    import resource
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def closed_loop(scenario_path: Path, repeats: int = 2) -> tuple[float, float, float]:
     """(sim seconds, best wall seconds, real-time factor) of a full run with logging."""
     from fwsim.loop import run
@@ -106,6 +133,7 @@ def run_bench(quick: bool = False) -> dict[str, float | str]:
     sim, wall, rtf = closed_loop(SCENARIO_DIR / "autopilot_checkout.yaml", 1 if quick else 2)
     det_med, det_p99 = detection_frame_ms(200 if quick else 600)
     p_sim, p_wall, p_rtf = closed_loop(SCENARIO_DIR / "paper_mission.yaml", 1)
+    state_us, msg_us = log_writer_us()
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "jsbsim_raw_steps_per_s": raw,
@@ -119,4 +147,7 @@ def run_bench(quick: bool = False) -> dict[str, float | str]:
         "detection_frame_ms_p99": det_p99,
         "paper_mission_sim_s": p_sim,
         "paper_mission_real_time_factor": p_rtf,
+        "log_write_state_us": state_us,
+        "log_write_message_us": msg_us,
+        "peak_memory_mb": peak_memory_mb(),
     }
