@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import yaml
 
 import fwsim
 from controllers.mission import FlightSoftware
@@ -134,6 +135,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     sim_t = 0.0
     status, reason = "completed", "duration reached"
     with LogWriter(log_path, metadata=run_metadata(scenario), scenario_text=scenario_text) as log:
+        log.add_attachment("scenario_effective.yaml",
+                           yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),
+                           "application/yaml")
         try:
             world = World(scenario)
             truth = world.reset()
@@ -183,6 +187,10 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                 if render_every and (tick + 1) % render_every == 0:
                     img = world.render(frame.bbox_px if frame is not None else None)
                     log.write_image(IMAGE_TOPIC, sim_t, CAMERA_FRAME_ID, world.camera.encode_jpeg(img))
+                if world.uav_inside_ship():
+                    _log_truth(log, truth)
+                    status, reason = "completed", f"hit the ship at t = {sim_t:.2f} s"
+                    break
                 if truth.uav.height_above_sea_m <= scenario.stop.min_height_m:
                     _log_truth(log, truth)
                     status, reason = "completed", f"sea contact at t = {sim_t:.2f} s"

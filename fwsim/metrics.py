@@ -10,6 +10,14 @@ height, the truth is the waterline centre. Convergence is defined from the
 filter's own covariance, not from truth: the first time after which the
 estimate's horizontal position standard deviation stays below
 ``CONVERGED_STD_M``.
+
+Terminal phase: ``miss_distance_m`` is the closest approach of the UAV's
+centre of gravity to the ship's aim point (target.aim_point_ship_m: midships,
+half-way up the hull, inside it), with the path continued straight along the
+final velocity for ``MISS_EXTENSION_S`` past an impact: a run ends when the
+UAV reaches the hull or the sea, and the miss distance should measure where
+the guidance was taking it. ``hit`` is 1 when the run's last state is
+inside the hull or superstructure.
 """
 from __future__ import annotations
 
@@ -22,6 +30,7 @@ from fwsim.log import RunLog, read_log
 
 
 CONVERGED_STD_M = 5.0
+MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
 PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
 
 
@@ -66,7 +75,62 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
         det = log.table("/camera/detection")
         m["detections"] = float(np.sum(det["detected"].astype(bool)))
     _acquisition_metrics(log, m)
+    _impact_metrics(log, m)
     return m
+
+
+def _closest_approach(t: np.ndarray, rel: np.ndarray) -> float:
+    """Smallest |rel(t)| with rel linear between samples (rel: UAV minus aim point, (n, 3))."""
+    best = float(np.min(np.linalg.norm(rel, axis=1)))
+    d = np.diff(rel, axis=0)
+    dd = np.einsum("ij,ij->i", d, d)
+    s = np.clip(-np.einsum("ij,ij->i", rel[:-1], d) / np.maximum(dd, 1e-12), 0.0, 1.0)
+    seg = rel[:-1] + s[:, None] * d
+    return min(best, float(np.min(np.linalg.norm(seg, axis=1)))) if len(seg) else best
+
+
+def _impact_metrics(log: RunLog, m: dict) -> None:
+    """Terminal phase: switch time, impact time, miss distance to the aim point, hit, impact angles."""
+    from fwsim.scenario import parse_scenario
+    from fwsim.target import HullVolume, Ship
+    if "/fsw/status" in log.topics:
+        fs = log.table("/fsw/status")
+        p3 = np.flatnonzero(fs["phase"] == 3)
+        m["switch_time_s"] = float(fs["t_s"][p3[0]]) if p3.size else math.nan
+    reason = str(log.reason)
+    ended = reason.startswith("hit the ship") or reason.startswith("sea contact")
+    st = log.table("/uav/state")
+    m["impact_time_s"] = float(st["t_s"][-1]) if ended else math.nan
+    try:
+        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text)
+    except Exception:  # a log written by another version: no geometry to score against
+        return
+    ship = Ship(scenario.target)
+    t = st["t_s"]
+    pos = st["pos_enu_m"]
+    if ended:
+        # Guidance accuracy: continue the path straight through the impact along the final
+        # velocity for MISS_EXTENSION_S, so the miss distance says where the UAV was going,
+        # not where the ship's skin or the sea stopped it.
+        ext = np.linspace(0.0, MISS_EXTENSION_S, 61)[1:]
+        t = np.concatenate([t, t[-1] + ext])
+        pos = np.concatenate([pos, pos[-1] + ext[:, None] * st["vel_enu_m_s"][-1]])
+    aims = np.array([ship.aim_point_enu_m(float(ti)) for ti in t])
+    m["miss_distance_m"] = _closest_approach(t, pos - aims)
+    pos = st["pos_enu_m"]
+    t = st["t_s"]
+    hull = HullVolume(scenario.target)
+    p_ship, R = ship.pose(float(t[-1]))
+    m["hit"] = 1.0 if hull.contains(R.T @ (pos[-1] - p_ship)) else 0.0  # a number, like every metric
+    bpng = getattr(scenario.controllers, "bpng", None)
+    if ended and bpng is not None:
+        v = st["vel_enu_m_s"][-1]
+        fpa = math.degrees(math.asin(max(-1.0, min(1.0, v[2] / max(float(np.linalg.norm(v)), 1e-9)))))
+        heading = math.degrees(math.atan2(v[0], v[1]))
+        m["impact_fpa_deg"] = fpa
+        m["impact_heading_deg"] = heading % 360.0
+        m["impact_fpa_error_deg"] = fpa - bpng.impact_flight_path_deg
+        m["impact_heading_error_deg"] = (heading - bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
 
 
 def _acquisition_metrics(log: RunLog, m: dict) -> None:

@@ -462,3 +462,30 @@ def ship_mesh(cfg: TargetConfig) -> trimesh.Trimesh:
         part.visual.face_colors = _PART_RGBA[name]
         parts.append(part)
     return trimesh.util.concatenate(parts)
+
+
+class HullVolume:
+    """Point-in-ship test in the ship frame: inside any of the ship's closed convex parts.
+
+    Each part is kept as its outward face planes (n . p <= d inside); a
+    bounding-box test rejects most points first. Used to end a run when the UAV
+    reaches the ship and to score a hit from a log.
+    """
+
+    def __init__(self, cfg: TargetConfig):
+        self.parts = []
+        for _, part in ship_mesh_parts(cfg):
+            normals = np.asarray(part.face_normals, dtype=float)
+            d = np.einsum("ij,ij->i", normals, np.asarray(part.triangles[:, 0], dtype=float))
+            self.parts.append((np.asarray(part.bounds, dtype=float), normals, d))
+        self.lo = np.min([b[0] for b, _, _ in self.parts], axis=0)
+        self.hi = np.max([b[1] for b, _, _ in self.parts], axis=0)
+
+    def contains(self, p_ship: np.ndarray) -> bool:
+        p = np.asarray(p_ship, dtype=float)
+        if np.any(p < self.lo) or np.any(p > self.hi):
+            return False
+        for (lo, hi), n, d in self.parts:
+            if np.all(p >= lo) and np.all(p <= hi) and np.all(n @ p <= d + 1e-9):
+                return True
+        return False

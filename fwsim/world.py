@@ -18,7 +18,7 @@ from fwsim.geometry import uav_mesh
 from fwsim.gimbal import Gimbal, GimbalState, camera_pose_world
 from fwsim.messages import ActuatorCommand, AirframeState, GimbalCommand
 from fwsim.scenario import Scenario
-from fwsim.target import Ship, TargetState
+from fwsim.target import HullVolume, Ship, TargetState
 
 
 @dataclass(slots=True)
@@ -61,6 +61,7 @@ class World:
         self.gimbal = Gimbal(scenario.camera.gimbal, dt)
         self.camera = Camera(scenario.camera, uav_mesh(scenario.aircraft.name), self.ship.mesh)
         self._mount = np.asarray(scenario.camera.gimbal.mount_offset_frd_m, dtype=float)
+        self._hull = HullVolume(scenario.target)
         self.truth: Truth | None = None
 
     def _compose(self, uav: AirframeState, g: GimbalState) -> Truth:
@@ -77,6 +78,15 @@ class World:
         uav = self.airframe.step(act)
         g = self.gimbal.step(uav.t_s, gimbal_cmd.pan_rate_rad_s, gimbal_cmd.tilt_rate_rad_s)
         return self._compose(uav, g)
+
+    def uav_inside_ship(self) -> bool:
+        """True once the UAV's centre of gravity is inside the ship's hull or superstructure."""
+        tr = self.truth
+        pos, R = self.ship.pose(tr.uav.t_s)
+        rel = tr.uav.pos_enu_m - pos
+        if rel @ rel > 60.0 ** 2:  # far from the ship: skip the exact test
+            return False
+        return self._hull.contains(R.T @ rel)
 
     def poses(self) -> tuple[Pose, Pose]:
         """Current poses of the UAV (body FRD) and the ship (ship frame) in the world."""

@@ -184,3 +184,25 @@ def test_paper_mission_phase1_locks_tracks_and_estimates(tmp_path):
     assert m["ukf_vel_rmse_after_convergence_m_s"] < 1.5
     events = [e[2] for e in read_log(result.log_path).events()]
     assert any("target locked" in e for e in events)
+
+
+def test_flying_into_the_ship_ends_the_run_as_a_hit(tmp_path):
+    """A shallow (-4 deg) straight descent through a stopped ship: the run ends at hull contact,
+    and the metrics (from the log alone) score a hit with a small miss distance."""
+    over = {"initial.pos_enu_m": [-150.0, 0.0, 16.0], "initial.flight_path_deg": -4.0, "target.speed_m_s": 0.0,
+            "controllers.script": [{"t_s": 0, "rates": {"airspeed_m_s": 22}}]}
+    result = fly(CHECKOUT, tmp_path, **over)
+    assert result.status == "completed" and result.reason.startswith("hit the ship"), result.reason
+    m = compute_metrics(result.log_path)
+    # the straight path continued through the hull passes ~1.5 m above the aim point
+    assert m["hit"] == 1.0 and m["miss_distance_m"] < 3.0
+    assert m["impact_time_s"] == pytest.approx(result.sim_time_s, abs=1e-6)
+
+
+def test_missing_the_ship_is_not_a_hit(tmp_path):
+    over = {"initial.pos_enu_m": [-150.0, 80.0, 16.0], "initial.flight_path_deg": -4.0, "target.speed_m_s": 0.0,
+            "controllers.script": [{"t_s": 0, "rates": {"airspeed_m_s": 22}}]}
+    result = fly(CHECKOUT, tmp_path, duration_s=20, **over)
+    assert not result.reason.startswith("hit the ship"), result.reason
+    m = compute_metrics(result.log_path)
+    assert m["hit"] == 0.0 and m["miss_distance_m"] > 50.0

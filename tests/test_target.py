@@ -269,3 +269,17 @@ def test_mesh_world_moves_with_the_ship():
     np.testing.assert_allclose(mw.bounds, [[25 - 27.5, 5 - 12.5, 0], [25 + 27.5, 5 + 12.5, 25]], atol=1e-9)
     np.testing.assert_allclose(s.aim_point_enu_m(2.0), [25, 5, 0.5 * 7.5], atol=1e-12)
     assert s.mesh.bounds[0, 0] == pytest.approx(-27.5)  # the ship-frame mesh is untouched
+
+
+def test_hull_volume_agrees_with_trimesh_point_in_mesh():
+    import numpy as np
+    from fwsim.target import HullVolume, TargetConfig, ship_mesh_parts
+    cfg = TargetConfig()
+    hull = HullVolume(cfg)
+    pts = np.random.default_rng(0).uniform(hull.lo - 2.0, hull.hi + 2.0, (2000, 3))
+    ours = np.array([hull.contains(p) for p in pts])
+    ref = np.zeros(len(pts), bool)
+    for _, part in ship_mesh_parts(cfg):
+        ref |= part.contains(pts)
+    assert 0.1 < ours.mean() < 0.9
+    assert (ours == ref).mean() > 0.999

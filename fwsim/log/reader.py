@@ -49,6 +49,7 @@ class RunLog:
         self.status = "unknown"
         self.reason = ""
         self.scenario_text = ""
+        self.effective_scenario_text = ""  # the scenario actually flown (overrides applied); "" if absent
         self.topics: dict[str, int] = {}
         # topic -> list of (log_time_ns, data, channel_id)
         self._messages: dict[str, list[tuple[int, bytes, int]]] = defaultdict(list)
@@ -297,6 +298,9 @@ def read_log(path: str | os.PathLike) -> RunLog:
     else:
         log.status = "unknown"
         log.reason = "no run_status record (file cut off before the writer closed it)"
+    effective = log.attachments.get("scenario_effective.yaml")
+    if effective is not None:
+        log.effective_scenario_text = effective.decode("utf-8")
     scenario = log.attachments.get(SCENARIO_ATTACHMENT)
     if scenario is not None:
         log.scenario_text = scenario.decode("utf-8")

@@ -27,6 +27,8 @@ UAV_FRAME = "uav"
 METADATA_NAME = "fwsim"
 STATUS_METADATA_NAME = "run_status"
 SCENARIO_ATTACHMENT = "scenario.yaml"
+#: The scenario actually flown (file + command-line overrides + defaults), as YAML.
+EFFECTIVE_SCENARIO_ATTACHMENT = "scenario_effective.yaml"
 
 #: Default uncompressed chunk size: at ~120 msg/s this is a chunk every few
 #: seconds of sim time, which bounds what a hard kill loses.
@@ -249,6 +251,13 @@ class LogWriter:
         pos.x, pos.y, pos.z = px, py, pz
         ori.w, ori.x, ori.y, ori.z = w, x, y, z
         self._write_proto(POSE_TOPIC, pose, ns)
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream") -> None:
+        """Attach a file (e.g. the effective scenario) to the log."""
+        if self._closed:
+            raise ValueError(f"LogWriter for {self.path} is closed")
+        self._mcap.add_attachment(create_time=time.time_ns(), log_time=0, name=name, media_type=media_type,
+                                  data=data)
 
     def write_transform(self, t_s: float, child_frame_id: str, pos, quat_wxyz,
                         parent_frame_id: str = WORLD_FRAME) -> None:
