@@ -5,10 +5,15 @@ Phases (paper, "Simulation"):
 1. Acquisition: the UAV flies its initial path while the gimbal sweeps a
    raster (controllers/search.py) until the detector reports the target on
    ``lock_detections`` frames in a row. At lock the UKF is initialised from the
-   detection and IBVS takes the gimbal. After lock the UAV keeps to its path,
-   or (``after_lock: orbit``) circles the estimated target at R, H: a simple
-   stand-in until the NMPC loiter (Phase 2) exists.
-2. NMPC loiter with the CBF, and 3. BPNG terminal guidance: later issues.
+   detection and IBVS takes the gimbal.
+2. Loiter (``after_lock``): ``nmpc`` (the paper's NMPC with the CBF,
+   controllers/nmpc.py) or ``orbit`` (a simple circle follower) around the
+   estimated target at R, H; ``path`` keeps the initial path (no Phase 2).
+3. Terminal: quaternion BPNG (controllers/bpng.py) through the autopilot's
+   acceleration mode, once the switch condition holds (``switch``: radius and
+   altitude within tolerances for ``dwell_s``, after ``min_loiter_s``, and the
+   bearing from the UAV to the target within ``approach_window_deg`` of the
+   impact heading). The reason is logged as an event.
 
 IBVS runs in every phase once locked. The UKF predicts every step and updates
 on each new detection. A scripted command list can stand in for the mission.
@@ -22,15 +27,60 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pydantic import BaseModel, ConfigDict, Field
+
+from controllers.bpng import Bpng
 from controllers.camera_model import PinholeCamera, depth_on_plane
+from controllers.nmpc import Nmpc
 from controllers.ibvs import Ibvs
 from controllers.path import OrbitFollower, PathFollower
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
 from controllers.ukf import CameraMotion, UkfTargetEstimator
+from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at, wrap_pi
 from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
 
 GIMBAL_ANGLE_GAIN_1_S = 3.0  # scripted gimbal angles: joint rate per rad of encoder error
+
+
+class ReacquireConfig(BaseModel):
+    """What the gimbal does when the target is lost after the lock (predictive pointing)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    after_s: float = Field(0.7, ge=0, le=60, description="no detection this long: point at the estimate instead")
+    search_after_s: float = Field(20.0, gt=0, le=3600,
+                                  description="no detection this long: restart the raster search")
+    gain_1_s: float = Field(4.0, gt=0, le=50, description="joint rate per rad of pointing error")
+
+
+class SwitchConfig(BaseModel):
+    """The Phase 2 -> 3 (loiter -> terminal) switch; the paper gives it only loosely."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    enabled: bool = Field(True, description="false: loiter until the run ends")
+    radius_tol_m: float = Field(25.0, gt=0, le=1000, description="|distance to the estimate - R| below this")
+    altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
+    dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long")
+    min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
+    approach_window_deg: float | None = Field(
+        10.0, gt=0, le=180,
+        description="bearing from the UAV to the target within this of the impact heading (none: any bearing)")
+
+
+@dataclass(frozen=True, slots=True)
+class NmpcStatus:
+    """One NMPC solve, for the log (the horizon's positions decimated to every 5th step)."""
+
+    t_s: float
+    status: str
+    solve_ms: float
+    iterations: int
+    fallback: bool
+    cost: float
+    cbf_active: bool
+    min_h_rad: float
+    u0: np.ndarray  # (3,) V_U, u_p, u_q applied
+    predicted_xyz_m: np.ndarray  # flattened (k, 3) predicted positions
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +107,15 @@ class FlightSoftware:
                                   path.waypoints_enu_m, path.max_bank_deg)
         o = controllers_cfg.orbit
         self._orbit = OrbitFollower(o.airspeed_m_s, o.radius_m, o.altitude_m, o.clockwise, path.max_bank_deg)
+        self._nmpc = Nmpc(controllers_cfg.nmpc) if controllers_cfg.after_lock == "nmpc" else None
+        self._nmpc_cmd = None
+        self._nmpc_next_t = -math.inf
+        self._bpng = Bpng(controllers_cfg.bpng)
+        self._last_det_t = math.nan
+        self._lost_reported = False
+        self.phase = 1
+        self._phase2_t = math.nan
+        self._in_tol_since = math.nan
         self.camera = PinholeCamera.from_config(camera_cfg)
         self._search = GimbalSearch(controllers_cfg.acquisition)
         self._ukf = UkfTargetEstimator(self.camera, controllers_cfg.ukf)
@@ -85,6 +144,50 @@ class FlightSoftware:
             return float(z) if np.isfinite(z) else None
         return None
 
+    def _point_at_estimate(self, meas: Measurements, motion: CameraMotion) -> GimbalCommand:
+        """Drive the joints toward the direction of the estimated target (atan2 gives the pan
+        within [-pi, pi], so the joint swings the long way round instead of pushing a stop)."""
+        R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
+        pan_sp, tilt_sp = pan_tilt_pointing_at(R_ef.T @ (self._ukf.pos_enu_m - motion.pos_enu_m))
+        lim = self.cfg.ibvs
+        tilt_sp = min(max(tilt_sp, lim.tilt_limits_rad[0]), lim.tilt_limits_rad[1])
+        k = self.cfg.reacquire.gain_1_s
+        e_pan = pan_sp - meas.pan_rad  # not wrapped: the joint cannot pass its stops
+        return GimbalCommand(meas.t_s, k * e_pan, k * (tilt_sp - meas.tilt_rad))
+
+    def _loiter_radius_altitude(self) -> tuple[float, float]:
+        if self.cfg.after_lock == "nmpc":
+            return self.cfg.nmpc.radius_m, self.cfg.nmpc.altitude_m
+        return self.cfg.orbit.radius_m, self.cfg.orbit.altitude_m
+
+    def _radial_error(self, meas: Measurements) -> float:
+        rel = meas.pos_enu_m[:2] - self._ukf.pos_enu_m[:2]
+        return float(np.hypot(rel[0], rel[1])) - self._loiter_radius_altitude()[0]
+
+    def _switch_reason(self, meas: Measurements) -> str:
+        """Why Phase 3 starts now, or "" while the switch condition does not hold."""
+        sw = self.cfg.switch
+        if not sw.enabled or meas.t_s - self._phase2_t < sw.min_loiter_s:
+            return ""
+        R, H = self._loiter_radius_altitude()
+        radial = self._radial_error(meas)
+        alt_err = float(meas.height_above_sea_m) - H
+        if abs(radial) > sw.radius_tol_m or abs(alt_err) > sw.altitude_tol_m:
+            self._in_tol_since = math.nan
+            return ""
+        if math.isnan(self._in_tol_since):
+            self._in_tol_since = meas.t_s
+        if meas.t_s - self._in_tol_since < sw.dwell_s:
+            return ""
+        rel = self._ukf.pos_enu_m[:2] - meas.pos_enu_m[:2]
+        bearing = math.degrees(math.atan2(rel[0], rel[1]))  # clockwise from North
+        off = (bearing - self.cfg.bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
+        if sw.approach_window_deg is not None and abs(off) > sw.approach_window_deg:
+            return ""
+        return (f"radius error {radial:+.1f} m (tol {sw.radius_tol_m:g}), altitude error {alt_err:+.1f} m "
+                f"(tol {sw.altitude_tol_m:g}) for {meas.t_s - self._in_tol_since:.1f} s; bearing to target "
+                f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading")
+
     def step(self, meas: Measurements) -> FlightSoftwareOutput:
         if self.kind == "script":
             return self._scripted(meas)
@@ -101,18 +204,65 @@ class FlightSoftware:
                 self._ukf.update(meas, motion)
         if self._ukf.initialised:
             logs["/fsw/estimate"] = self._ukf.estimate()
-        # gimbal: search until lock, IBVS after
+        # gimbal: search until lock, IBVS after; predictive pointing at the estimate when the target is lost
+        if meas.det_new and meas.det_valid:
+            self._last_det_t = meas.t_s
         locked = self._search.locked
+        lost_s = meas.t_s - self._last_det_t if locked else 0.0
+        rq = self.cfg.reacquire
         if not locked or motion is None:
             gimbal = self._search.step(meas)
+        elif lost_s > rq.search_after_s:
+            gimbal = self._search.step(meas)
+        elif lost_s > rq.after_s and self._ukf.initialised:
+            gimbal = self._point_at_estimate(meas, motion)
         else:
             vel = self._ukf.vel_enu_m_s if self._ukf.initialised else None
             gimbal, ibvs_status = self._ibvs.step(meas, vel, self._depth(meas, motion), self.mount)
             logs["/fsw/ibvs"] = ibvs_status
-        # the UAV: initial path, or the orbit stand-in around the estimate after lock
-        if locked and self.cfg.after_lock == "orbit" and self._ukf.initialised:
+        if locked and lost_s > rq.after_s and self._lost_reported is False:
+            events.append(f"target lost at t = {meas.t_s:.2f} s (no detection for {lost_s:.1f} s): "
+                          "pointing at the estimate")
+            self._lost_reported = True
+        elif lost_s <= rq.after_s:
+            self._lost_reported = False
+        # phase switches
+        if locked and self.phase == 1 and self.cfg.after_lock != "path" and self._ukf.initialised:
+            self.phase, self._phase2_t = 2, meas.t_s
+            events.append(f"phase 1 -> 2 at t = {meas.t_s:.2f} s: target locked, loiter ({self.cfg.after_lock})")
+        if self.phase == 2:
+            why = self._switch_reason(meas)
+            if why:
+                self.phase = 3
+                events.append(f"phase 2 -> 3 at t = {meas.t_s:.2f} s: {why}")
+        # the UAV
+        if self.phase == 3:
+            target = np.array(self._ukf.pos_enu_m, dtype=float)
+            target[2] = 0.0  # the estimate's plane height is a camera-model detail; BPNG adds its aim height
+            cmd, bstat = self._bpng.step(meas.t_s, meas.pos_enu_m, meas.vel_enu_m_s, target, self._ukf.vel_enu_m_s)
+            logs["/fsw/bpng"] = bstat
+            status = FlightSoftwareStatus(meas.t_s, 3, "terminal", "accel", locked=True, lock_t_s=self._search.lock_t_s,
+                                          radial_err_m=self._radial_error(meas))
+        elif self.phase == 2 and self._nmpc is not None:
+            if meas.t_s + 1e-9 >= self._nmpc_next_t:
+                est = self._ukf
+                res = self._nmpc.solve(meas.t_s, self._nmpc.state_from_measurements(meas), est.pos_enu_m,
+                                       est.vel_enu_m_s)
+                self._nmpc_cmd = self._nmpc.command(res)
+                self._nmpc_next_t = meas.t_s + self.cfg.nmpc.step_s
+                logs["/fsw/nmpc"] = NmpcStatus(meas.t_s, res.status, res.solve_ms, res.iterations, res.fallback,
+                                               res.cost, res.cbf_active, res.min_h, np.asarray(res.u0, float),
+                                               np.asarray(res.predicted[::5, :3], float).ravel())
+                if res.fallback:
+                    events.append(f"NMPC fallback at t = {meas.t_s:.2f} s: {res.status}")
+            cmd = type(self._nmpc_cmd)(meas.t_s, self._nmpc_cmd.airspeed_m_s, self._nmpc_cmd.roll_rate_rad_s,
+                                       self._nmpc_cmd.pitch_rate_rad_s)
+            status = FlightSoftwareStatus(meas.t_s, 2, "loiter:nmpc", "rates", altitude_sp_m=self.cfg.nmpc.altitude_m,
+                                          locked=True, lock_t_s=self._search.lock_t_s,
+                                          radial_err_m=self._radial_error(meas))
+        elif self.phase == 2:
             cmd, chi_c, radial = self._orbit.step(meas, self._ukf.pos_enu_m)
-            status = FlightSoftwareStatus(meas.t_s, 1, "acquisition:orbit", "rates", course_sp_rad=chi_c,
+            status = FlightSoftwareStatus(meas.t_s, 2, "loiter:orbit", "rates", course_sp_rad=chi_c,
                                           altitude_sp_m=self._orbit.altitude_m, locked=True,
                                           lock_t_s=self._search.lock_t_s, radial_err_m=radial)
         else:

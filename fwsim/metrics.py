@@ -75,8 +75,58 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
         det = log.table("/camera/detection")
         m["detections"] = float(np.sum(det["detected"].astype(bool)))
     _acquisition_metrics(log, m)
+    _loiter_metrics(log, m)
     _impact_metrics(log, m)
     return m
+
+
+LOITER_SETTLE_S = 60.0  # loiter errors are scored from Phase 2 start + this
+
+
+def _loiter_metrics(log: RunLog, m: dict) -> None:
+    """Phase 2: radius and altitude errors against the true ship, the tilt joint, the NMPC's solves."""
+    if "/gimbal/state" in log.topics:
+        g = log.table("/gimbal/state")
+        dt = np.diff(g["t_s"], append=g["t_s"][-1])
+        m["tilt_positive_s"] = float(np.sum(dt[g["tilt_rad"] > 0.0]))
+    if "/fsw/nmpc" in log.topics:
+        n = log.table("/fsw/nmpc")
+        m["nmpc_solves"] = float(len(n["t_s"]))
+        m["nmpc_solve_ms_median"] = float(np.median(n["solve_ms"]))
+        m["nmpc_solve_ms_p99"] = float(np.percentile(n["solve_ms"], 99))
+        m["nmpc_fallbacks"] = float(np.sum(n["fallback"].astype(bool)))
+        m["nmpc_cbf_active_fraction"] = float(np.mean(n["cbf_active"].astype(bool)))
+    if "/fsw/status" not in log.topics or "/target/state" not in log.topics:
+        return
+    fs = log.table("/fsw/status")
+    p2 = np.flatnonzero(fs["phase"] == 2)
+    if not p2.size:
+        return
+    t2 = float(fs["t_s"][p2[0]])
+    p3 = np.flatnonzero(fs["phase"] == 3)
+    t_end = float(fs["t_s"][p3[0]]) if p3.size else float(fs["t_s"][-1])
+    from fwsim.scenario import parse_scenario
+    try:
+        sc = parse_scenario(log.effective_scenario_text or log.scenario_text).controllers
+    except Exception:
+        return
+    R, H = (sc.nmpc.radius_m, sc.nmpc.altitude_m) if sc.after_lock == "nmpc" else (sc.orbit.radius_m,
+                                                                                    sc.orbit.altitude_m)
+    st, tg = log.table("/uav/state"), log.table("/target/state")
+    w = (st["t_s"] >= t2 + LOITER_SETTLE_S) & (st["t_s"] <= t_end)
+    m["loiter_settle_s"] = LOITER_SETTLE_S
+    if not w.any():
+        m["loiter_radius_rmse_m"] = m["loiter_alt_rmse_m"] = math.nan
+        return
+    t = st["t_s"][w]
+    q = np.stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, i]) for i in range(2)], axis=1)
+    radius = np.linalg.norm(st["pos_enu_m"][w, :2] - q, axis=1)
+    m["loiter_radius_rmse_m"] = _rms(radius - R)
+    m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
+    if "/camera/frame" in log.topics:
+        fr = log.table("/camera/frame")
+        wf = (fr["t_s"] >= t2) & (fr["t_s"] <= t_end)
+        m["occluded_frames_phase2"] = float(np.sum(fr["in_fov"][wf].astype(bool) & (fr["visible_px"][wf] <= 0)))
 
 
 def _closest_approach(t: np.ndarray, rel: np.ndarray) -> float:

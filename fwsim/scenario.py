@@ -18,7 +18,10 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from controllers.bpng import BpngConfig
 from controllers.ibvs import IbvsConfig
+from controllers.mission import ReacquireConfig, SwitchConfig
+from controllers.nmpc import NmpcConfig
 from controllers.search import AcquisitionConfig
 from controllers.ukf import UkfConfig
 from fwsim.camera import CameraConfig
@@ -119,8 +122,13 @@ class Controllers(_Strict):
     script: list[ScriptStep] = Field(default_factory=list)
     initial_path: InitialPath = Field(default_factory=InitialPath)
     acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
-    after_lock: Literal["path", "orbit"] = Field("path", description="what the UAV flies after the lock")
+    after_lock: Literal["path", "orbit", "nmpc"] = Field(
+        "path", description="after the lock: keep the path, or loiter (Phase 2) with a circle follower or the NMPC")
     orbit: Orbit = Field(default_factory=Orbit)
+    nmpc: NmpcConfig = Field(default_factory=NmpcConfig)
+    switch: SwitchConfig = Field(default_factory=lambda: SwitchConfig(enabled=False))
+    reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
+    bpng: BpngConfig = Field(default_factory=BpngConfig)
     ukf: UkfConfig = Field(default_factory=UkfConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
 

@@ -1,0 +1,773 @@
+"""Phase 2: the NMPC loiter around the ship (paper "Phase 2: NMPC for the tracking phase"), with the CBF.
+
+Model (paper eq. NMPCstate, NMPCinput, add_tran, dynamics). State and input::
+
+    X = [x, y, z (ENU, m), phi, theta, psi]      U = [V_U (m/s), u_p, u_q (rad/s)]
+
+phi, theta are the aerospace roll and pitch; **psi is the ENU yaw, counter-clockwise from
+East** (``psi = pi/2 - psi_ned``), the convention of the paper's eq. (dynamics). With it,
+positive roll (right wing down) turns right, i.e. decreases psi::
+
+    r_dot     = V_U [cos psi cos theta, sin psi cos theta, sin theta]
+    phi_dot   = u_p + u_q sin(phi) tan(theta)
+    theta_dot = u_q cos(phi)
+    psi_dot   = -(g / V_U) tan(phi) cos(theta)
+
+Discretisation: Euler forward ``X_{k+1} = X_k + T_s Xdot(X_k, U_k)`` (paper); ``integrator:
+rk4`` is available. Euler is kept: its prediction drifts from an exact flight of the same plan by
+at most ~3 m at the end of the 5 s horizon in a 35 deg bank (tools/bench_nmpc.py prints it), and
+on the continuous model as plant the loop still settles to ~0.2 m radius RMS.
+
+Cost, summed over the horizon (paper eq. NMPC with f1..f4)::
+
+    f1 = w1 (|r_p,k - r_q,k|_xy - R)^2           k = 1..N (X_0 is fixed; X_N is included so
+    f2 = w2 (z_k - H)^2                          k = 1..N  the last input is not free)
+    f3 = (Q_{k+1} - Q_k)^T W3 (Q_{k+1} - Q_k)    k = 0..N-1, Q = [phi, theta, psi]
+    f4 = w4 |[u_p, u_q]_0 - [u_p, u_q]*_{-1}|^2   the previously applied input
+    reg = w_V (V_U,k - V_ref)^2 + w_rate (u_p,k^2 + u_q,k^2)     (ours, small)
+
+``r_q,k = r_q + V_q k T_s``: the target's constant-velocity future from the UKF estimate at
+solve time. ``Q_{k+1} - Q_k`` is written as ``Q(F(X_k, U_k)) - Q(X_k)`` (F the discrete step),
+equal on the dynamics and stage-separable, which the structured solvers need. The input
+regularisation makes V_U (which only enters through the kinematics) and the rates strictly
+convex in the QP (its weights are 1e-4 of the tracking terms' scale). The CBF slack
+(controllers/cbf.py) is a 4th control per stage, penalised linearly and quadratically. Weights
+are per stage; the defaults put the cost at O(100) for the paper's start (300 m, 100 m off).
+
+Bounds (eq. limits): |phi| <= phi_max, |theta| <= theta_max on X_1..X_N; V_U, u_p, u_q boxes.
+If the measured attitude is already outside its box, the state bound of stage k is widened to
+what the rate limits can reach by then (a funnel), so the problem stays feasible.
+
+Solvers (``NmpcConfig.solver``):
+  * ``rti_hpipm`` (default): SQP in real-time-iteration form. Per call: shift the previous plan
+    by the elapsed steps, embed the measured X_0 through the QP bounds, evaluate one expanded SX
+    function (Hessian blocks, gradient, constraint Jacobian; evaluated on preallocated numpy
+    buffers, ``Function.buffer``), solve one structure-exploiting QP with HPIPM (variables
+    [x0, u0, x1, u1, ..., xN], constraints [gap0, cbf0, gap1, cbf1, ...]) and take the full step.
+    The QP Hessian (``hessian: exact``) is the Hessian of the Lagrangian with the gap multipliers
+    from an adjoint recursion, made convex by flooring the eigenvalues of each stage block (on its
+    structurally independent groups: [x, y, z, angles, inputs] and the slack). The Gauss-Newton
+    Hessian (``hessian: gauss_newton``, cheaper) drops the curvature of the turn dynamics
+    (psi_dot ~ tan(phi)/V times large multipliers on big radius errors) and its real-time
+    iteration then oscillates period-2 in u_p during the approach. ``rti_iterations`` QPs per call
+    (default 1); a cold start (first call, after a reset) iterates up to ``cold_start_iterations``
+    within 90 % of ``max_solve_ms``. A call at the same t_s as the previous one does not shift, so
+    repeated calls keep iterating toward the optimum.
+  * ``rti_qrqp``: the same with CasADi's sparse active-set qrqp (far slower here and unreliable on
+    this QP: kept for comparison only).
+  * ``fatrop``: the full NLP with the structure-exploiting interior point Fatrop (exact Hessian).
+  * ``ipopt``: the full NLP with IPOPT (exact Hessian, converged to ``ipopt_tol``): the reference.
+
+A failed or late (``solve_ms > max_solve_ms``) solve never raises: the result carries the
+previous successful plan's input for this time (the shifted plan's first input), ``fallback``
+is true and ``status`` says why; ``Nmpc.fallback_count`` counts them.
+
+Nothing here imports the truth side of the harness (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import casadi as ca
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from controllers.cbf import G, CbfConfig, cbf_rows, cbf_terms
+from fwsim.frames import wrap_pi
+from fwsim.messages import Measurements, RateCommand
+
+__all__ = ["NmpcConfig", "NmpcResult", "Nmpc", "continuous_dynamics", "NX", "KinematicRun", "kinematic_closed_loop"]
+
+NX = 6  # [x, y, z, phi, theta, psi]
+_TWO_PI = 2.0 * math.pi
+_DIST_EPS2 = 1.0  # m^2 inside the planar-distance sqrt (smooth at the target)
+_HESS_REG = 1e-8  # diagonal added to the QP Hessian
+_FUNNEL = 0.5  # fraction of the rate limit used to widen a violated attitude bound per second
+_CBF_ACTIVE_TOL = 1e-3  # rad/s: a CBF row closer than this to its bound counts as active
+
+
+class NmpcConfig(BaseModel):
+    """Tuning of the Phase 2 NMPC (paper eq. NMPC, limits) and its solver."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    horizon_steps: int = Field(50, ge=2, le=400, description="N, prediction = control horizon (steps)")
+    step_s: float = Field(0.1, gt=0.0, le=2.0, description="T_s, the NMPC step and the model's Euler step, s")
+    radius_m: float = Field(500.0, gt=20.0, le=5000.0, description="R, loiter radius around the target, m")
+    altitude_m: float = Field(500.0, gt=10.0, le=5000.0, description="H, loiter altitude (world z), m")
+    w1_radius: float = Field(1e-4, ge=0.0, le=1e6, description="w1, per m^2 of radius error, per stage")
+    w2_altitude: float = Field(1e-4, ge=0.0, le=1e6, description="w2, per m^2 of altitude error, per stage")
+    w3_attitude: tuple[float, float, float] = Field(
+        (30.0, 30.0, 1.0), description="W3 diagonal: per rad^2 of change of [phi, theta, psi] per step")
+    w4_continuity: float = Field(0.1, ge=0.0, le=1e6,
+                                 description="w4, per (rad/s)^2 of [u_p, u_q] change from the previous input")
+    w_airspeed: float = Field(1e-4, ge=0.0, le=1e6,
+                              description="input regularisation, per (m/s)^2 of V_U - airspeed_ref, per stage")
+    w_rates: float = Field(1e-4, ge=0.0, le=1e6,
+                           description="input regularisation, per (rad/s)^2 of u_p and u_q, per stage")
+    airspeed_ref_m_s: float = Field(22.0, gt=0.0, le=80.0, description="V_ref of the airspeed regularisation")
+    roll_max_deg: float = Field(35.0, gt=0.0, lt=80.0, description="|phi| bound")
+    pitch_max_deg: float = Field(15.0, gt=0.0, lt=60.0, description="|theta| bound")
+    airspeed_min_m_s: float = Field(18.0, gt=0.0, le=80.0, description="V_U lower bound")
+    airspeed_max_m_s: float = Field(28.0, gt=0.0, le=80.0, description="V_U upper bound")
+    roll_rate_max_rad_s: float = Field(0.8, gt=0.0, le=10.0, description="|u_p| bound, rad/s")
+    pitch_rate_max_rad_s: float = Field(0.3, gt=0.0, le=10.0, description="|u_q| bound, rad/s")
+    cbf: CbfConfig = Field(default_factory=CbfConfig)
+    integrator: Literal["euler", "rk4"] = Field("euler", description="discretisation of the model")
+    solver: Literal["rti_hpipm", "rti_qrqp", "fatrop", "ipopt"] = Field(
+        "rti_hpipm", description="rti_*: SQP real-time iterations with that QP solver (hpipm: structured "
+                                 "interior point; qrqp: comparison only); fatrop/ipopt: the full NLP to convergence")
+    hessian: Literal["exact", "gauss_newton"] = Field(
+        "exact", description="rti_*: QP Hessian. exact: Hessian of the Lagrangian (gap multipliers from the adjoint "
+                             "recursion), eigenvalues clipped per stage block; gauss_newton: 2 J_r^T J_r (oscillates "
+                             "on large radius errors, kept for comparison)")
+    hessian_min_eig: float = Field(1e-6, gt=0.0, le=1.0,
+                                   description="exact Hessian: eigenvalue floor of each stage block")
+    rti_iterations: int = Field(1, ge=1, le=50, description="SQP iterations per call once warm")
+    cold_start_iterations: int = Field(50, ge=1, le=500,
+                                       description="SQP iterations at most on the first call or after a reset; "
+                                                   "they also stop when 90 % of max_solve_ms is used")
+    cold_start_tol: float = Field(1e-5, gt=0.0, le=1.0,
+                                  description="cold start stops when the largest input step is below this")
+    ipopt_tol: float = Field(1e-8, gt=0.0, le=1e-2, description="IPOPT convergence tolerance")
+    max_solve_ms: float = Field(50.0, ge=0.0, le=1e5,
+                                description="time budget of one solve; a later result is not applied")
+    reset_after_failures: int = Field(3, ge=1, le=1000,
+                                      description="consecutive failed solves before the warm start is rebuilt")
+    pitch_from: Literal["attitude", "flight_path"] = Field(
+        "attitude", description="theta of the model from the AHRS pitch (paper) or the flight-path angle of "
+                                "the velocity (the kinematics' z_dot = V sin(theta) then has no alpha bias)")
+
+
+@dataclass(frozen=True, slots=True)
+class NmpcResult:
+    t_s: float
+    u0: np.ndarray  # (3,) [V_U m/s, u_p rad/s, u_q rad/s] to apply now
+    status: str  # "ok", "fallback:late", "fallback:failed:<why>", ...
+    solve_ms: float
+    iterations: int
+    fallback: bool
+    cost: float  # cost of the returned plan (nan on a fallback)
+    predicted: np.ndarray  # (N+1, 6) predicted states (psi continuous with the x0 given)
+    cbf_active: bool  # a CBF row is (nearly) binding somewhere on the horizon
+    min_h: float  # min over the predicted states of controllers.cbf.h_value (rad)
+    inputs: np.ndarray  # (N, 3) the plan's inputs [V_U, u_p, u_q] (on a late solve: the new, unapplied plan)
+
+
+def continuous_dynamics(x, u):
+    """Xdot of the paper's eq. (dynamics) (psi ENU, counter-clockwise from East); casadi or numbers."""
+    phi, theta, psi = x[3], x[4], x[5]
+    V, up, uq = u[0], u[1], u[2]
+    ct = ca.cos(theta)
+    return ca.vertcat(V * ca.cos(psi) * ct, V * ca.sin(psi) * ct, V * ca.sin(theta),
+                      up + uq * ca.sin(phi) * ca.tan(theta), uq * ca.cos(phi), -(G / V) * ca.tan(phi) * ct)
+
+
+def _discrete_step(x, u, dt: float, integrator: str):
+    if integrator == "euler":
+        return x + dt * continuous_dynamics(x, u)
+    k1 = continuous_dynamics(x, u)
+    k2 = continuous_dynamics(x + 0.5 * dt * k1, u)
+    k3 = continuous_dynamics(x + 0.5 * dt * k2, u)
+    k4 = continuous_dynamics(x + dt * k3, u)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+class _Problem:
+    """The stage-structured NLP in CasADi SX, and the functions the solvers need."""
+
+    def __init__(self, cfg: NmpcConfig):
+        self.cfg = cfg
+        N, dt = cfg.horizon_steps, cfg.step_s
+        self.N = N
+        self.use_cbf = cfg.cbf.enabled
+        self.nu = 4 if self.use_cbf else 3
+        self.ng_stage = 2 if self.use_cbf else 0
+        nu, ns = self.nu, NX + self.nu
+        self.ns = ns
+        self.nw = N * ns + NX
+        self.ix = np.array([k * ns + np.arange(NX) for k in range(N + 1)])
+        self.iu = np.array([k * ns + NX + np.arange(nu) for k in range(N)])
+        # parameters: target position (3), velocity (3), previous input [u_p, u_q] (2), f4 on/off (1)
+        self.np_ = 9
+        w = ca.SX.sym("w", self.nw)
+        p = ca.SX.sym("p", self.np_)
+        rq, vq, uprev, f4_on = p[0:3], p[3:6], p[6:8], p[8]
+        X = [w[self.ix[k]] for k in range(N + 1)]
+        U = [w[self.iu[k]] for k in range(N)]
+        sw1, sw2 = math.sqrt(cfg.w1_radius), math.sqrt(cfg.w2_altitude)
+        sw3 = ca.DM([math.sqrt(v) for v in cfg.w3_attitude])
+        sw4, swV, swr = math.sqrt(cfg.w4_continuity), math.sqrt(cfg.w_airspeed), math.sqrt(cfg.w_rates)
+        sws = math.sqrt(cfg.cbf.slack_weight_quadratic)
+        R, H = cfg.radius_m, cfg.altitude_m
+
+        def track(x, k):
+            tq = rq + vq * (k * dt)
+            d = ca.sqrt((x[0] - tq[0]) ** 2 + (x[1] - tq[1]) ** 2 + _DIST_EPS2)
+            return [sw1 * (d - R), sw2 * (x[2] - H)]
+
+        res, cons, lin, steps = [], [], 0, []
+        step_fun = ca.Function("F", [X[0], U[0]], [_discrete_step(X[0], U[0][0:3], dt, cfg.integrator)])
+        for k in range(N):
+            x, u = X[k], U[k]
+            xn = step_fun(x, u)
+            steps.append(xn)
+            if k >= 1:
+                res += track(x, k)
+            res.append(sw3 * (xn[3:6] - x[3:6]))  # f3 through the step: stage-separable
+            res.append(ca.vertcat(swV * (u[0] - cfg.airspeed_ref_m_s), swr * u[1], swr * u[2]))
+            if k == 0:
+                res.append(sw4 * f4_on * (u[1:3] - uprev))
+            cons.append(X[k + 1] - xn)  # gap x_{k+1} - F(x_k, u_k) (Fatrop's form; HPIPM takes it too)
+            if self.use_cbf:
+                res.append(sws * u[3])
+                lin = lin + cfg.cbf.slack_weight_linear * u[3]
+                cons.append(cbf_rows(x, u, rq + vq * (k * dt), vq, cfg.cbf.beta, u[3]))
+        res += track(X[N], N)
+        r = ca.vertcat(*res)
+        c = ca.vertcat(*cons)
+        J = ca.sumsqr(r) + lin
+        self.w, self.p, self.J, self.c = w, p, J, c
+        self.nc = c.shape[0]
+        # constraint bounds (the CBF rows' upper bounds are set per solve for sides = solve_time)
+        self.lbc = np.zeros(self.nc)
+        self.ubc = np.zeros(self.nc)
+        self.icbf = np.zeros((N, 2), dtype=int)
+        if self.use_cbf:
+            per = NX + 2
+            for k in range(N):
+                self.icbf[k] = k * per + NX + np.arange(2)
+            self.lbc[self.icbf.ravel()] = -np.inf
+        # outputs for results: cost, CBF rows without slack, h per stage
+        rows, hmin = [], []
+        for k in range(N + 1):
+            tq = rq + vq * (k * dt)
+            uk = U[min(k, N - 1)]
+            hR, hL, _, _ = cbf_terms(X[k], uk, tq, vq)
+            hmin.append(ca.fmin(hR, hL))
+            if k < N and self.use_cbf:
+                rows.append(cbf_rows(X[k], uk, tq, vq, cfg.cbf.beta, 0.0))
+        rows = ca.vertcat(*rows) if rows else ca.DM.zeros(0, 1)
+        self.eval_fun = ca.Function("nmpc_eval", [w, p], [J, rows, ca.vertcat(*hmin)])
+        self.r, self.lin_grad = r, ca.gradient(lin, w) if self.use_cbf else ca.DM.zeros(self.nw)
+        self.steps, self.X = steps, X
+        # Hessian blocks: stage k owns [x_k, u_k] (contiguous in w), the last block is x_N
+        self.blocks = [np.concatenate([self.ix[k], self.iu[k]]) for k in range(N)] + [self.ix[N]]
+
+    def qp_function(self) -> ca.Function:
+        """(w, p) -> (stage Hessian blocks (ns x ns N), terminal block (6 x 6), g, A, c) at w.
+
+        ``hessian = gauss_newton``: 2 J_r^T J_r. ``hessian = exact``: the Hessian of the Lagrangian
+        ``J + sum_k lambda_k^T (x_{k+1} - F(x_k, u_k))`` with the gap multipliers from the adjoint recursion
+        at w (stationarity in x_1..x_N with the inequality multipliers taken as zero):
+        ``lambda_{N-1} = -dJ/dx_N``, ``lambda_k = A_{k+1}^T lambda_{k+1} - dJ/dx_{k+1}``. (The QP plugin's
+        own gap multipliers are not usable; adding its CBF and bound multipliers did not help.) The caller
+        makes each block convex.
+        """
+        w, N = self.w, self.N
+        if self.cfg.hessian == "gauss_newton":
+            Jr = ca.jacobian(self.r, w)
+            Hfull = 2.0 * ca.mtimes(Jr.T, Jr)
+        else:
+            gJ = ca.gradient(self.J, w)
+            lam = [None] * N
+            lam[N - 1] = -gJ[self.ix[N]]
+            for k in range(N - 2, -1, -1):
+                Ak = ca.jacobian(self.steps[k + 1], self.X[k + 1])
+                lam[k] = ca.mtimes(Ak.T, lam[k + 1]) - gJ[self.ix[k + 1]]
+            lam_sym = ca.SX.sym("lam", NX, N)
+            L = self.J + sum(ca.dot(lam_sym[:, k], self.X[k + 1] - self.steps[k]) for k in range(N))
+            Hfull = ca.hessian(L, w)[0]
+            Hfull = ca.substitute(Hfull, ca.vec(lam_sym), ca.vec(ca.horzcat(*lam)))
+        blk = [Hfull[[int(i) for i in b], [int(i) for i in b]] for b in self.blocks]
+        # structurally independent groups of variables in a block (e.g. [x, y] | z | angles + inputs | slack):
+        # the per-block convexification works on each group alone (smaller eigenproblems)
+        self.stage_groups = _components(sum(np.array(ca.DM(b.sparsity(), 1)) for b in blk[:N]))
+        self.term_groups = _components(np.array(ca.DM(blk[N].sparsity(), 1)))
+        blk = [ca.densify(b) for b in blk]
+        g = ca.gradient(self.J, w)
+        A = ca.jacobian(self.c, w)
+        return ca.Function("nmpc_qp", [w, self.p], [ca.horzcat(*blk[:N]), blk[N], g, A, self.c])
+
+    def hessian_sparsity(self) -> ca.Sparsity:
+        """Block-diagonal pattern of the QP Hessian: dense (ns x ns) per stage, (6 x 6) for x_N."""
+        sp = [ca.Sparsity.dense(len(b), len(b)) for b in self.blocks]
+        return ca.diagcat(*sp)
+
+    def rollout(self, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """States (N+1, 6) from x0 under the inputs U (N, >=3) with the model's discrete step."""
+        X = np.empty((U.shape[0] + 1, NX))
+        X[0] = x0
+        for k in range(U.shape[0]):
+            X[k + 1] = _np_step(X[k], U[k], self.cfg.step_s, self.cfg.integrator)
+        return X
+
+
+def _components(pattern: np.ndarray) -> list[np.ndarray]:
+    """Connected components (index arrays) of the graph of a symmetric sparsity pattern."""
+    n = pattern.shape[0]
+    adj = (pattern != 0) | (pattern.T != 0)
+    seen = np.zeros(n, dtype=bool)
+    groups = []
+    for i in range(n):
+        if seen[i]:
+            continue
+        stack, comp = [i], []
+        seen[i] = True
+        while stack:
+            j = stack.pop()
+            comp.append(j)
+            for k in np.nonzero(adj[j])[0]:
+                if not seen[k]:
+                    seen[k] = True
+                    stack.append(int(k))
+        groups.append(np.array(sorted(comp)))
+    return groups
+
+
+def _np_dyn(x, u):
+    phi, theta, psi = x[3], x[4], x[5]
+    V, up, uq = u[0], u[1], u[2]
+    ct = math.cos(theta)
+    return np.array([V * math.cos(psi) * ct, V * math.sin(psi) * ct, V * math.sin(theta),
+                     up + uq * math.sin(phi) * math.tan(theta), uq * math.cos(phi), -(G / V) * math.tan(phi) * ct])
+
+
+def _np_step(x, u, dt, integrator):
+    if integrator == "euler":
+        return x + dt * _np_dyn(x, u)
+    k1 = _np_dyn(x, u)
+    k2 = _np_dyn(x + 0.5 * dt * k1, u)
+    k3 = _np_dyn(x + 0.5 * dt * k2, u)
+    k4 = _np_dyn(x + dt * k3, u)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+class _Buffered:
+    """A CasADi Function evaluated on preallocated numpy arrays (``Function.buffer``: no DM conversions).
+
+    ``inputs[i]`` / ``outputs[i]`` hold the nonzeros (column-major) of input/output i. ``rebind``: bind the
+    arrays again before each evaluation and zero the outputs (the QP plugins consume the output pointers
+    on evaluation and accumulate into them; 15 us).
+    """
+
+    def __init__(self, f: ca.Function, rebind: bool = False):
+        self.f = f
+        self.rebind = rebind
+        self.inputs = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
+        self.outputs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+        self.buf, self._eval = f.buffer()
+        self._bind()
+
+    def _bind(self) -> None:
+        for i, a in enumerate(self.inputs):
+            self.buf.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.outputs):
+            self.buf.set_res(i, memoryview(r))
+
+    def __call__(self, *args) -> list[np.ndarray]:
+        for dst, src in zip(self.inputs, args):
+            if src is not None:
+                dst[:] = src
+        if self.rebind:
+            for r in self.outputs:
+                r.fill(0.0)
+            self._bind()
+        self._eval()
+        return self.outputs
+
+    def stats(self) -> dict:
+        return self.buf.stats()
+
+
+class Nmpc:
+    """The Phase 2 NMPC: ``solve`` at 10 Hz, ``command`` to turn a result into a RateCommand."""
+
+    def __init__(self, cfg: NmpcConfig | None = None):
+        self.cfg = cfg = cfg if cfg is not None else NmpcConfig()
+        if cfg.airspeed_min_m_s >= cfg.airspeed_max_m_s:
+            raise ValueError("airspeed_min_m_s must be below airspeed_max_m_s")
+        self._is_rti = cfg.solver.startswith("rti_")
+        self.problem = pb = _Problem(cfg)
+        N = pb.N
+        if self._is_rti:
+            qp_fun = pb.qp_function()
+            self._qp_fun = _Buffered(qp_fun)
+            self._h_sp = pb.hessian_sparsity()
+            # _HESS_REG on the diagonal entries of the block-diagonal pattern (column-major within blocks)
+            self._h_reg = np.concatenate([(_HESS_REG * np.eye(len(b))).reshape(-1) for b in pb.blocks])
+            qp_sp = {"h": self._h_sp, "a": qp_fun.sparsity_out(3)}
+            if cfg.solver == "rti_hpipm":
+                opts = {"N": N, "nx": [NX] * (N + 1), "nu": [pb.nu] * N + [0],
+                        "ng": [pb.ng_stage] * N + [0], "error_on_fail": False,
+                        "inf": 1e5,
+                        "hpipm": {"mode": "speed_abs", "iter_max": 50, "res_g_max": 1e-8, "res_b_max": 1e-8,
+                                  "res_d_max": 1e-8, "res_m_max": 1e-8}}
+                qp = ca.conic("nmpc_qp_solver", "hpipm", qp_sp, opts)
+            else:
+                opts = {"error_on_fail": False, "print_iter": False, "print_header": False,
+                        "print_info": False, "max_iter": 1000}
+                qp = ca.conic("nmpc_qp_solver", "qrqp", qp_sp, opts)
+            self._qp = _Buffered(qp, rebind=True)
+        else:
+            nlp = {"x": pb.w, "p": pb.p, "f": pb.J, "g": pb.c}
+            if cfg.solver == "ipopt":
+                opts = {"expand": True, "print_time": False, "error_on_fail": False,
+                        "ipopt": {"print_level": 0, "tol": cfg.ipopt_tol, "sb": "yes", "max_iter": 500}}
+            else:
+                opts = {"expand": True, "print_time": False, "error_on_fail": False,
+                        "structure_detection": "auto", "equality": [bool(e) for e in pb.lbc == pb.ubc],
+                        "fatrop": {"print_level": 0, "tol": 1e-6, "max_iter": 200}}
+            self._nlp = ca.nlpsol("nmpc_nlp", cfg.solver, nlp, opts)
+        # bounds of w (x0 filled per solve) and of the constraints
+        self._lbw = np.full(pb.nw, -np.inf)
+        self._ubw = np.full(pb.nw, np.inf)
+        ulo = [cfg.airspeed_min_m_s, -cfg.roll_rate_max_rad_s, -cfg.pitch_rate_max_rad_s]
+        uhi = [cfg.airspeed_max_m_s, cfg.roll_rate_max_rad_s, cfg.pitch_rate_max_rad_s]
+        if pb.use_cbf:
+            ulo.append(0.0)
+            uhi.append(np.inf)
+        for k in range(N):
+            self._lbw[pb.iu[k]] = ulo
+            self._ubw[pb.iu[k]] = uhi
+        self._phi_max = math.radians(cfg.roll_max_deg)
+        self._theta_max = math.radians(cfg.pitch_max_deg)
+        self._u_lo, self._u_hi = np.array(ulo), np.array(uhi)
+        self._eval = _Buffered(pb.eval_fun)
+        self.fallback_count = 0
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the warm start, the previous input and the psi unwrapping."""
+        self._w = None  # warm start (internal psi frame)
+        self._t_prev = None
+        self._plan = None  # (t_s, U (N, 3)) of the last successful solve, for fallbacks
+        self._u_applied = None  # [u_p, u_q] of the last returned input (f4)
+        self._psi_meas = None  # unwrapping of state_from_measurements
+        self._failures = 0
+
+    def state_from_measurements(self, meas: Measurements) -> np.ndarray:
+        """x0 = [pos_enu (3), phi, theta, psi_enu] with psi_enu = pi/2 - psi_ned, unwrapped across calls."""
+        phi, theta, psi_ned = (float(v) for v in meas.euler_ned_rad)
+        if self.cfg.pitch_from == "flight_path":
+            v = meas.vel_enu_m_s
+            theta = math.atan2(float(v[2]), max(math.hypot(float(v[0]), float(v[1])), 1e-3))
+        psi = 0.5 * math.pi - psi_ned
+        if self._psi_meas is not None:
+            psi = self._psi_meas + wrap_pi(psi - self._psi_meas)
+        else:
+            psi = wrap_pi(psi)
+        self._psi_meas = psi
+        return np.array([*(float(v) for v in meas.pos_enu_m), phi, theta, psi])
+
+    @staticmethod
+    def command(result: NmpcResult) -> RateCommand:
+        """The autopilot's rate command (mode a) for a result."""
+        return RateCommand(result.t_s, float(result.u0[0]), float(result.u0[1]), float(result.u0[2]))
+
+    # ------------------------------------------------------------------ internals
+    def _initial_guess(self, x0: np.ndarray) -> np.ndarray:
+        pb = self.problem
+        U = np.zeros((pb.N, pb.nu))
+        U[:, 0] = min(max(self.cfg.airspeed_ref_m_s, self.cfg.airspeed_min_m_s), self.cfg.airspeed_max_m_s)
+        # roll to wings level over the first second, then hold
+        phi = x0[3]
+        k_roll = max(1, int(round(1.0 / self.cfg.step_s)))
+        U[:k_roll, 1] = np.clip(-phi / (k_roll * self.cfg.step_s), -self.cfg.roll_rate_max_rad_s,
+                                self.cfg.roll_rate_max_rad_s)
+        X = pb.rollout(x0, U)
+        return self._pack(X, U)
+
+    def _pack(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+        pb = self.problem
+        w = np.empty(pb.nw)
+        w[pb.ix.ravel()] = X.ravel()
+        w[pb.iu.ravel()] = U.ravel()
+        return w
+
+    def _shifted(self, w: np.ndarray, m: int) -> np.ndarray:
+        pb = self.problem
+        if m <= 0:
+            return w.copy()
+        X, U = w[pb.ix], w[pb.iu]
+        Xs = np.empty_like(X)
+        Us = np.empty_like(U)
+        N = pb.N
+        Us[: N - m] = U[m:]
+        Us[N - m:] = U[-1]
+        Xs[: N + 1 - m] = X[m:]
+        for k in range(N + 1 - m, N + 1):
+            Xs[k] = _np_step(Xs[k - 1], Us[k - 1], self.cfg.step_s, self.cfg.integrator)
+        return self._pack(Xs, Us)
+
+    def _bounds(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pb, cfg = self.problem, self.cfg
+        lbw, ubw = self._lbw.copy(), self._ubw.copy()
+        lbw[pb.ix[0]] = x0
+        ubw[pb.ix[0]] = x0
+        t = np.arange(1, pb.N + 1) * cfg.step_s
+        for j, lim, rate in ((3, self._phi_max, cfg.roll_rate_max_rad_s),
+                             (4, self._theta_max, cfg.pitch_rate_max_rad_s * math.cos(self._phi_max))):
+            hi = np.maximum(lim, x0[j] - _FUNNEL * rate * t)
+            lo = np.minimum(-lim, x0[j] + _FUNNEL * rate * t)
+            ubw[pb.ix[1:, j]] = hi
+            lbw[pb.ix[1:, j]] = lo
+        return lbw, ubw
+
+    def _cbf_bounds(self, x0: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pb = self.problem
+        ubc = pb.ubc
+        if pb.use_cbf and self.cfg.cbf.sides == "solve_time":
+            ubc = ubc.copy()
+            psi = x0[5]
+            Rp = (target_pos[0] - x0[0]) * math.sin(psi) - (target_pos[1] - x0[1]) * math.cos(psi)
+            drop = pb.icbf[:, 1] if Rp >= 0.0 else pb.icbf[:, 0]  # keep the target's side only
+            ubc[drop] = np.inf
+        return pb.lbc, ubc
+
+    def _hessian(self, Hs: np.ndarray, HN: np.ndarray) -> np.ndarray:
+        """Nonzeros of the QP Hessian from the blocks: symmetrised, eigenvalues floored per group (exact)."""
+        pb = self.problem
+        blocks = [Hs.reshape(pb.N, pb.ns, pb.ns), HN.reshape(1, NX, NX)]  # column-major = transposed blocks
+        if self.cfg.hessian == "exact":
+            floor = self.cfg.hessian_min_eig
+            out = []
+            for M, groups in zip(blocks, (pb.stage_groups, pb.term_groups)):
+                M = 0.5 * (M + M.transpose(0, 2, 1))
+                C = np.zeros_like(M)
+                for g in groups:
+                    if len(g) == 1:
+                        C[:, g[0], g[0]] = np.maximum(M[:, g[0], g[0]], floor)
+                        continue
+                    lam, V = np.linalg.eigh(M[:, g[:, None], g[None, :]])
+                    np.maximum(lam, floor, out=lam)
+                    C[:, g[:, None], g[None, :]] = (V * lam[:, None, :]) @ V.transpose(0, 2, 1)
+                out.append(C)
+            blocks = out
+        return np.concatenate([blocks[0].reshape(-1), blocks[1].reshape(-1)]) + self._h_reg
+
+    def _rti(self, w, p, lbw, ubw, lbc, ubc, iters: int, converge: bool, deadline: float):
+        """Up to ``iters`` full SQP steps, fewer if the next one would end after ``deadline``
+        (perf_counter seconds) or, with ``converge``, once the largest input step is below
+        ``cold_start_tol``; returns (w, n_iter, ok, why)."""
+        pb = self.problem
+        iu = pb.iu[:, :3].ravel()
+        n = 0
+        for n in range(1, iters + 1):
+            t_it = time.perf_counter()
+            Hs, HN, g, A, c = self._qp_fun(w, p)
+            h = self._hessian(Hs, HN)
+            dw = self._qp(h, g, A, lbc - c, ubc - c, lbw - w, ubw - w)[0]
+            st = self._qp.stats()
+            if not st.get("success", False) or not np.all(np.isfinite(dw)):
+                return w, n, False, "qp:" + str(st.get("return_status", "failed"))
+            w = w + dw
+            if converge and np.max(np.abs(dw[iu])) < self.cfg.cold_start_tol:
+                break
+            now = time.perf_counter()
+            if now + (now - t_it) > deadline:
+                break
+        return w, n, True, "ok"
+
+    def _nlp_solve(self, w, p, lbw, ubw, lbc, ubc):
+        kw = {"x0": w, "p": p, "lbx": lbw, "ubx": ubw, "lbg": lbc, "ubg": ubc}
+        sol = self._nlp(**kw)
+        st = self._nlp.stats()
+        w_new = np.asarray(sol["x"]).ravel()
+        ok = bool(st.get("success", False)) and np.all(np.isfinite(w_new))
+        return w_new, int(st.get("iter_count", -1)), ok, "ok" if ok else "nlp:" + str(st.get("return_status"))
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, t_s: float, x0, target_pos_enu, target_vel_enu, u_prev=None) -> NmpcResult:
+        """One NMPC solve at time t_s from state x0 (NMPC convention) for the target's estimate.
+
+        ``u_prev`` ([u_p, u_q], optional) overrides the previously applied input of f4
+        (default: the u0 this object returned last; none on the first call, f4 then off).
+        Never raises on a solver failure: see ``NmpcResult.fallback``.
+        """
+        t_start = time.perf_counter()
+        cfg, pb = self.cfg, self.problem
+        N, dt = pb.N, cfg.step_s
+        x0_in = np.asarray(x0, dtype=float).reshape(NX)
+        q = np.asarray(target_pos_enu, dtype=float).reshape(3)
+        v = np.asarray(target_vel_enu, dtype=float).reshape(3)
+        # warm start: shift the previous plan to this time
+        cold = True
+        w0 = None
+        if self._w is not None and self._t_prev is not None:
+            m = int(round((t_s - self._t_prev) / dt))
+            if 0 <= m < N:
+                w0 = self._shifted(self._w, m)
+                cold = False
+        # psi: the same 2 pi branch as the warm start (internal frame kept near [-pi, pi])
+        x0 = x0_in.copy()
+        if w0 is not None:
+            x0[5] = w0[pb.ix[0, 5]] + wrap_pi(x0[5] - w0[pb.ix[0, 5]])
+        else:
+            x0[5] = wrap_pi(x0[5])
+        if abs(x0[5]) > _TWO_PI:
+            turns = _TWO_PI * math.floor((x0[5] + math.pi) / _TWO_PI)
+            x0[5] -= turns
+            if w0 is not None:
+                w0[pb.ix[:, 5]] -= turns
+        psi_offset = x0_in[5] - x0[5]
+        if w0 is None:
+            w0 = self._initial_guess(x0)
+        if u_prev is not None:
+            up, f4_on = np.asarray(u_prev, dtype=float).reshape(2), 1.0
+        elif self._u_applied is not None:
+            up, f4_on = self._u_applied, 1.0
+        else:
+            up, f4_on = np.zeros(2), 0.0
+        p = np.concatenate([q, v, up, [f4_on]])
+        lbw, ubw = self._bounds(x0)
+        lbc, ubc = self._cbf_bounds(x0, q)
+        try:
+            if self._is_rti:
+                # iterate within 90 % of the budget (always at least one QP)
+                deadline = t_start + 0.9e-3 * cfg.max_solve_ms
+                n_it = cfg.cold_start_iterations if cold else cfg.rti_iterations
+                w, iters, ok, why = self._rti(w0, p, lbw, ubw, lbc, ubc, n_it, cold, deadline)
+            else:
+                w, iters, ok, why = self._nlp_solve(w0, p, lbw, ubw, lbc, ubc)
+        except Exception as exc:  # noqa: BLE001 - a solver must never take the flight software down
+            w, iters, ok, why = w0, 0, False, f"exception:{type(exc).__name__}"
+        X, U = w[pb.ix], w[pb.iu]
+        if ok:
+            J, rows, hmin = self._eval(w, p)
+            rows = rows.copy()
+            if pb.use_cbf and cfg.cbf.sides == "solve_time":
+                rows = np.where(np.isfinite(ubc[pb.icbf.ravel()]), rows, -np.inf)
+            cost = float(J[0])
+            min_h = float(np.min(np.asarray(hmin)))
+            cbf_active = bool(rows.size and np.max(rows) > -_CBF_ACTIVE_TOL)
+            self._w, self._t_prev = w, t_s
+            self._failures = 0
+        else:
+            self._failures += 1
+            if self._failures >= cfg.reset_after_failures:
+                self._w, self._t_prev = None, None  # next call rebuilds the warm start (cold)
+            else:
+                self._w, self._t_prev = w0, t_s  # keep the shifted plan as the warm start
+        solve_ms = (time.perf_counter() - t_start) * 1e3
+        late = solve_ms > cfg.max_solve_ms
+        if ok and not late:
+            u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
+            self._plan = (t_s, U[:, :3].copy())
+            status, fallback = "ok", False
+        else:
+            status = "fallback:late" if ok else f"fallback:failed:{why}"
+            fallback = True
+            self.fallback_count += 1
+            u0 = self._fallback_input(t_s)
+            if not ok:
+                cost, cbf_active, min_h = math.nan, False, math.nan
+                U = np.tile(u0, (N, 1))
+                X = pb.rollout(x0, U)
+        self._u_applied = u0[1:3].copy()
+        predicted = X.copy()
+        predicted[:, 5] += psi_offset
+        return NmpcResult(t_s, u0, status, solve_ms, iters, fallback, cost, predicted, cbf_active, min_h,
+                          U[:, :3].copy())
+
+    def plan_cost(self, x0, target_pos_enu, target_vel_enu, inputs, u_prev=None) -> float:
+        """The NLP cost of an input sequence (N, >=3) flown from x0 on the model (the dynamics then hold exactly).
+
+        CBF slacks are set to the smallest that makes the plan feasible, so plans from different solvers are
+        compared on the same, honest footing. ``u_prev``: f4's previous input (None: f4 off).
+        """
+        pb = self.problem
+        U = np.zeros((pb.N, pb.nu))
+        U[:, :3] = np.asarray(inputs, dtype=float)[:, :3]
+        X = pb.rollout(np.asarray(x0, dtype=float), U)
+        f4 = np.zeros(2) if u_prev is None else np.asarray(u_prev, dtype=float)
+        p = np.concatenate([np.asarray(target_pos_enu, float), np.asarray(target_vel_enu, float), f4,
+                            [0.0 if u_prev is None else 1.0]])
+        w = self._pack(X, U)
+        if pb.use_cbf:
+            rows = self._eval(w, p)[1].reshape(pb.N, 2)
+            U[:, 3] = np.maximum(rows.max(axis=1), 0.0)
+            w = self._pack(X, U)
+        return float(self._eval(w, p)[0][0])
+
+    def _fallback_input(self, t_s: float) -> np.ndarray:
+        if self._plan is not None:
+            t0, U = self._plan
+            m = int(round((t_s - t0) / self.cfg.step_s))
+            if 0 <= m:
+                return U[min(m, U.shape[0] - 1)].copy()
+        return np.array([self.cfg.airspeed_ref_m_s, 0.0, 0.0])
+
+
+@dataclass(frozen=True, slots=True)
+class KinematicRun:
+    """A closed loop of the NMPC on its own model (see ``kinematic_closed_loop``)."""
+
+    t_s: np.ndarray  # (K,) solve times
+    states: np.ndarray  # (K, 6) plant state at each solve
+    target: np.ndarray  # (K, 3) target position at each solve
+    inputs: np.ndarray  # (K, 3) applied inputs
+    radius_err_m: np.ndarray  # (K,) planar distance to the target minus R
+    altitude_err_m: np.ndarray  # (K,) z - H
+    h: np.ndarray  # (K,) realised CBF h (controllers.cbf.h_value) of the plant state
+    min_h_pred: np.ndarray  # (K,) min h over each predicted horizon
+    solve_ms: np.ndarray  # (K,) wall time of each solve (NmpcResult.solve_ms)
+    cpu_ms: np.ndarray  # (K,) process CPU time of each solve call
+    iterations: np.ndarray  # (K,)
+    fallbacks: int
+    results: list  # the NmpcResults
+
+    def rms_after(self, t0_s: float) -> tuple[float, float]:
+        """(radius RMS, altitude RMS) in m over t >= t0_s."""
+        m = self.t_s >= t0_s
+        return (float(np.sqrt(np.mean(self.radius_err_m[m] ** 2))),
+                float(np.sqrt(np.mean(self.altitude_err_m[m] ** 2))))
+
+
+def kinematic_closed_loop(nmpc: Nmpc, x0, target_pos0, target_vel, duration_s: float,
+                          substeps: int = 10, keep_results: bool = False, observer=None) -> KinematicRun:
+    """Fly the NMPC on its own continuous model (RK4, ``substeps`` per step, input held) as the plant.
+
+    One solve per T_s; the target moves at constant velocity and its exact state is given to the NMPC
+    (no estimator). ``observer(t_s, x, target_pos, target_vel, result, u_prev)`` is called after each
+    solve (``u_prev``: the [u_p, u_q] applied before, None at the first step). For tuning, tests and
+    tools/bench_nmpc.py; the JSBSim closed loop lives in the harness.
+    """
+    from controllers.cbf import h_value  # local: keeps the module's import surface small
+
+    dt = nmpc.cfg.step_s
+    K = int(round(duration_s / dt))
+    x = np.asarray(x0, dtype=float).copy()
+    q0 = np.asarray(target_pos0, dtype=float)
+    v = np.asarray(target_vel, dtype=float)
+    rec = {k: [] for k in ("t", "x", "q", "u", "h", "mh", "ms", "cpu", "it")}
+    results = []
+    fb = 0
+    u_prev = None
+    for k in range(K):
+        t = k * dt
+        q = q0 + v * t
+        c0 = time.process_time()
+        r = nmpc.solve(t, x, q, v)
+        rec["cpu"].append((time.process_time() - c0) * 1e3)
+        if observer is not None:
+            observer(t, x.copy(), q, v, r, u_prev)
+        fb += int(r.fallback)
+        rec["t"].append(t), rec["x"].append(x.copy()), rec["q"].append(q), rec["u"].append(r.u0.copy())
+        rec["h"].append(h_value(x, q)), rec["mh"].append(r.min_h), rec["ms"].append(r.solve_ms)
+        rec["it"].append(r.iterations)
+        if keep_results:
+            results.append(r)
+        u_prev = r.u0[1:3].copy()
+        for _ in range(substeps):
+            x = _np_step(x, r.u0, dt / substeps, "rk4")
+    X, Q = np.array(rec["x"]), np.array(rec["q"])
+    d = np.hypot(X[:, 0] - Q[:, 0], X[:, 1] - Q[:, 1])
+    cfg = nmpc.cfg
+    return KinematicRun(np.array(rec["t"]), X, Q, np.array(rec["u"]), d - cfg.radius_m, X[:, 2] - cfg.altitude_m,
+                        np.array(rec["h"]), np.array(rec["mh"]), np.array(rec["ms"]), np.array(rec["cpu"]),
+                        np.array(rec["it"]), fb, results)
