@@ -112,6 +112,7 @@ class FlightSoftware:
         self._nmpc_next_t = -math.inf
         self._bpng = Bpng(controllers_cfg.bpng)
         self._last_det_t = math.nan
+        self._last_est = None  # (t_s, pos, vel) of the last UKF estimate
         self._lost_reported = False
         self.phase = 1
         self._phase2_t = math.nan
@@ -144,11 +145,18 @@ class FlightSoftware:
             return float(z) if np.isfinite(z) else None
         return None
 
+    def _target(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Target position and velocity: the UKF's, or (while it is down) the last estimate extrapolated."""
+        if self._ukf.initialised:
+            return np.asarray(self._ukf.pos_enu_m, float), np.asarray(self._ukf.vel_enu_m_s, float)
+        t0, pos, vel = self._last_est
+        return pos + vel * (t_s - t0), vel
+
     def _point_at_estimate(self, meas: Measurements, motion: CameraMotion) -> GimbalCommand:
         """Drive the joints toward the direction of the estimated target (atan2 gives the pan
         within [-pi, pi], so the joint swings the long way round instead of pushing a stop)."""
         R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
-        pan_sp, tilt_sp = pan_tilt_pointing_at(R_ef.T @ (self._ukf.pos_enu_m - motion.pos_enu_m))
+        pan_sp, tilt_sp = pan_tilt_pointing_at(R_ef.T @ (self._target(meas.t_s)[0] - motion.pos_enu_m))
         lim = self.cfg.ibvs
         tilt_sp = min(max(tilt_sp, lim.tilt_limits_rad[0]), lim.tilt_limits_rad[1])
         k = self.cfg.reacquire.gain_1_s
@@ -161,7 +169,7 @@ class FlightSoftware:
         return self.cfg.orbit.radius_m, self.cfg.orbit.altitude_m
 
     def _radial_error(self, meas: Measurements) -> float:
-        rel = meas.pos_enu_m[:2] - self._ukf.pos_enu_m[:2]
+        rel = meas.pos_enu_m[:2] - self._target(meas.t_s)[0][:2]
         return float(np.hypot(rel[0], rel[1])) - self._loiter_radius_altitude()[0]
 
     def _switch_reason(self, meas: Measurements) -> str:
@@ -179,7 +187,7 @@ class FlightSoftware:
             self._in_tol_since = meas.t_s
         if meas.t_s - self._in_tol_since < sw.dwell_s:
             return ""
-        rel = self._ukf.pos_enu_m[:2] - meas.pos_enu_m[:2]
+        rel = self._target(meas.t_s)[0][:2] - meas.pos_enu_m[:2]
         bearing = math.degrees(math.atan2(rel[0], rel[1]))  # clockwise from North
         off = (bearing - self.cfg.bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
         if sw.approach_window_deg is not None and abs(off) > sw.approach_window_deg:
@@ -202,8 +210,16 @@ class FlightSoftware:
             self._ukf.predict(meas.t_s, motion)
             if meas.det_new and meas.det_valid:
                 self._ukf.update(meas, motion)
+            if not self._ukf.initialised:
+                events.append(f"UKF reset itself at t = {meas.t_s:.2f} s (non-finite prediction: the target left "
+                              "the camera's front half-space); extrapolating the last estimate")
+        elif self._search.locked and motion is not None and meas.det_new and meas.det_valid:
+            self._ukf.initialise(meas, motion)
+            events.append(f"UKF re-initialised from a detection at t = {meas.t_s:.2f} s")
         if self._ukf.initialised:
-            logs["/fsw/estimate"] = self._ukf.estimate()
+            est = self._ukf.estimate()
+            self._last_est = (meas.t_s, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))
+            logs["/fsw/estimate"] = est
         # gimbal: search until lock, IBVS after; predictive pointing at the estimate when the target is lost
         if meas.det_new and meas.det_valid:
             self._last_det_t = meas.t_s
@@ -214,7 +230,7 @@ class FlightSoftware:
             gimbal = self._search.step(meas)
         elif lost_s > rq.search_after_s:
             gimbal = self._search.step(meas)
-        elif lost_s > rq.after_s and self._ukf.initialised:
+        elif lost_s > rq.after_s and self._last_est is not None:
             gimbal = self._point_at_estimate(meas, motion)
         else:
             vel = self._ukf.vel_enu_m_s if self._ukf.initialised else None
@@ -227,7 +243,7 @@ class FlightSoftware:
         elif lost_s <= rq.after_s:
             self._lost_reported = False
         # phase switches
-        if locked and self.phase == 1 and self.cfg.after_lock != "path" and self._ukf.initialised:
+        if locked and self.phase == 1 and self.cfg.after_lock != "path" and self._last_est is not None:
             self.phase, self._phase2_t = 2, meas.t_s
             events.append(f"phase 1 -> 2 at t = {meas.t_s:.2f} s: target locked, loiter ({self.cfg.after_lock})")
         if self.phase == 2:
@@ -237,17 +253,17 @@ class FlightSoftware:
                 events.append(f"phase 2 -> 3 at t = {meas.t_s:.2f} s: {why}")
         # the UAV
         if self.phase == 3:
-            target = np.array(self._ukf.pos_enu_m, dtype=float)
+            target, target_vel = self._target(meas.t_s)
+            target = target.copy()
             target[2] = 0.0  # the estimate's plane height is a camera-model detail; BPNG adds its aim height
-            cmd, bstat = self._bpng.step(meas.t_s, meas.pos_enu_m, meas.vel_enu_m_s, target, self._ukf.vel_enu_m_s)
+            cmd, bstat = self._bpng.step(meas.t_s, meas.pos_enu_m, meas.vel_enu_m_s, target, target_vel)
             logs["/fsw/bpng"] = bstat
             status = FlightSoftwareStatus(meas.t_s, 3, "terminal", "accel", locked=True, lock_t_s=self._search.lock_t_s,
                                           radial_err_m=self._radial_error(meas))
         elif self.phase == 2 and self._nmpc is not None:
             if meas.t_s + 1e-9 >= self._nmpc_next_t:
-                est = self._ukf
-                res = self._nmpc.solve(meas.t_s, self._nmpc.state_from_measurements(meas), est.pos_enu_m,
-                                       est.vel_enu_m_s)
+                pos, vel = self._target(meas.t_s)
+                res = self._nmpc.solve(meas.t_s, self._nmpc.state_from_measurements(meas), pos, vel)
                 self._nmpc_cmd = self._nmpc.command(res)
                 self._nmpc_next_t = meas.t_s + self.cfg.nmpc.step_s
                 logs["/fsw/nmpc"] = NmpcStatus(meas.t_s, res.status, res.solve_ms, res.iterations, res.fallback,
@@ -261,7 +277,7 @@ class FlightSoftware:
                                           locked=True, lock_t_s=self._search.lock_t_s,
                                           radial_err_m=self._radial_error(meas))
         elif self.phase == 2:
-            cmd, chi_c, radial = self._orbit.step(meas, self._ukf.pos_enu_m)
+            cmd, chi_c, radial = self._orbit.step(meas, self._target(meas.t_s)[0])
             status = FlightSoftwareStatus(meas.t_s, 2, "loiter:orbit", "rates", course_sp_rad=chi_c,
                                           altitude_sp_m=self._orbit.altitude_m, locked=True,
                                           lock_t_s=self._search.lock_t_s, radial_err_m=radial)

@@ -475,8 +475,11 @@ class UkfTargetEstimator:
         omega = 0.5 * (m0.omega_cam_rad_s + motion.omega_cam_rad_s)
         V_c = 0.5 * (m0.vel_enu_m_s + motion.vel_enu_m_s)
         try:
-            self._core.predict(dt, _fx_batch, _process_noise(dt, self.cfg), r_c0=m0.pos_enu_m,
-                               R_ec0=m0.R_enu_from_cam, V_c=V_c, omega=omega, max_step=self.cfg.max_substep_s)
+            # a target leaving the camera's front half-space makes x1, x2 = X/Z, Y/Z blow up: the
+            # resulting non-finite state is caught below, so numpy's overflow warnings are noise here
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                self._core.predict(dt, _fx_batch, _process_noise(dt, self.cfg), r_c0=m0.pos_enu_m,
+                                   R_ec0=m0.R_enu_from_cam, V_c=V_c, omega=omega, max_step=self.cfg.max_substep_s)
         except FloatingPointError:
             self.divergence_resets += 1
             self.reset()

@@ -112,6 +112,10 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
         return
     R, H = (sc.nmpc.radius_m, sc.nmpc.altitude_m) if sc.after_lock == "nmpc" else (sc.orbit.radius_m,
                                                                                     sc.orbit.altitude_m)
+    if "/camera/frame" in log.topics:
+        fr = log.table("/camera/frame")
+        wf = (fr["t_s"] >= t2) & (fr["t_s"] <= t_end)
+        m["occluded_frames_phase2"] = float(np.sum(fr["in_fov"][wf].astype(bool) & (fr["visible_px"][wf] <= 0)))
     st, tg = log.table("/uav/state"), log.table("/target/state")
     w = (st["t_s"] >= t2 + LOITER_SETTLE_S) & (st["t_s"] <= t_end)
     m["loiter_settle_s"] = LOITER_SETTLE_S
@@ -123,10 +127,6 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     radius = np.linalg.norm(st["pos_enu_m"][w, :2] - q, axis=1)
     m["loiter_radius_rmse_m"] = _rms(radius - R)
     m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
-    if "/camera/frame" in log.topics:
-        fr = log.table("/camera/frame")
-        wf = (fr["t_s"] >= t2) & (fr["t_s"] <= t_end)
-        m["occluded_frames_phase2"] = float(np.sum(fr["in_fov"][wf].astype(bool) & (fr["visible_px"][wf] <= 0)))
 
 
 def _closest_approach(t: np.ndarray, rel: np.ndarray) -> float:
