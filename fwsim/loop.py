@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import math
 import platform
+import signal
+import threading
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -70,6 +72,31 @@ class RunResult:
 
 class RunStopped(Exception):
     """The run ended early for a reason the scenario defines (sea contact, ...)."""
+
+
+class _StopOnSigint:
+    """Turns Ctrl-C into a flag the loop checks once per tick, so an interrupt never lands in the
+    middle of writing the log; a second Ctrl-C interrupts at once. Main thread only."""
+
+    def __init__(self):
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.getsignal(signal.SIGINT)
+            signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
 
 
 def default_log_path(scenario: Scenario, out_dir: Path) -> Path:
@@ -134,7 +161,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     wall0 = time.perf_counter()
     sim_t = 0.0
     status, reason = "completed", "duration reached"
-    with LogWriter(log_path, metadata=run_metadata(scenario), scenario_text=scenario_text) as log:
+    with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario),
+                                              scenario_text=scenario_text) as log:
         log.add_attachment("scenario_effective.yaml",
                            yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),
                            "application/yaml")
@@ -201,6 +229,10 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                                      f"{scenario.stop.max_airspeed_m_s:g} m/s at t = {sim_t:.2f} s")
                 if progress is not None and tick % progress_every == 0:
                     progress(sim_t, scenario.duration_s)
+                if sigint.requested:
+                    _log_truth(log, truth)
+                    log.close("interrupted", f"interrupted (Ctrl-C) at t = {sim_t:.2f} s")
+                    raise KeyboardInterrupt
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too

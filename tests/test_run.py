@@ -173,7 +173,8 @@ def test_paper_mission_phase1_locks_tracks_and_estimates(tmp_path):
     detector reports the box centre, and the superstructure sits aft of midships, so the
     bound here is 10 m (the paper's 8 m bar is met by the synthetic test in test_ukf.py
     and, on this scenario, by the RMSE)."""
-    result = fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, duration_s=60)
+    result = fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, duration_s=60,
+                 **{"controllers.after_lock": "orbit", "controllers.switch.enabled": False})
     m = compute_metrics(result.log_path)
     assert 1.0 < m["lock_time_s"] < 30.0  # the search had to sweep: the ship starts out of view
     assert m["target_in_fov_fraction_after_lock"] > 0.99
