@@ -45,7 +45,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable
 
-import yaml
+
+from fwsim.yamlfile import load_yaml_file
 
 import fwsim
 from fwsim.scenario import ScenarioError, load_scenario
@@ -134,12 +135,7 @@ def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]
     one line per problem.
     """
     path = Path(path)
-    if not path.is_file():
-        raise BatchSpecError(f"{path}: no such batch spec")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise BatchSpecError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    data = load_yaml_file(path, "batch spec", BatchSpecError)
     if not isinstance(data, dict) or not isinstance(data.get("runs"), list) or not data["runs"]:
         raise BatchSpecError(f"{path}: expected a mapping with a non-empty 'runs:' list")
     unknown = set(data) - _SPEC_KEYS

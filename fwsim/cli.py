@@ -41,6 +41,14 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _log_exists(path: Path) -> bool:
+    """True if the log file exists; otherwise says so on stderr."""
+    if path.is_file():
+        return True
+    console.print(f"[red]{path}: no such log file[/]")
+    return False
+
+
 def _print_table(title: str, rows: dict) -> None:
     table = Table(title=title)
     table.add_column("name")
@@ -81,8 +89,7 @@ def cmd_run(args) -> int:
 def cmd_metrics(args) -> int:
     from fwsim.metrics import compute_metrics
     path = Path(args.log)
-    if not path.is_file():
-        console.print(f"[red]{path}: no such log file[/]")
+    if not _log_exists(path):
         return 2
     m = compute_metrics(path)
     if args.json:
@@ -172,8 +179,7 @@ def cmd_compare(args) -> int:
 def cmd_plot(args) -> int:
     from fwsim.plot import plot_log
     path = Path(args.log)
-    if not path.is_file():
-        console.print(f"[red]{path}: no such log file[/]")
+    if not _log_exists(path):
         return 2
     out = Path(args.out) if args.out else path.with_name(f"{path.stem}_plots")
     try:
@@ -193,8 +199,7 @@ def cmd_plot(args) -> int:
 def cmd_replay(args) -> int:
     from fwsim.log.rerun_export import ReplayOptions, export_rrd
     path = Path(args.log)
-    if not path.is_file():
-        console.print(f"[red]{path}: no such log file[/]")
+    if not _log_exists(path):
         return 2
     rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
     try:

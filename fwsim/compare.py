@@ -49,6 +49,8 @@ from typing import Any
 
 import yaml
 
+from fwsim.yamlfile import load_yaml_file
+
 from fwsim.scenario import ScenarioError
 
 TOLERANCE_KEYS = ("abs", "rel", "min", "max", "ignore")
@@ -322,12 +324,7 @@ def load_metrics(path: str | Path) -> MetricsSource:
 def load_tolerance_file(path: str | Path) -> dict[str, Tolerance]:
     """A YAML file with a ``tolerances:`` mapping (or just the mapping)."""
     path = Path(path)
-    if not path.is_file():
-        raise CompareError(f"{path}: no such tolerance file")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise CompareError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    data = load_yaml_file(path, "tolerance file", CompareError)
     if isinstance(data, dict) and "tolerances" in data:
         data = data["tolerances"]
     return parse_tolerances(data, str(path))
@@ -358,12 +355,7 @@ class Baseline:
 def load_baseline(path: str | Path, require_metrics: bool = True) -> Baseline:
     """Read a baseline file; ``require_metrics=False`` accepts a new one without metrics yet."""
     path = Path(path)
-    if not path.is_file():
-        raise CompareError(f"{path}: no such baseline file")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise CompareError(f"{path}: YAML syntax error: {str(exc).splitlines()[0]}") from None
+    data = load_yaml_file(path, "baseline file", CompareError)
     if not isinstance(data, dict):
         raise CompareError(f"{path}: expected a mapping with keys {list(BASELINE_KEYS)}")
     unknown = set(data) - set(BASELINE_KEYS)

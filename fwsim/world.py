@@ -18,7 +18,7 @@ from fwsim.geometry import uav_mesh
 from fwsim.gimbal import Gimbal, GimbalState, camera_pose_world
 from fwsim.messages import ActuatorCommand, AirframeState, GimbalCommand
 from fwsim.scenario import Scenario
-from fwsim.target import HullVolume, Ship, TargetState
+from fwsim.target import HullVolume, Ship, TargetState, r_enu_from_ship
 
 
 @dataclass(slots=True)
@@ -82,11 +82,10 @@ class World:
     def uav_inside_ship(self) -> bool:
         """True once the UAV's centre of gravity is inside the ship's hull or superstructure."""
         tr = self.truth
-        pos, R = self.ship.pose(tr.uav.t_s)
-        rel = tr.uav.pos_enu_m - pos
+        rel = tr.uav.pos_enu_m - tr.target.pos_enu_m  # the ship's state of this tick, already computed
         if rel @ rel > 60.0 ** 2:  # far from the ship: skip the exact test
             return False
-        return self._hull.contains(R.T @ rel)
+        return self._hull.contains(r_enu_from_ship(tr.target.heading_ned_rad).T @ rel)
 
     def poses(self) -> tuple[Pose, Pose]:
         """Current poses of the UAV (body FRD) and the ship (ship frame) in the world."""
