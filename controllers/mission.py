@@ -22,6 +22,7 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -36,6 +37,7 @@ from controllers.ibvs import Ibvs
 from controllers.path import OrbitFollower, PathFollower
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
+from controllers.target_model import ShipOutline, box_centre_offset_px, predicted_box_px
 from controllers.ukf import CameraMotion, UkfTargetEstimator
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at, wrap_pi
 from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
@@ -51,6 +53,25 @@ class ReacquireConfig(BaseModel):
     search_after_s: float = Field(20.0, gt=0, le=3600,
                                   description="no detection this long: restart the raster search")
     gain_1_s: float = Field(4.0, gt=0, le=50, description="joint rate per rad of pointing error")
+
+
+class DetectionGateConfig(BaseModel):
+    """Which detections the UKF does not use: those a known cause has cut short (the box then lies)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    box_size_tolerance: float = Field(
+        0.1, ge=0, le=10,
+        description="skip a detection whose box width or height differs from the one the ship model predicts "
+                    "(course known) by more than this fraction plus box_size_tolerance_px: part of the ship is "
+                    "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
+    box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
+    skip_overflowing_box: bool = Field(
+        True, description="skip a detection whose box spans the whole image width or height (the ship is "
+                          "larger than the frame: the box centre says little)")
+    edge_px: float = Field(6.0, ge=0, le=100, description="a box edge this close to the image border touches it")
+    max_skipped_in_a_row: int = Field(
+        30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
+                                         "(the estimate the checks rely on may be what is wrong)")
 
 
 class SwitchConfig(BaseModel):
@@ -120,6 +141,9 @@ class FlightSoftware:
         self.camera = PinholeCamera.from_config(camera_cfg)
         self._search = GimbalSearch(controllers_cfg.acquisition)
         self._ukf = UkfTargetEstimator(self.camera, controllers_cfg.ukf)
+        self._outline = ShipOutline(controllers_cfg.target_model)
+        self.gated: dict[str, int] = {}  # detections the UKF did not use, by reason
+        self._gated_in_a_row = 0
         self._ibvs = Ibvs(controllers_cfg.ibvs, self.camera.fx, self.camera.fy, self.camera.cx, self.camera.cy)
 
     # ------------------------------------------------------------------ scripted
@@ -196,6 +220,48 @@ class FlightSoftware:
                 f"(tol {sw.altitude_tol_m:g}) for {meas.t_s - self._in_tol_since:.1f} s; bearing to target "
                 f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading")
 
+    def _gate(self, meas: Measurements) -> str:
+        """Why the UKF should not use this detection ('' to use it); see :class:`DetectionGateConfig`."""
+        g = self.cfg.detection_gate
+        b = np.asarray(meas.det_bbox_px, dtype=float)
+        cam = self.camera
+        e = g.edge_px
+        if g.skip_overflowing_box and np.all(np.isfinite(b)) and cam.width_px > 0 and (
+                (b[0] <= e and b[2] >= cam.width_px - 1.0 - e) or (b[1] <= e and b[3] >= cam.height_px - 1.0 - e)):
+            return "box spans the image"
+        return ""
+
+    def _debiased(self, meas: Measurements, motion: CameraMotion) -> tuple[Measurements, str]:
+        """The detection with the ship's box-centre offset removed (controllers.target_model), so that it
+        is the image of the point the UKF tracks; unchanged when the model is off or does not apply.
+        Second item: why not to use it ('' to use it) when its box disagrees with the model's."""
+        tm = self.cfg.target_model
+        if not tm.enabled:
+            return meas, ""
+        pos, vel = self._ukf.pos_enu_m, self._ukf.vel_enu_m_s
+        speed = math.hypot(float(vel[0]), float(vel[1]))
+        vel_std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+        course = None
+        if speed >= tm.min_speed_for_course_m_s and vel_std <= tm.max_vel_std_for_course_m_s:
+            course = math.atan2(float(vel[1]), float(vel[0]))
+        h = self.cfg.ukf.target_plane_height_m
+        ref = np.array([pos[0], pos[1], pos[2] - h])
+        g = self.cfg.detection_gate
+        b = np.asarray(meas.det_bbox_px, dtype=float)
+        if course is not None and np.all(np.isfinite(b)):
+            box = predicted_box_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref, course)
+            if box is not None:
+                for i, name in ((0, "width"), (1, "height")):
+                    pred, det = box[i + 2] - box[i], b[i + 2] - b[i]
+                    if abs(det - pred) > g.box_size_tolerance * pred + g.box_size_tolerance_px:
+                        return meas, f"box {name} off the model's"
+        off = box_centre_offset_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
+                                   course, h, tm.headings_when_unknown)
+        if off is None:
+            return meas, ""
+        return dataclasses.replace(meas, det_u_px=float(meas.det_u_px) - float(off[0]),
+                                   det_v_px=float(meas.det_v_px) - float(off[1])), ""
+
     def step(self, meas: Measurements) -> FlightSoftwareOutput:
         if self.kind == "script":
             return self._scripted(meas)
@@ -209,7 +275,14 @@ class FlightSoftware:
         elif self._ukf.initialised and motion is not None:
             self._ukf.predict(meas.t_s, motion)
             if meas.det_new and meas.det_valid:
-                self._ukf.update(meas, motion)
+                used, why = self._debiased(meas, motion)
+                why = self._gate(meas) or why
+                if why and self._gated_in_a_row < self.cfg.detection_gate.max_skipped_in_a_row:
+                    self.gated[why] = self.gated.get(why, 0) + 1
+                    self._gated_in_a_row += 1
+                else:
+                    self._gated_in_a_row = 0
+                    self._ukf.update(used, motion)
             if not self._ukf.initialised:
                 events.append(f"UKF reset itself at t = {meas.t_s:.2f} s (non-finite prediction: the target left "
                               "the camera's front half-space); extrapolating the last estimate")

@@ -88,6 +88,13 @@ class UkfConfig(BaseModel):
     target_plane_height_m: float = Field(
         0.0, ge=-100, le=200,
         description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
+    innovation_gate: float = Field(
+        13.8, ge=0, le=1000,
+        description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "
+                    "above this (13.8: 0.1 % of good detections); 0: never")
+    innovation_gate_max_rejects: int = Field(
+        15, ge=1, le=100000, description="after this many rejections in a row the next detection is used anyway "
+                                         "(the estimate, not the detections, may be wrong)")
     init_pos_std_frac: float = Field(
         0.05, gt=0, le=1, description="initial horizontal position std as a fraction of the slant range")
     init_vel_std_m_s: float = Field(10.0, gt=0, le=100, description="initial horizontal velocity std, m/s")
@@ -265,12 +272,31 @@ class UnscentedCore:
         self._kf.predict(dt=dt, fx=fx_batch, **fx_args)
         self._guard()
 
-    def update(self, z, hx, R, **hx_args) -> np.ndarray:
+    def update(self, z, hx, R, gate: tuple[float, list[int]] | None = None, **hx_args) -> np.ndarray | None:
+        """Unscented update (filterpy's equations). ``gate = (threshold, rows)``: if the normalised innovation
+        squared over ``rows`` (``y' S^-1 y``) exceeds the threshold, the update is not applied and None is
+        returned; otherwise the innovation."""
         self._guard()
-        self._kf.sigmas_f = self._kf.points_fn.sigma_points(self._kf.x, self._kf.P)
-        self._kf.update(np.asarray(z, dtype=float), R=np.asarray(R, dtype=float), hx=hx, **hx_args)
+        kf = self._kf
+        kf.sigmas_f = kf.points_fn.sigma_points(kf.x, kf.P)
+        z = np.asarray(z, dtype=float)
+        sig_h = np.array([hx(s, **hx_args) for s in kf.sigmas_f])
+        zp = kf.Wm @ sig_h
+        dz = sig_h - zp
+        S = dz.T @ (kf.Wc[:, None] * dz) + np.asarray(R, dtype=float)
+        y = z - zp
+        if gate is not None:
+            rows = gate[1]
+            Sg = S[np.ix_(rows, rows)]
+            if float(y[rows] @ np.linalg.solve(Sg, y[rows])) > gate[0]:
+                return None
+        Pxz = (kf.sigmas_f - kf.x).T @ (kf.Wc[:, None] * dz)
+        K = np.linalg.solve(S.T, Pxz.T).T  # Pxz S^-1 (S symmetric)
+        kf.x = kf.x + K @ y
+        kf.P = kf.P - K @ S @ K.T
+        kf.y, kf.S, kf.K, kf.z = y, S, K, z.copy()
         self._guard()
-        return np.array(self._kf.y, dtype=float)
+        return y.copy()
 
     def _guard(self) -> None:
         kf = self._kf
@@ -380,6 +406,8 @@ class UkfTargetEstimator:
         self._innov_t = math.nan
         self.rejected_updates = 0  # detections not used (ray misses the plane, non-finite pixels)
         self.divergence_resets = 0  # non-finite state: the filter de-initialised itself
+        self.gated_updates = 0  # detections rejected by the innovation gate
+        self._rejects_in_a_row = 0
         self.updates = 0
 
     # ------------------------------------------------------------ properties
@@ -460,6 +488,7 @@ class UkfTargetEstimator:
         self._motion = motion
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
+        self._rejects_in_a_row = 0
         self._initialised = True
 
     def predict(self, t_s: float, motion: CameraMotion) -> None:
@@ -511,14 +540,22 @@ class UkfTargetEstimator:
         s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
         R = np.diag([c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2])
         z = np.concatenate([[u, v], motion.pos_enu_m])
+        gate = None
+        if c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects:
+            gate = (c.innovation_gate, [0, 1])
         try:
-            y = self._core.update(z, _hx, R, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
+            y = self._core.update(z, _hx, R, gate=gate, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
                                   R_ec=motion.R_enu_from_cam, cam_h=motion.height_m,
                                   plane_z=c.target_plane_height_m)
         except FloatingPointError:
             self.divergence_resets += 1
             self.reset()
             return False
+        if y is None:
+            self.gated_updates += 1
+            self._rejects_in_a_row += 1
+            return False
+        self._rejects_in_a_row = 0
         self._innov = y[:2].copy()
         self._innov_t = self._t
         self._motion = motion

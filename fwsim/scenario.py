@@ -20,9 +20,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from controllers.bpng import BpngConfig
 from controllers.ibvs import IbvsConfig
-from controllers.mission import ReacquireConfig, SwitchConfig
+from controllers.mission import DetectionGateConfig, ReacquireConfig, SwitchConfig
 from controllers.nmpc import NmpcConfig
 from controllers.search import AcquisitionConfig
+from controllers.target_model import ShipModelConfig
 from controllers.ukf import UkfConfig
 from fwsim.camera import CameraConfig
 from fwsim.sensors import SensorsConfig
@@ -130,6 +131,8 @@ class Controllers(_Strict):
     reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
     bpng: BpngConfig = Field(default_factory=BpngConfig)
     ukf: UkfConfig = Field(default_factory=UkfConfig)
+    target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
+    detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
 
     @model_validator(mode="after")
