@@ -38,3 +38,23 @@ def test_paper_mission_phase2_settles_on_R_and_H(tmp_path):
     assert m["loiter_alt_rmse_m"] < 10.0
     assert m["target_in_fov_fraction_after_lock"] > 0.95
     assert m["nmpc_fallbacks"] == 0
+
+
+def test_terminal_dive_from_the_loiter_ring_meets_the_bounds(tmp_path):
+    """The paper's terminal case (theta_f = -30, psi_f = 30 deg, ship at 5 m/s) from the loiter ring,
+    full flight software (UKF with the ship-shape correction, logged switch, BPNG): it hits the ship
+    within 3 m of the aim point and 3 deg of both impact angles."""
+    import yaml
+
+    from fwsim.cases import terminal_case
+    from fwsim.scenario import parse_scenario
+    text = yaml.safe_dump(terminal_case(-30.0, 30.0, 0.0, 5.0), sort_keys=False)
+    scenario = parse_scenario(text)
+    result = run(scenario, text, tmp_path / "terminal.mcap")
+    m = compute_metrics(result.log_path)
+    case = {k: round(m[k], 2) for k in ("miss_distance_m", "impact_fpa_error_deg", "impact_heading_error_deg",
+                                        "switch_time_s")}
+    assert result.reason.startswith("hit the ship"), (result.reason, case)
+    assert m["hit"] == 1.0 and m["miss_distance_m"] <= 3.0, case
+    assert abs(m["impact_fpa_error_deg"]) <= 3.0 and abs(m["impact_heading_error_deg"]) <= 3.0, case
+    assert m["ukf_pos_err_max_after_convergence_m"] < 8.0, case

@@ -1,0 +1,51 @@
+"""Generated scenarios: the terminal phase flown from the loiter ring, for sweeps and tests.
+
+:func:`terminal_case` starts the UAV on the Phase 2 loiter circle (R, H) around
+the ship's start point, flying clockwise (ship on its right), ``arc_deg`` of
+arc before the bearing to the ship equals the impact heading, with the gimbal
+on the ship. The lock comes at once, the NMPC loiter holds the ring, and the
+logged 2 -> 3 switch fires inside its approach window about 10 s in; the dive
+takes ~20-25 s. Everything else (UKF, ship model, BPNG gains) is the paper
+mission's, so a case isolates the terminal phase of the full chain in ~35 s of
+flight instead of ~140 s.
+"""
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import yaml
+
+from fwsim import SCENARIO_DIR
+from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
+
+__all__ = ["terminal_case"]
+
+
+def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float, ship_speed_m_s: float,
+                  seed: int = 1, arc_deg: float = 25.0, radius_m: float = 500.0, altitude_m: float = 500.0,
+                  duration_s: float = 90.0) -> dict:
+    """A scenario (as a dict, ready for ``yaml.safe_dump`` / ``parse_scenario``) for one terminal case."""
+    d = copy.deepcopy(yaml.safe_load((SCENARIO_DIR / "paper_mission.yaml").read_text()))
+    b0 = math.radians(psi_f_deg - arc_deg)  # bearing UAV -> ship at the start; clockwise it grows to psi_f
+    pos = np.array([-radius_m * math.sin(b0), -radius_m * math.cos(b0), altitude_m])
+    heading_deg = math.degrees(b0) - 90.0  # the ship abeam on the right
+    euler = np.array([0.0, 0.0, math.radians(heading_deg)])
+    mount = np.array(d["camera"]["gimbal"]["mount_offset_frd_m"], dtype=float)
+    R = dcm_enu_from_frd(euler)
+    pan, tilt = pan_tilt_pointing_at(R.T @ (np.zeros(3) - (pos + R @ mount)))
+    d.update(name=f"terminal_th{theta_f_deg:+.0f}_psi{psi_f_deg:.0f}_ship{ship_heading_deg:.0f}at{ship_speed_m_s:g}",
+             description="terminal phase from the loiter ring (fwsim.cases.terminal_case)", seed=int(seed),
+             duration_s=float(duration_s))
+    d["initial"] = {"pos_enu_m": [round(float(x), 3) for x in pos], "airspeed_m_s": 22.0,
+                    "heading_deg": round(heading_deg % 360.0, 4)}
+    d["target"] = {"initial_pos_enu_m": [0.0, 0.0, 0.0], "heading_deg": float(ship_heading_deg),
+                   "speed_m_s": float(ship_speed_m_s), "motion": {"model": "constant_velocity"}}
+    d["camera"]["gimbal"] = dict(d["camera"]["gimbal"], initial_pan_rad=round(pan, 4), initial_tilt_rad=round(tilt, 4))
+    c = d["controllers"]
+    c.pop("initial_path", None)
+    c["nmpc"] = dict(c["nmpc"], radius_m=float(radius_m), altitude_m=float(altitude_m))
+    c["switch"] = dict(c["switch"], dwell_s=5.0, min_loiter_s=5.0)
+    c["bpng"] = dict(c["bpng"], impact_flight_path_deg=float(theta_f_deg), impact_heading_deg=float(psi_f_deg))
+    return d
