@@ -1,6 +1,7 @@
 """Command line: ``fwsim run | metrics | bench | batch | compare | plot | replay``.
 
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
+                                           [--rerun spawn|connect[=ADDR]|save=PATH.rrd]
     fwsim metrics runs/<log>.mcap [--json]
     fwsim bench [--json] [--quick]
     fwsim batch SPEC.yaml [--workers N] [--out DIR] [--resume] [--ray auto|local|ADDRESS]
@@ -59,17 +60,45 @@ def _print_table(title: str, rows: dict) -> None:
 
 
 def cmd_run(args) -> int:
-    from fwsim.loop import default_log_path, run
+    from fwsim.loop import default_log_path
+    target = None
+    if args.rerun is not None:  # a bad value fails before the scenario is even read
+        from fwsim.log.rerun_live import LiveViewError, RerunLive, parse_target
+        try:
+            target = parse_target(args.rerun)
+        except LiveViewError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     scenario, text = load_scenario(args.scenario, _parse_sets(args.set))
     log_path = Path(args.log) if args.log else default_log_path(scenario, Path(args.out))
+    if target is None:
+        return _fly(args, scenario, text, log_path, None)
+    try:  # spawn the viewer, check the one to connect to, or open the file
+        live = RerunLive(target, scenario=scenario, scenario_text=text, log_path=log_path,
+                         recording_id=f"{log_path.stem} (live)")
+    except LiveViewError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return _fly(args, scenario, text, log_path, live)
+    finally:
+        live.close()
+        if target.kind == "save":
+            done = "incomplete (see the warning above)" if live.failed else "saved"
+            console.print(f"live view {done}: {target.address} (open it with: rerun {target.address})")
+
+
+def _fly(args, scenario, text: str, log_path: Path, live) -> int:
+    from fwsim.loop import run
     console.print(f"[bold]fwsim[/] flying [cyan]{scenario.name}[/] (seed {scenario.seed}, "
-                  f"{scenario.duration_s:g} s) -> {log_path}")
+                  f"{scenario.duration_s:g} s) -> {log_path}" + (f"; live view: {live.target}" if live else ""))
     with Progress(TextColumn("sim {task.completed:>7.1f} / {task.total:.0f} s"), BarColumn(),
                   TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
                   console=console, disable=args.quiet, transient=True) as bar:
         task = bar.add_task("run", total=scenario.duration_s)
         try:
-            result = run(scenario, text, log_path, progress=lambda t, T: bar.update(task, completed=t))
+            result = run(scenario, text, log_path, progress=lambda t, T: bar.update(task, completed=t),
+                         listeners=[live] if live is not None else ())
         except KeyboardInterrupt:
             bar.stop()
             console.print(f"[yellow]interrupted[/]; the log is complete: {log_path}")
@@ -226,6 +255,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
                    help="override a scenario field, e.g. --set seed=3 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--rerun", metavar="spawn|connect[=ADDR]|save=PATH.rrd",
+                   help="also stream the run to Rerun as it flies (the MCAP log is written as always): "
+                        "'spawn' a viewer, 'connect' to a running one (default rerun+http://127.0.0.1:9876/proxy; "
+                        "ADDR: a port, HOST:PORT or a rerun+http:// URL), or 'save' into an .rrd file")
     r.set_defaults(func=cmd_run)
     m = sub.add_parser("metrics", help="print the metrics computed from a log")
     m.add_argument("log", help="MCAP log of a run")

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 import yaml
@@ -37,6 +37,7 @@ from fwsim.autopilot import Autopilot, load_autopilot_params
 from fwsim.camera import Detector
 from fwsim.frames import quat_from_dcm
 from fwsim.log import LogWriter
+from fwsim.log.writer import Listener
 from fwsim.scenario import Scenario
 from fwsim.sensors import Sensors, rng_for
 from fwsim.world import World
@@ -137,13 +138,17 @@ def _log_truth(log: LogWriter, truth) -> None:
 
 
 def run(scenario: Scenario, scenario_text: str, log_path: Path,
-        progress: Callable[[float, float], None] | None = None) -> RunResult:
+        progress: Callable[[float, float], None] | None = None,
+        listeners: Iterable[Listener] = ()) -> RunResult:
     """Fly a scenario; always leaves a complete MCAP log at ``log_path``.
 
     ``progress(sim_t_s, duration_s)`` is called about once per simulated
-    second. Ends at ``duration_s``, at sea contact (``stop.min_height_m``), or
-    on an error (the log records why). KeyboardInterrupt is logged as
-    'interrupted' and re-raised.
+    second. ``listeners`` go to the LogWriter and see every record as it is
+    written (e.g. :class:`fwsim.log.rerun_live.RerunLive`, the live Rerun
+    view); one that raises is detached and the run goes on. Ends at
+    ``duration_s``, at sea contact (``stop.min_height_m``), or on an error
+    (the log records why). KeyboardInterrupt is logged as 'interrupted' and
+    re-raised.
     """
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -162,7 +167,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     sim_t = 0.0
     status, reason = "completed", "duration reached"
     with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario),
-                                              scenario_text=scenario_text) as log:
+                                              scenario_text=scenario_text, listeners=listeners) as log:
         log.add_attachment("scenario_effective.yaml",
                            yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),
                            "application/yaml")

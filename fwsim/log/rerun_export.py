@@ -20,6 +20,11 @@ Each group is a *layer* (:data:`LAYERS`): a function that logs its entities
 when the topics it needs are in the log and returns the blueprint views it
 adds; a layer without its topics is skipped and reported. Add one with the
 :func:`layer` decorator.
+
+The entity paths, time series (:class:`Series`), colours, layer views
+(:data:`VIEWS`) and the helpers that log the static models are shared with
+the live view of a run (:mod:`fwsim.log.rerun_live`), so both look alike; a
+new layer that the live view should draw needs a handler there too.
 """
 from __future__ import annotations
 
@@ -50,7 +55,70 @@ ESTIMATE_TOPIC = "/fsw/estimate"
 
 #: The paper's UAV (fuselage 1 m, span 2.4 m) and ship (55 x 25 x 25 m).
 UAV_LENGTH_M, UAV_SPAN_M = 1.0, 2.4
+SHIP_SIZE_M = (55.0, 25.0, 25.0)
 PHASE_COLOURS = [(150, 150, 150), (31, 119, 180), (255, 127, 14), (214, 39, 40), (44, 160, 44), (148, 103, 189)]
+TARGET_COLOUR = (23, 190, 207)
+ESTIMATE_COLOUR = (255, 0, 255)
+DETECTION_COLOUR = (255, 60, 60)
+#: /events levels (foxglove.Log names) -> rr.TextLog levels
+TEXTLOG_LEVELS = {"DEBUG": "DEBUG", "INFO": "INFO", "WARNING": "WARN", "ERROR": "ERROR", "FATAL": "CRITICAL"}
+
+# Entity paths (shared with the live view, fwsim/log/rerun_live.py).
+WORLD_ENTITY = "world"
+UAV_ENTITY = "world/uav"
+UAV_BODY_ENTITY = "world/uav/body"
+UAV_AXES_ENTITY = "world/uav/axes"
+UAV_PATH_ENTITY = "world/uav_path"
+TARGET_ENTITY = "world/target"
+HULL_ENTITY = "world/target/hull"
+TARGET_PATH_ENTITY = "world/target_path"
+CAMERA_ENTITY = "world/camera"
+ESTIMATE_ENTITY = "world/target_estimate"
+IMAGE_ENTITY = "camera/image"
+DETECTION_ENTITY = "camera/detection"
+EVENTS_ENTITY = "events"
+SCENARIO_ENTITY = "scenario"
+RUN_ENTITY = "run"
+
+
+@dataclass(frozen=True)
+class Series:
+    """One time series: entity path, legend name, colour, and whether it is a (thin) set-point line."""
+    path: str
+    name: str
+    colour: tuple[int, int, int] | None = None
+    setpoint: bool = False
+
+
+AIRSPEED = Series("plots/airspeed/truth", "airspeed (truth)", (31, 119, 180))
+AIRSPEED_SP = Series("plots/airspeed/setpoint", "airspeed set-point", (255, 127, 14), True)
+HEIGHT = Series("plots/altitude/height", "height above sea", (44, 160, 44))
+ROLL = Series("plots/attitude/roll", "roll φ [deg]", (214, 39, 40))
+PITCH = Series("plots/attitude/pitch", "pitch θ [deg]", (31, 119, 180))
+P_ACTUAL = Series("plots/rates/p/actual", "p", (31, 119, 180))
+P_SP = Series("plots/rates/p/setpoint", "p set-point", (255, 127, 14), True)
+Q_ACTUAL = Series("plots/rates/q/actual", "q", (31, 119, 180))
+Q_SP = Series("plots/rates/q/setpoint", "q set-point", (255, 127, 14), True)
+DISTANCE = Series("plots/target/distance", "distance [m]")
+PAN = Series("plots/gimbal/pan", "pan [deg]", (148, 103, 189))
+TILT = Series("plots/gimbal/tilt", "tilt [deg]", (140, 86, 75))
+ESTIMATE_ERROR = Series("plots/estimate/position_error", "|estimate - truth| [m]", ESTIMATE_COLOUR)
+
+#: The blueprint views each layer adds (when it has its data).
+VIEWS: dict[str, Callable[[], list]] = {
+    "uav": lambda: [rrb.Spatial3DView(origin=WORLD_ENTITY, name="3D (ENU, body axes FRD)")],
+    "target": lambda: [],
+    "camera": lambda: [rrb.Spatial2DView(origin="camera", name="camera")],
+    "estimate": lambda: [rrb.TimeSeriesView(origin="plots/estimate", name="target estimate error [m]")],
+    "flight_plots": lambda: [rrb.TimeSeriesView(origin="plots/airspeed", name="airspeed [m/s]"),
+                             rrb.TimeSeriesView(origin="plots/altitude", name="height [m]"),
+                             rrb.TimeSeriesView(origin="plots/attitude", name="roll, pitch [deg]")],
+    "inner_loops": lambda: [rrb.TimeSeriesView(origin="plots/rates/p", name="roll rate p [deg/s]"),
+                            rrb.TimeSeriesView(origin="plots/rates/q", name="pitch rate q [deg/s]")],
+    "target_plots": lambda: [rrb.TimeSeriesView(origin="plots/target", name="distance to target [m]")],
+    "gimbal_plots": lambda: [rrb.TimeSeriesView(origin="plots/gimbal", name="gimbal [deg]")],
+    "events": lambda: [rrb.TextLogView(origin=EVENTS_ENTITY, name="events")],
+}
 
 
 @dataclass
@@ -93,13 +161,64 @@ def _time(t_s: np.ndarray) -> list[rr.TimeColumn]:
     return [rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=float))]
 
 
-def _scalars(rec: rr.RecordingStream, path: str, t_s: np.ndarray, values: np.ndarray, name: str,
-             colour: tuple[int, int, int] | None = None, dashed_setpoint: bool = False) -> None:
+def series_style(rec: rr.RecordingStream, series: Series) -> None:
+    """A series' legend name, colour and line width (static)."""
+    rec.log(series.path, rr.SeriesLines(names=series.name, colors=[series.colour] if series.colour else None,
+                                        widths=1.0 if series.setpoint else 2.0), static=True)
+
+
+def _scalars(rec: rr.RecordingStream, series: Series, t_s: np.ndarray, values: np.ndarray) -> None:
     """One time series: its style (static) and its values."""
-    values = np.asarray(values, dtype=float)
-    style = rr.SeriesLines(names=name, colors=[colour] if colour else None, widths=1.0 if dashed_setpoint else 2.0)
-    rec.log(path, style, static=True)
-    rec.send_columns(path, indexes=_time(t_s), columns=rr.Scalars.columns(scalars=values))
+    series_style(rec, series)
+    rec.send_columns(series.path, indexes=_time(t_s),
+                     columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)))
+
+
+def log_uav_model(rec: rr.RecordingStream, marker_scale: float) -> None:
+    """World axes (ENU, Z up) and the UAV's body boxes and axes (static, under world/uav)."""
+    rec.log(WORLD_ENTITY, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    s = marker_scale
+    rec.log(UAV_BODY_ENTITY, rr.Boxes3D(
+        centers=[[0.0, 0.0, 0.0], [0.05 * s, 0.0, 0.0]],
+        half_sizes=[[0.5 * UAV_LENGTH_M * s, 0.06 * s, 0.06 * s], [0.12 * s, 0.5 * UAV_SPAN_M * s, 0.015 * s]],
+        colors=[(230, 230, 230), (200, 200, 255)], fill_mode="solid", labels=["fuselage", "wing"]), static=True)
+    L = 1.2 * UAV_LENGTH_M * s
+    rec.log(UAV_AXES_ENTITY, rr.Arrows3D(vectors=[[L, 0, 0], [0, L, 0], [0, 0, L]],
+                                         colors=[(255, 0, 0), (0, 200, 0), (0, 0, 255)],
+                                         labels=["x fwd", "y right", "z down"]), static=True)
+
+
+def log_ship_model(rec: rr.RecordingStream, size_m: tuple[float, float, float]) -> None:
+    """The ship's hull box in its frame (bow, port, up), waterline at z = 0 (static)."""
+    L, W, H = size_m
+    rec.log(HULL_ENTITY, rr.Boxes3D(centers=[[0, 0, 0.5 * H]], half_sizes=[[0.5 * L, 0.5 * W, 0.5 * H]],
+                                    colors=[TARGET_COLOUR], labels=["ship"]), static=True)
+
+
+def log_pinhole(rec: rr.RecordingStream, K: np.ndarray, width: int, height: int, frustum_m: float) -> None:
+    """The camera's pinhole model (optical frame RDF) on world/camera (static): the frustum in 3D."""
+    rec.log(CAMERA_ENTITY, rr.Pinhole(image_from_camera=K, resolution=[width, height],
+                                      camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=frustum_m),
+            static=True)
+
+
+def log_path(rec: rr.RecordingStream, entity: str, strips: list, colours: list, labels: list | None = None) -> None:
+    """A trajectory as line strips (static: the latest call is the whole path)."""
+    rec.log(entity, rr.LineStrips3D(strips, colors=colours, labels=labels, radii=rr.Radius.ui_points(1.5)),
+            static=True)
+
+
+def phase_label(phase: int, name: str) -> str:
+    return f"phase {phase}: {name}"
+
+
+def detection_box(rec: rr.RecordingStream, found: bool, box: np.ndarray, scale: float) -> None:
+    """The detector's box on the camera image (scaled to the rendered size), or a clear when none."""
+    if found and np.all(np.isfinite(box)):
+        rec.log(DETECTION_ENTITY, rr.Boxes2D(mins=[box[:2] * scale], sizes=[(box[2:] - box[:2]) * scale],
+                                             colors=[DETECTION_COLOUR], labels=["detection"]))
+    else:
+        rec.log(DETECTION_ENTITY, rr.Clear(recursive=False))
 
 
 def _tf(log: RunLog, child: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -134,7 +253,7 @@ def _phase_strips(log: RunLog, t: np.ndarray, pos: np.ndarray) -> tuple[list[np.
     for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(ph)]):
         strips.append(pos[a: min(b + 1, len(pos))])  # overlap one point so the strips join
         colours.append(PHASE_COLOURS[ph[a] % len(PHASE_COLOURS)])
-        labels.append(f"phase {ph[a]}: {names.get(int(ph[a]), '?')}")
+        labels.append(phase_label(ph[a], names.get(int(ph[a]), '?')))
     return strips, colours, labels
 
 
@@ -144,30 +263,19 @@ def _phase_strips(log: RunLog, t: np.ndarray, pos: np.ndarray) -> tuple[list[np.
 def _uav(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     t, pos, q_wxyz = log.poses()  # q_enu_from_frd: body FRD into world ENU
     quat = q_wxyz[:, [1, 2, 3, 0]]  # Rerun wants x, y, z, w
-    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    log_uav_model(rec, opt.marker_scale)
     strips, colours, labels = _phase_strips(log, t, pos)
-    rec.log("world/uav_path", rr.LineStrips3D(strips, colors=colours, labels=labels, radii=rr.Radius.ui_points(1.5)),
-            static=True)
-    rec.send_columns("world/uav", indexes=_time(t),
+    log_path(rec, UAV_PATH_ENTITY, strips, colours, labels)
+    rec.send_columns(UAV_ENTITY, indexes=_time(t),
                      columns=rr.Transform3D.columns(translation=pos, quaternion=quat))
-    s = opt.marker_scale
-    rec.log("world/uav/body", rr.Boxes3D(
-        centers=[[0.0, 0.0, 0.0], [0.05 * s, 0.0, 0.0]],
-        half_sizes=[[0.5 * UAV_LENGTH_M * s, 0.06 * s, 0.06 * s], [0.12 * s, 0.5 * UAV_SPAN_M * s, 0.015 * s]],
-        colors=[(230, 230, 230), (200, 200, 255)], fill_mode="solid", labels=["fuselage", "wing"]), static=True)
-    L = 1.2 * UAV_LENGTH_M * s
-    rec.log("world/uav/axes", rr.Arrows3D(vectors=[[L, 0, 0], [0, L, 0], [0, 0, L]],
-                                          colors=[(255, 0, 0), (0, 200, 0), (0, 0, 255)],
-                                          labels=["x fwd", "y right", "z down"]), static=True)
-    return [rrb.Spatial3DView(origin="world", name="3D (ENU, body axes FRD)")]
+    return VIEWS["uav"]()
 
 
 @layer("target", needs=(TARGET_TOPIC,))
 def _target(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     tg = log.table(TARGET_TOPIC)
     pos = tg["pos_enu_m"]
-    rec.log("world/target_path", rr.LineStrips3D([pos], colors=[(23, 190, 207)], radii=rr.Radius.ui_points(1.5)),
-            static=True)
+    log_path(rec, TARGET_PATH_ENTITY, [pos], [TARGET_COLOUR])
     tf = _tf(log, "ship")
     if tf is not None:  # the ship frame (bow, port, up) as the loop logged it
         t, p, q = tf
@@ -175,20 +283,19 @@ def _target(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
         t, p = tg["t_s"], pos
         half = 0.5 * (np.pi / 2 - tg["heading_ned_rad"])
         q = np.column_stack([np.zeros_like(half), np.zeros_like(half), np.sin(half), np.cos(half)])
-    rec.send_columns("world/target", indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
-    L, W, H = _ship_size(log)
-    rec.log("world/target/hull", rr.Boxes3D(centers=[[0, 0, 0.5 * H]], half_sizes=[[0.5 * L, 0.5 * W, 0.5 * H]],
-                                            colors=[(23, 190, 207)], labels=["ship"]), static=True)
-    return []
+    rec.send_columns(TARGET_ENTITY, indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
+    log_ship_model(rec, _ship_size(log))
+    return VIEWS["target"]()
 
 
 def _ship_size(log: RunLog) -> tuple[float, float, float]:
     import yaml
     try:
         tgt = (yaml.safe_load(log.scenario_text) or {}).get("target") or {}
-        return float(tgt.get("length_m", 55.0)), float(tgt.get("width_m", 25.0)), float(tgt.get("height_m", 25.0))
+        L, W, H = SHIP_SIZE_M
+        return float(tgt.get("length_m", L)), float(tgt.get("width_m", W)), float(tgt.get("height_m", H))
     except (yaml.YAMLError, AttributeError, TypeError, ValueError):
-        return 55.0, 25.0, 25.0
+        return SHIP_SIZE_M
 
 
 @layer("camera", needs=(TF_TOPIC, CALIBRATION_TOPIC))
@@ -200,11 +307,8 @@ def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     t, p, q = tf
     cal = CameraCalibration.FromString(log.raw(CALIBRATION_TOPIC)[0][1])
     K = np.array(cal.K, dtype=float).reshape(3, 3)
-    rec.send_columns("world/camera", indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
-    rec.log("world/camera", rr.Pinhole(image_from_camera=K, resolution=[cal.width, cal.height],
-                                       camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=opt.frustum_m),
-            static=True)
-    views = []
+    rec.send_columns(CAMERA_ENTITY, indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
+    log_pinhole(rec, K, cal.width, cal.height, opt.frustum_m)
     scale = 1.0
     if log.topics.get(IMAGE_TOPIC):
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
@@ -213,29 +317,26 @@ def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
             m = CompressedImage.FromString(data)
             times.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
             blobs.append(bytes(m.data))
-        width = _jpeg_width(blobs[0])
+        width = jpeg_width(blobs[0])
         scale = width / cal.width if width else 1.0
         for ti, blob in zip(times, blobs):
             rec.set_time(TIMELINE, duration=ti)
-            rec.log("camera/image", rr.EncodedImage(contents=blob, media_type="image/jpeg"))
+            rec.log(IMAGE_ENTITY, rr.EncodedImage(contents=blob, media_type="image/jpeg"))
         rec.reset_time()
     if log.topics.get(DETECTION_TOPIC):
         det = log.table(DETECTION_TOPIC)
         found = det["detected"].astype(bool) if "detected" in det else np.isfinite(det["u_px"])
         for ti, ok, box in zip(det["t_s"], found, det["bbox_px"]):
             rec.set_time(TIMELINE, duration=float(ti))
-            if ok and np.all(np.isfinite(box)):
-                rec.log("camera/detection", rr.Boxes2D(mins=[box[:2] * scale], sizes=[(box[2:] - box[:2]) * scale],
-                                                       colors=[(255, 60, 60)], labels=["detection"]))
-            else:
-                rec.log("camera/detection", rr.Clear(recursive=False))
+            detection_box(rec, bool(ok), box, scale)
         rec.reset_time()
     if log.topics.get(IMAGE_TOPIC) or log.topics.get(DETECTION_TOPIC):
-        views.append(rrb.Spatial2DView(origin="camera", name="camera"))
-    return views
+        return VIEWS["camera"]()
+    return []
 
 
-def _jpeg_width(blob: bytes) -> int | None:
+def jpeg_width(blob: bytes) -> int | None:
+    """Width in pixels of a JPEG image (None if it cannot be decoded)."""
     try:
         import cv2
         img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -251,31 +352,27 @@ def _estimate(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
         raise SkipLayer(f"{ESTIMATE_TOPIC} has no pos_enu_m")
     t, pos = est["t_s"], est["pos_enu_m"]
     ok = np.all(np.isfinite(pos), axis=1)
-    rec.send_columns("world/target_estimate", indexes=_time(t[ok]),
+    rec.send_columns(ESTIMATE_ENTITY, indexes=_time(t[ok]),
                      columns=rr.Points3D.columns(positions=pos[ok], radii=np.full(ok.sum(), 4.0),
-                                                 colors=np.tile([255, 0, 255], (ok.sum(), 1))))
-    views = []
+                                                 colors=np.tile(ESTIMATE_COLOUR, (ok.sum(), 1))))
     if log.topics.get(TARGET_TOPIC):
         tg = log.table(TARGET_TOPIC)
         truth = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
-        _scalars(rec, "plots/estimate/position_error", t, np.linalg.norm(pos - truth, axis=1),
-                 "|estimate - truth| [m]", (255, 0, 255))
-        views.append(rrb.TimeSeriesView(origin="plots/estimate", name="target estimate error [m]"))
-    return views
+        _scalars(rec, ESTIMATE_ERROR, t, np.linalg.norm(pos - truth, axis=1))
+        return VIEWS["estimate"]()
+    return []
 
 
 @layer("flight_plots", needs=(STATE_TOPIC,))
 def _flight_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     st = log.table(STATE_TOPIC)
     t = st["t_s"]
-    _scalars(rec, "plots/airspeed/truth", t, st["airspeed_m_s"], "airspeed (truth)", (31, 119, 180))
-    _scalars(rec, "plots/altitude/height", t, st["height_above_sea_m"], "height above sea", (44, 160, 44))
+    _scalars(rec, AIRSPEED, t, st["airspeed_m_s"])
+    _scalars(rec, HEIGHT, t, st["height_above_sea_m"])
     eul = np.degrees(st["euler_ned_rad"])
-    _scalars(rec, "plots/attitude/roll", t, eul[:, 0], "roll φ [deg]", (214, 39, 40))
-    _scalars(rec, "plots/attitude/pitch", t, eul[:, 1], "pitch θ [deg]", (31, 119, 180))
-    return [rrb.TimeSeriesView(origin="plots/airspeed", name="airspeed [m/s]"),
-            rrb.TimeSeriesView(origin="plots/altitude", name="height [m]"),
-            rrb.TimeSeriesView(origin="plots/attitude", name="roll, pitch [deg]")]
+    _scalars(rec, ROLL, t, eul[:, 0])
+    _scalars(rec, PITCH, t, eul[:, 1])
+    return VIEWS["flight_plots"]()
 
 
 @layer("inner_loops", needs=(AUTOPILOT_TOPIC,))
@@ -283,13 +380,12 @@ def _inner_loops(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> li
     ap = log.table(AUTOPILOT_TOPIC)
     t = ap["t_s"]
     sp, act = np.degrees(ap["body_rates_sp_frd_rad_s"]), np.degrees(ap["body_rates_frd_rad_s"])
-    _scalars(rec, "plots/airspeed/setpoint", t, ap["airspeed_sp_m_s"], "airspeed set-point", (255, 127, 14), True)
-    _scalars(rec, "plots/rates/p/actual", t, act[:, 0], "p", (31, 119, 180))
-    _scalars(rec, "plots/rates/p/setpoint", t, sp[:, 0], "p set-point", (255, 127, 14), True)
-    _scalars(rec, "plots/rates/q/actual", t, act[:, 1], "q", (31, 119, 180))
-    _scalars(rec, "plots/rates/q/setpoint", t, sp[:, 1], "q set-point", (255, 127, 14), True)
-    return [rrb.TimeSeriesView(origin="plots/rates/p", name="roll rate p [deg/s]"),
-            rrb.TimeSeriesView(origin="plots/rates/q", name="pitch rate q [deg/s]")]
+    _scalars(rec, AIRSPEED_SP, t, ap["airspeed_sp_m_s"])
+    _scalars(rec, P_ACTUAL, t, act[:, 0])
+    _scalars(rec, P_SP, t, sp[:, 0])
+    _scalars(rec, Q_ACTUAL, t, act[:, 1])
+    _scalars(rec, Q_SP, t, sp[:, 1])
+    return VIEWS["inner_loops"]()
 
 
 @layer("target_plots", needs=(STATE_TOPIC, TARGET_TOPIC))
@@ -297,26 +393,25 @@ def _target_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> l
     st, tg = log.table(STATE_TOPIC), log.table(TARGET_TOPIC)
     t = st["t_s"]
     tp = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
-    _scalars(rec, "plots/target/distance", t, np.linalg.norm(st["pos_enu_m"] - tp, axis=1), "distance [m]")
-    return [rrb.TimeSeriesView(origin="plots/target", name="distance to target [m]")]
+    _scalars(rec, DISTANCE, t, np.linalg.norm(st["pos_enu_m"] - tp, axis=1))
+    return VIEWS["target_plots"]()
 
 
 @layer("gimbal_plots", needs=(GIMBAL_TOPIC,))
 def _gimbal_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     g = log.table(GIMBAL_TOPIC)
-    _scalars(rec, "plots/gimbal/pan", g["t_s"], np.degrees(g["pan_rad"]), "pan [deg]", (148, 103, 189))
-    _scalars(rec, "plots/gimbal/tilt", g["t_s"], np.degrees(g["tilt_rad"]), "tilt [deg]", (140, 86, 75))
-    return [rrb.TimeSeriesView(origin="plots/gimbal", name="gimbal [deg]")]
+    _scalars(rec, PAN, g["t_s"], np.degrees(g["pan_rad"]))
+    _scalars(rec, TILT, g["t_s"], np.degrees(g["tilt_rad"]))
+    return VIEWS["gimbal_plots"]()
 
 
 @layer("events", needs=(EVENTS_TOPIC,))
 def _events(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     events = log.events()
-    levels = {"DEBUG": "DEBUG", "INFO": "INFO", "WARNING": "WARN", "ERROR": "ERROR", "FATAL": "CRITICAL"}
-    rec.send_columns("events", indexes=_time(np.array([e[0] for e in events])),
+    rec.send_columns(EVENTS_ENTITY, indexes=_time(np.array([e[0] for e in events])),
                      columns=rr.TextLog.columns(text=[e[2] for e in events],
-                                                level=[levels.get(e[1], "INFO") for e in events]))
-    return [rrb.TextLogView(origin="events", name="events")]
+                                                level=[TEXTLOG_LEVELS.get(e[1], "INFO") for e in events]))
+    return VIEWS["events"]()
 
 
 # -- the recording ----------------------------------------------------------
@@ -336,9 +431,8 @@ def export_rrd(log: RunLog | str | Path, rrd_path: str | Path, options: ReplayOp
     views: list = []
     try:
         if log.scenario_text:
-            rec.log("scenario", rr.TextDocument(f"```yaml\n{log.scenario_text}\n```", media_type="text/markdown"),
-                    static=True)
-        rec.log("run", rr.TextDocument(
+            log_scenario(rec, log.scenario_text)
+        rec.log(RUN_ENTITY, rr.TextDocument(
             f"status: {log.status}\nreason: {log.reason}\nscenario: {meta.get('scenario', '?')}, "
             f"seed {meta.get('seed', '?')}\nfwsim {meta.get('fwsim_version', '?')}, "
             f"jsbsim {meta.get('jsbsim_version', '?')}\nlog: {log.path}"), static=True)
@@ -358,6 +452,18 @@ def export_rrd(log: RunLog | str | Path, rrd_path: str | Path, options: ReplayOp
     finally:
         rec.disconnect()
     return res
+
+
+def log_scenario(rec: rr.RecordingStream, scenario_text: str) -> None:
+    """The scenario file the run flew, as a YAML block (static)."""
+    rec.log(SCENARIO_ENTITY, rr.TextDocument(f"```yaml\n{scenario_text}\n```", media_type="text/markdown"),
+            static=True)
+
+
+def blueprint_for(layers) -> rrb.Blueprint:
+    """The default blueprint of a recording whose ``layers`` (names in :data:`LAYERS`) all have their data."""
+    wanted = set(layers)
+    return default_blueprint([(name, v) for name in LAYERS if name in wanted for v in VIEWS[name]()])
 
 
 def default_blueprint(views: list[tuple[str, object]]) -> rrb.Blueprint:

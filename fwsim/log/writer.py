@@ -1,12 +1,13 @@
 """LogWriter: one MCAP file per simulation run (topics: docs/LOGS.md)."""
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import time
 import traceback
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterable
 
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
@@ -33,6 +34,11 @@ EFFECTIVE_SCENARIO_ATTACHMENT = "scenario_effective.yaml"
 #: Default uncompressed chunk size: at ~120 msg/s this is a chunk every few
 #: seconds of sim time, which bounds what a hard kill loses.
 DEFAULT_CHUNK_SIZE = 256 * 1024
+
+#: ``listener(topic, t_s, msg)``: called after each record is written (see LogWriter).
+Listener = Callable[[str, float, Any], None]
+
+_logger = logging.getLogger("fwsim.log")
 
 _LEVELS = {name: value for name, value in Log.Level.items()}
 _LEVELS.update({"WARN": _LEVELS["WARNING"], "CRITICAL": _LEVELS["FATAL"]})
@@ -113,6 +119,16 @@ class LogWriter:
     Leaving the with-block normally records status "completed"; an exception
     records "failed" (or "interrupted" for KeyboardInterrupt/SystemExit) and
     propagates. ``close()`` may be called any number of times.
+
+    Listeners (``listeners=[fn]`` or ``add_listener(fn)``) see every record
+    after it is written, as ``fn(topic, t_s, msg)``: ``msg`` is the dataclass
+    given to ``write`` (``write_state`` gives the state on /uav/state, then
+    the ``foxglove`` protobuf messages on /tf and /uav/pose), or the protobuf
+    message of ``write_transform``, ``write_image``, ``write_calibration`` and
+    ``write_event`` (the end-of-run line included). Protobuf messages may be
+    reused by the writer: read them during the call, do not keep them. A
+    listener that raises is detached with one warning (logger ``fwsim.log``);
+    the log goes on. Without listeners a record costs one truth test more.
     """
 
     def __init__(
@@ -122,8 +138,10 @@ class LogWriter:
         metadata: dict[str, str],
         scenario_text: str,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
+        listeners: Iterable[Listener] = (),
     ):
         self.path = Path(path)
+        self._listeners: list[Listener] = list(listeners)
         self._file = open(self.path, "wb")
         self._closed = False
         try:
@@ -201,6 +219,30 @@ class LogWriter:
             data=msg.SerializeToString(),
             sequence=entry[1],
         )
+        if self._listeners:
+            self._notify(topic, log_time * 1e-9, msg)
+
+    # -- listeners --------------------------------------------------------
+    def add_listener(self, fn: Listener) -> None:
+        """Call ``fn(topic, t_s, msg)`` after each record from now on (see the class docstring)."""
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn: Listener) -> None:
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    @property
+    def listeners(self) -> tuple[Listener, ...]:
+        return tuple(self._listeners)
+
+    def _notify(self, topic: str, t_s: float, msg: Any) -> None:
+        for fn in tuple(self._listeners):
+            try:
+                fn(topic, t_s, msg)
+            except Exception as exc:  # a view must never stop the run or its log
+                self.remove_listener(fn)
+                _logger.warning("%s failed at t = %.2f s on %s and is detached; the run and its log go on: %s: %s",
+                                fn, t_s, topic, type(exc).__name__, exc)
 
     # -- writing ----------------------------------------------------------
     def write(self, topic: str, msg: Any) -> None:
@@ -222,6 +264,8 @@ class LogWriter:
             data=entry[1].encode(msg),
             sequence=entry[2],
         )
+        if self._listeners:
+            self._notify(topic, t_s, msg)
 
     def write_state(self, state) -> None:
         """Write an AirframeState on /uav/state (JSON), /tf and /uav/pose (Foxglove)."""
