@@ -56,18 +56,82 @@ threshold, and ``|q| <= |b| / mu`` everywhere (for a centred target
 ``sigma_min = |cos t|``, so damping starts at ``|tilt| > acos(mu)``, 84.3 deg
 for mu = 0.1).
 
-Known limit: flying (almost) straight over the target, the line of sight
-passes through the pan axis while tilt is at its -90 deg joint limit; the
-local law cannot swing the pan through 180 deg, so the target leaves the image
-(measured in a kinematic test at 300 m height: lost at a 0 or 5 m lateral
-miss, held within 0.2 px at 30 m, the pan then swinging 0.1 -> 3.0 rad). A
-re-pointing manoeuvre for that case would be the mission's (or a later
-version's) job; the paper avoids overflight by the loiter geometry.
+Keyhole: the target near the pan axis. The joint limits are the paper's: tilt
+within +-90 deg (the optical axis reaches the pan axis, body z, but cannot pass
+it) and pan within [-pi, pi] (the pan cannot follow the target's azimuth across
++-180 deg). Both bite when the line of sight passes close to the pan axis: the
+pan that faces the target, its azimuth ``phi = atan2(d_y, d_x)`` for the
+target direction d in the body, then turns fast (as 1/sin of the angle alpha
+off the axis), and
+  * if the target passes the axis, or the pan (rate-limited) falls more than
+    90 deg behind its azimuth, the target is on the far side of the axis: the
+    tilt would have to go past -90 deg and the law stalls (at 180 deg the pan
+    column of J only turns the image about its centre, at right angles to e).
+    Flying straight and level over a still ship at 300 m with a lateral miss
+    of 0 or 5 m, the pan stayed put, the target slid to the bottom edge of the
+    image and left it 4.4 s after passing under the UAV, for good (kinematic
+    test below);
+  * if the azimuth crosses +-180 deg, the pan is pinned at its stop while the
+    target goes on. In the paper mission (seed 7) the bank reversal on entering
+    Phase 2 (-35 -> +35 deg, nose 15 deg down, 880 m above the ship) sweeps the
+    pan axis past the ship 6-13 deg away, its azimuth running -75 -> -180 ->
+    +98 deg in 2 s: the pan chased it at its 120 deg/s limit, stopped at -180
+    deg at 29.8 s while the tilt swung up, the ship left the image at 30.1 s
+    and was back only at 32.8 s, after the mission's predictive pointing had
+    turned the pan the long way round (target_in_fov_fraction_after_lock
+    0.979; the other seeds alike).
+The way out is the keyhole: a target within alpha_k of the pan axis stays in
+the image for ANY pan while the tilt is at its limit on that side, with
+``tan alpha_k = min(cx/fx, cy/fy)`` (principal point to the nearer image edge:
+18.0 deg for 1280 x 720 px, 60 deg horizontal field of view), times
+``keyhole_fov_fraction``, less what the tilt limit falls short of +-90 deg.
+While the target is in it the pan may swing round, through a full relative
+turn if need be. A swing (``IbvsStatus.swing``, the direction): the pan at its
+full rate, the tilt by least squares for the image error given that pan rate,
+``tilt_dot = J[:, 0] . (b - J[:, 1] pan_dot) / |J[:, 0]|^2`` (it goes toward
+the axis as the target goes round to the far side and comes back up as the
+pan catches up), each joint then cut at its own limits. It starts, with the
+target in the keyhole, when
+  (a) the target is on the far side of the axis (azimuth more than 90 deg from
+      the pan): toward its azimuth, the shorter way the pan limits allow; or
+  (b) the target is on the near side, but its azimuth will pass a pan limit
+      (by 5 deg: a dead band against noise at the seam) while still in the
+      keyhole, within one full-range swing time (pan range / rate limit, 3 s):
+      the pan unwinds AWAY from that limit, round the other side of the axis,
+      and meets the azimuth once it has come past the seam. The prediction
+      (``predict_limit_crossing``) moves the target's gnomonic projection on
+      the plane normal to the pan axis, ``p = (d_x, d_y) / |d_z|`` (|p| = tan
+      alpha), along a straight line at its present rate (the UAV's rotation
+      from the gyros, the relative translation from the depth and velocities
+      the feed-forward uses). Only for a pan range that covers the full circle
+      (bar at most the 30 deg exit angle), else the azimuths past the limit are
+      out of reach from the other side as well.
+It ends when the target, having been on the far side, is within 30 deg of the
+pan in azimuth (the law takes over from there), when the pan reaches its stop,
+when the target leaves the keyhole without having reached the far side (the
+prediction was wrong), or after one full-range swing time plus 1 s. Outside
+these cases the law runs untouched (``keyhole_swing: false`` gives the same
+commands, bit for bit, wherever no swing fires; tested).
+Measured with it: in the paper mission (seed 7) the swing starts at 28.8 s
+(pan -104 deg, ship 13 deg off the axis) and ends at 30.3 s (pan +83 deg); the
+ship stays in the image, the pan never reaches a stop:
+target_in_fov_fraction_after_lock 0.979 -> 1.000, pixel_err_rms u/v 36.7/11.7
+-> 27.0/9.2 px, pixel_err_max 628 -> 373 px (seeds 1-3: likewise 0.979 ->
+1.000). Kinematic tests (``tests/test_ibvs.py``): the 300 m overflight keeps the
+target in the image at 0, +-5 and 30 m lateral miss (within 71 px; at 30 m no
+swing is needed), and a bank reversal like the mission's keeps it at 5 and
+0.3 deg closest approach to the axis (the plain law: lost). Limits of the
+handling: the target must still be in the keyhole when the pan has swung it
+past the far side; with a faster bank reversal (70 deg/s peak at the same
+height, the ship 8-10 deg from the axis) the target is still lost for up to
+1 s in a kinematic sweep, and a curving path (e.g. a roll rate still building
+up) is only caught once the straight-line prediction says so.
 
 Limits (what the flight software knows of the gimbal): a joint at a limit is
 not pushed further, and within one step of it the rate is cut so that it lands
 on the limit; then both rates are scaled by the same factor to the rate limits
-(the direction of the joint-rate vector is kept).
+(the direction of the joint-rate vector is kept). During a keyhole swing each
+joint is limited on its own (the pan is at its rate limit by construction).
 
 Modes (``IbvsStatus.mode``):
   * ``"track"``: the newest detection found the target and is at most
@@ -93,12 +157,15 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd
+from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import GimbalCommand, Measurements
 
 _PI = math.pi
 _HALF_PI = 0.5 * math.pi
 _FEATURE_CAP = 3.0  # |x1|, |x2| of a propagated feature (about 72 deg off axis): numerical guard only
+_SWING_FAR_RAD = 0.5 * _PI  # target azimuth this far from the pan: on the far side of the pan axis
+_SWING_EXIT_RAD = math.radians(30.0)  # a swing ends with the pan this close to the target's azimuth
+_SWING_DEADBAND_RAD = math.radians(5.0)  # an unwind needs the azimuth to go this far past a pan limit
 
 _PanAngle = Annotated[float, Field(ge=-2.0 * _PI, le=2.0 * _PI)]
 _TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
@@ -132,6 +199,13 @@ class IbvsConfig(BaseModel):
     max_detection_age_s: float = Field(0.2, gt=0.0, le=10.0,
                                        description="a valid detection older than this (since its exposure) no "
                                                    "longer counts as tracking, s")
+    keyhole_swing: bool = Field(True, description="near the pan axis, swing the pan round (full rate, tilt by least "
+                                                  "squares) when the target is on the far side of the axis or its "
+                                                  "azimuth is about to cross a pan limit (module docstring)")
+    keyhole_fov_fraction: float = Field(1.0, gt=0.0, le=1.0,
+                                        description="the keyhole: target within this fraction of the smallest half "
+                                                    "field of view (principal point to the nearer image edge) of the "
+                                                    "pan axis, less what the tilt limit falls short of the axis")
     propagate_feature: bool = Field(True, description="predict the feature from the detection's exposure to now "
                                                       "and between detections with the feature kinematics")
     nominal_dt_s: float = Field(1.0 / 30.0, gt=0.0, le=1.0,
@@ -233,6 +307,47 @@ def camera_rates_paper(x1: float, x2: float, lambda_1_s: float, known_rate=(0.0,
     return np.array([(f * b0 - c * b1) / det, (a * b1 - d * b0) / det])
 
 
+def predict_limit_crossing(p, p_dot, pan_rad: float, pan_limits_rad, beyond_rad: float = 0.0
+                           ) -> tuple[float, float, int] | None:
+    """When and how far from the pan axis the target's azimuth passes ``beyond_rad`` beyond a pan limit.
+
+    ``p = (d_x, d_y) / |d_z|`` for the target's direction d (body FRD; z = the
+    pan axis) is its gnomonic projection on the plane normal to the pan axis:
+    ``|p|`` is the tangent of its angle off the axis and ``atan2(p_y, p_x)`` the
+    pan that faces it. The target is extrapolated on the straight line
+    ``p + p_dot t`` (exact for a target translating relative to a non-rotating
+    UAV), along which the azimuth sweeps monotonically by less than pi. A pan
+    following the azimuth from ``pan_rad`` (its representation nearest the
+    pan) reaches the limit ahead after a sweep ``delta`` (plus ``beyond_rad``):
+    returns ``(t, |p| there, sweep direction +1/-1)`` for that crossing
+    (``t = 0`` when the azimuth is already that far past the limit), or None if
+    the line never gets there.
+    """
+    px, py = float(p[0]), float(p[1])
+    vx, vy = float(p_dot[0]), float(p_dot[1])
+    cross = px * vy - py * vx
+    if not math.isfinite(cross) or cross == 0.0:
+        return None
+    sweep = 1 if cross > 0.0 else -1
+    phi = math.atan2(py, px)
+    phi_u = pan_rad + wrap_pi(phi - pan_rad)
+    delta = ((pan_limits_rad[1] - phi_u) if sweep > 0 else (phi_u - pan_limits_rad[0])) + beyond_rad
+    if delta >= _PI:
+        return None
+    if delta <= 0.0:
+        return 0.0, math.hypot(px, py), sweep
+    psi = phi + sweep * delta
+    ux, uy = math.cos(psi), math.sin(psi)
+    den = ux * vy - uy * vx  # u x p_dot; p + p_dot t = s u
+    if den == 0.0:
+        return None
+    t = (px * uy - py * ux) / den
+    s = cross / den
+    if t < 0.0 or s <= 0.0:
+        return None
+    return t, s, sweep
+
+
 def limit_joint_rates(pan_rad: float, tilt_rad: float, pan_rate: float, tilt_rate: float, cfg: IbvsConfig,
                       dt_s: float) -> tuple[float, float, float]:
     """Joint- and rate-limit aware command: returns (pan_rate, tilt_rate, scale).
@@ -276,6 +391,7 @@ class IbvsStatus:
     detection_age_s: float  # t_s minus the exposure time of the newest valid detection (NaN: none yet)
     sigma_min: float  # smallest singular value of J (near 0: singular, damping active below mu)
     rate_scale: float  # factor applied by the rate limits (1: not saturated)
+    swing: int = 0  # keyhole pan swing under way: its direction (+1 / -1), 0 when the law runs as is
 
 
 def _finite(*xs) -> bool:
@@ -290,6 +406,18 @@ class Ibvs:
             raise ValueError(f"Ibvs: focal lengths must be positive and finite (fx={fx}, fy={fy}, cx={cx}, cy={cy})")
         self.cfg = cfg
         self.fx, self.fy, self.cx, self.cy = float(fx), float(fy), float(cx), float(cy)
+        # the keyhole (tangent of its radius) about the pan axis below and above the UAV: a target
+        # closer than this to the axis stays in the image for ANY pan with the tilt at its limit
+        # on that side (the principal point is taken as the image centre: half-sizes cx, cy)
+        half_fov = math.atan(max(0.0, min(self.cx / self.fx, self.cy / self.fy))) * cfg.keyhole_fov_fraction
+        tilt_lo, tilt_hi = cfg.tilt_limits_rad
+        self._tan_keyhole = (math.tan(max(0.0, half_fov - (_HALF_PI + tilt_lo))),
+                             math.tan(max(0.0, half_fov - (_HALF_PI - tilt_hi))))
+        pan_span = cfg.pan_limits_rad[1] - cfg.pan_limits_rad[0]
+        self._swing_horizon_s = pan_span / cfg.max_pan_rate_rad_s  # one swing over the whole pan range
+        # unwinding ahead of a limit pays only if the azimuths beyond it are (nearly) all reachable
+        # from the other side: the pan covers the full circle but for a gap of at most the exit angle
+        self._can_unwind = pan_span >= 2.0 * _PI - _SWING_EXIT_RAD
         self.reset()
 
     def reset(self) -> None:
@@ -300,6 +428,9 @@ class Ibvs:
         self._fix_t = math.nan  # exposure time of the newest valid detection
         self._lost_t: float | None = None  # when the track was lost (start of coast)
         self._last_cmd = (0.0, 0.0)  # (pan_rate, tilt_rate) last sent, 0 when holding
+        self._swing = 0  # keyhole swing direction (+1/-1), 0: none
+        self._swing_far = False  # the target has been on the far side of the pan axis during this swing
+        self._swing_t0 = math.nan
 
     # ------------------------------------------------------------------ helpers
 
@@ -311,8 +442,65 @@ class Ibvs:
         T = T_fn(s)
         return out if T is None else out + T
 
+    def _keyhole_swing(self, t: float, pan: float, s: np.ndarray, R_fc: np.ndarray, w_p: np.ndarray,
+                       v_rel_body, z: float) -> int:
+        """Direction of the keyhole pan swing to fly this tick (+1/-1), 0 for the plain law (module docstring).
+
+        ``v_rel_body``: target velocity relative to the camera, body FRD (None: unknown); ``z``: depth.
+        """
+        cfg = self.cfg
+        lo, hi = cfg.pan_limits_rad
+        d = R_fc @ np.array([float(s[0]), float(s[1]), 1.0])  # target direction, body FRD (per unit depth)
+        dz = float(d[2])
+        tan_k = self._tan_keyhole[0 if dz > 0.0 else 1]
+        rho = math.hypot(d[0], d[1]) / abs(dz) if dz != 0.0 else math.inf  # tan(angle off the pan axis)
+        w = wrap_pi(math.atan2(d[1], d[0]) - pan)  # target azimuth relative to the pan
+
+        def travel() -> float | None:
+            """Pan motion that faces the target within the pan limits (shortest), None if none can."""
+            best = None
+            for c in (pan + w, pan + w - 2.0 * _PI, pan + w + 2.0 * _PI):
+                if lo - 1e-9 <= c <= hi + 1e-9 and (best is None or abs(c - pan) < abs(best)):
+                    best = c - pan
+            return best
+
+        def blocked(direction: int) -> bool:
+            return pan >= hi - 1e-9 if direction > 0 else pan <= lo + 1e-9
+
+        if self._swing:
+            self._swing_far = self._swing_far or abs(w) > _SWING_FAR_RAD
+            tr = travel()
+            done = ((self._swing_far and tr is not None and abs(tr) <= _SWING_EXIT_RAD)
+                    or blocked(self._swing)
+                    or (not self._swing_far and not rho <= tan_k)  # left the keyhole on the near side
+                    or t - self._swing_t0 > self._swing_horizon_s + 1.0)
+            if not done:
+                return self._swing
+            self._swing = 0
+        if not (tan_k > 0.0 and rho <= tan_k):
+            return 0
+        direction, far = 0, False
+        if abs(w) > _SWING_FAR_RAD:  # far side of the axis: only a pan swing brings the target back
+            tr = travel()
+            if tr is not None and abs(tr) > _SWING_EXIT_RAD:
+                direction, far = (1 if tr > 0.0 else -1), True
+        elif self._can_unwind:  # near side: will the azimuth carry the pan into a limit within the keyhole?
+            ddot = -cross3(w_p, d)
+            if v_rel_body is not None:
+                ddot = ddot + np.asarray(v_rel_body, dtype=float) / z
+            sz = 1.0 if dz > 0.0 else -1.0
+            p = d[:2] / abs(dz)
+            p_dot = (ddot[:2] - p * sz * ddot[2]) / abs(dz)
+            hit = predict_limit_crossing(p, p_dot, pan, (lo, hi), _SWING_DEADBAND_RAD)
+            if hit is not None and hit[0] <= self._swing_horizon_s and hit[1] <= tan_k:
+                direction = -hit[2]  # unwind away from that limit, round the other side of the axis
+        if direction and not blocked(direction):
+            self._swing, self._swing_far, self._swing_t0 = direction, far, t
+        return self._swing
+
     def _hold(self, t: float, e=None, age=math.nan) -> tuple[GimbalCommand, IbvsStatus]:
         self._last_cmd = (0.0, 0.0)
+        self._swing = 0
         e = np.full(2, np.nan) if e is None else e
         px = np.array([e[0] * self.fx, e[1] * self.fy])
         return (GimbalCommand(t, math.nan, math.nan),
@@ -413,9 +601,22 @@ class Ibvs:
             T = T_fn(s)
             if T is not None:
                 b -= T
-        q, sigma_min = damped_solve(joint_jacobian(x1, x2, tilt), b, cfg.singularity_damping)
-        pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, float(q[1]), float(q[0]), cfg, dt)
+        J = joint_jacobian(x1, x2, tilt)
+        q, sigma_min = damped_solve(J, b, cfg.singularity_damping)
+        swing = 0
+        if cfg.keyhole_swing:
+            v_rel_body = None if v_rel is None else R_fc @ v_rel
+            swing = self._keyhole_swing(t, pan, s, R_fc, w_p, v_rel_body, z)
+        if swing:
+            # the pan at full rate; the tilt does what it can for the image error given that pan rate
+            pan_rate = swing * cfg.max_pan_rate_rad_s
+            j0, j1 = J[:, 0], J[:, 1]
+            tilt_rate = float(j0 @ (b - j1 * pan_rate)) / float(j0 @ j0)
+            pan_rate = limit_joint_rates(pan, tilt, pan_rate, 0.0, cfg, dt)[0]
+            tilt_rate, scale = limit_joint_rates(pan, tilt, 0.0, tilt_rate, cfg, dt)[1:]
+        else:
+            pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, float(q[1]), float(q[0]), cfg, dt)
         self._last_cmd = (pan_rate, tilt_rate)
         status = IbvsStatus(t, mode, s.copy(), np.array([x1 * self.fx, x2 * self.fy]), pan_rate, tilt_rate,
-                            age, sigma_min, scale)
+                            age, sigma_min, scale, swing)
         return GimbalCommand(t, pan_rate, tilt_rate), status

@@ -298,26 +298,30 @@ def _angles_putting_target_at(pos, euler, q, u, v):
     return float(pt[0]), float(pt[1])
 
 
-def _fly(uav, cfg, duration_s, start_px=(100.0, 80.0), dropout=None):
-    """Closed loop; returns t, true pixel error norm, modes, commanded rates, joint angles."""
+def _fly(uav, cfg, duration_s, start_px=(100.0, 80.0), dropout=None, ship_vel=SHIP_VEL):
+    """Closed loop; returns t, true pixel error norm, whether the target is in the image, modes, swing
+    directions, commanded rates, joint angles, and the target's angle off the pan axis (deg)."""
     q0 = np.zeros(3)
+    ship_vel = np.asarray(ship_vel, float)
     pos, vel, euler, w = uav.state(0.0)
     pan0, tilt0 = _angles_putting_target_at(pos, euler, q0, *start_px)
     gim = Gimbal(GimbalConfig(mount_offset_frd_m=list(MOUNT), initial_pan_rad=pan0, initial_tilt_rad=tilt0), DT)
     ctl = I.Ibvs(cfg, FX, FY, CX, CY)
     n = int(round(duration_s / DT))
-    out = {k: np.empty(n) for k in ("t", "err", "pan_cmd", "tilt_cmd", "pan", "tilt")}
+    out = {k: np.empty(n) for k in ("t", "err", "in_image", "swing", "pan_cmd", "tilt_cmd", "pan", "tilt",
+                                    "off_axis_deg")}
     modes = []
     det = (False, math.nan, math.nan, math.nan)
     for k in range(n):
         t = k * DT
         pos, vel, euler, w = uav.state(t)
-        q = q0 + SHIP_VEL * t
+        q = q0 + ship_vel * t
         g = gim.state
         u, v, Z = _project(pos, euler, g.pan_rad, g.tilt_rad, q)
+        in_image = Z > 0 and 0 <= u < W_PX and 0 <= v < H_PX
         new = k % DET_EVERY == 0
         if new:
-            visible = Z > 0 and 0 <= u < W_PX and 0 <= v < H_PX
+            visible = in_image
             if dropout is not None and dropout[0] <= t < dropout[1]:
                 visible = False
             det = (visible, t, u, v)
@@ -325,13 +329,17 @@ def _fly(uav, cfg, duration_s, start_px=(100.0, 80.0), dropout=None):
                          airspeed_m_s=V_UAV, height_above_sea_m=pos[2], pan_rad=g.pan_rad, tilt_rad=g.tilt_rad,
                          pan_rate_rad_s=g.pan_rate_rad_s, tilt_rate_rad_s=g.tilt_rate_rad_s, det_new=new,
                          det_valid=det[0], det_exposure_t_s=det[1], det_u_px=det[2], det_v_px=det[3])
-        cmd, st = ctl.step(m, SHIP_VEL, Z, MOUNT)
+        cmd, st = ctl.step(m, ship_vel, Z, MOUNT)
         gim.step(t + DT, cmd.pan_rate_rad_s, cmd.tilt_rate_rad_s)
-        out["t"][k], out["err"][k] = t, math.hypot(u - CX, v - CY)
+        d = F.dcm_enu_from_frd(euler).T @ (q - pos)
+        out["t"][k], out["err"][k], out["in_image"][k] = t, math.hypot(u - CX, v - CY), in_image
+        out["swing"][k] = st.swing
         out["pan_cmd"][k], out["tilt_cmd"][k] = cmd.pan_rate_rad_s, cmd.tilt_rate_rad_s
         out["pan"][k], out["tilt"][k] = g.pan_rad, g.tilt_rad
+        out["off_axis_deg"][k] = math.degrees(math.atan2(math.hypot(d[0], d[1]), d[2]))
         modes.append(st.mode)
     out["modes"] = modes
+    out["in_image"] = out["in_image"].astype(bool)
     return out
 
 
@@ -383,3 +391,164 @@ def test_coast_keeps_the_target_through_a_detection_dropout():
     assert {r["modes"][i] for i in np.nonzero(sel)[0][2:]} == {"coast"}
     assert np.max(r["err"][sel]) < 2.0  # feed-forward of the UAV and ship motion holds the image
     assert r["modes"][-1] == "track" and r["err"][-1] < 1.0
+
+
+# --------------------------------------------------------------------------- keyhole: target near the pan axis
+
+
+def _line_crossing_by_walking(p, p_dot, pan, lims, beyond, t_end=100.0, n=100_001):
+    """Reference for predict_limit_crossing: walk the line, unwrap the azimuth, follow it with the pan."""
+    t = np.linspace(0.0, t_end, n)
+    pts = np.asarray(p)[None, :] + t[:, None] * np.asarray(p_dot)[None, :]
+    az = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
+    follow = pan + F.wrap_pi(az[0] - pan) + (az - az[0])
+    past = np.nonzero((follow > lims[1] + beyond) | (follow < lims[0] - beyond))[0]
+    if len(past) == 0:
+        return None
+    k = past[0]
+    return t[k], float(np.hypot(*pts[k])), 1 if follow[k] > lims[1] else -1
+
+
+def test_predict_limit_crossing_geometry():
+    lims = (-PI, PI)
+    # target 11.3 deg off the axis at azimuth -90 deg drifting back and right: its azimuth sweeps
+    # down through -180 deg, which the pan (at -90 deg) meets after 4 s, 21.8 deg off the axis
+    t, s, sweep = I.predict_limit_crossing((0.0, -0.2), (-0.1, 0.05), -PI / 2, lims)
+    assert (t, s, sweep) == (pytest.approx(4.0), pytest.approx(0.4), -1)
+    assert I.predict_limit_crossing((0.0, -0.2), (-0.1, 0.05), -PI / 2, (-2 * PI, 2 * PI)) is None  # room to follow
+    assert I.predict_limit_crossing((0.0, -0.2), (0.1, 0.05), -PI / 2, lims) is None  # sweeping away from -180 deg
+    # already past the limit (pan pinned at +pi, azimuth 1 deg beyond and going on): now; not if 5 deg are required
+    p = 0.2 * np.array([math.cos(-PI + 0.0175), math.sin(-PI + 0.0175)])
+    t, s, sweep = I.predict_limit_crossing(p, (0.0, -0.05), PI, lims)
+    assert t == 0.0 and s == pytest.approx(0.2) and sweep == 1
+    assert I.predict_limit_crossing(p, (0.0, -0.05), PI, lims, math.radians(5.0))[0] > 0.0
+    assert I.predict_limit_crossing(p, (0.0, 0.05), PI, lims) is None  # coming back: no
+    # against a walk along the line
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(60):
+        p = rng.uniform(-0.4, 0.4, 2)
+        p_dot = rng.uniform(-0.2, 0.2, 2)
+        if abs(p[0] * p_dot[1] - p[1] * p_dot[0]) / np.linalg.norm(p_dot) < 0.02:
+            continue  # passes (almost) through the axis: the azimuth jumps, the walk would need a finer grid
+        pan = float(np.clip(math.atan2(p[1], p[0]) + rng.uniform(-0.2, 0.2), -PI, PI))
+        beyond = rng.choice([0.0, math.radians(5.0)])
+        got = I.predict_limit_crossing(p, p_dot, pan, lims, beyond)
+        ref = _line_crossing_by_walking(p, p_dot, pan, lims, beyond)
+        if got is not None and got[0] > 75.0:
+            continue  # beyond the walk
+        assert (got is None) == (ref is None), (p, p_dot, pan, got, ref)
+        if ref is not None:
+            assert got[0] == pytest.approx(ref[0], abs=2e-3) and got[2] == ref[2]
+            assert got[1] == pytest.approx(ref[1], rel=1e-3, abs=1e-3)
+            checked += 1
+    assert checked >= 5
+
+
+def _target_off_the_pan_axis(off_axis_deg, azimuth_rad, height=500.0):
+    """A UAV level at `height`, heading north, and a ship `off_axis_deg` off its pan axis at body azimuth."""
+    r = height * math.tan(math.radians(off_axis_deg))
+    # body FRD (heading north, level): x = north, y = east, z = down
+    north, east = r * math.cos(azimuth_rad), r * math.sin(azimuth_rad)
+    return np.array([east, north, -height])  # ship relative to the UAV, ENU
+
+
+def test_far_side_target_near_the_axis_starts_a_swing():
+    """A target on the far side of the pan axis cannot be centred by the tilt (it would have to pass -90 deg):
+    the pan swings toward it at full rate, the shorter way the limits allow; farther from the axis, no swing."""
+    cfg = I.IbvsConfig()
+    cam_h = 500.0
+
+    def step(pan, tilt, off_axis_deg, azimuth):
+        rel = _target_off_the_pan_axis(off_axis_deg, azimuth, cam_h)
+        euler = np.zeros(3)
+        cam, R_ec = F.camera_pose_world(np.array([0.0, 0.0, cam_h]), euler, MOUNT, pan, tilt)
+        P = R_ec.T @ (rel + np.array([0.0, 0.0, cam_h]) - cam)
+        u, v = FX * P[0] / P[2] + CX, FY * P[1] / P[2] + CY
+        ctl = I.Ibvs(cfg, FX, FY, CX, CY)
+        return ctl.step(_meas(pan=pan, tilt=tilt, u=u, v=v), np.zeros(3), P[2], MOUNT)
+
+    # pan -0.3 rad, tilt at -90 deg, target 8 deg off the axis almost behind the pan (azimuth -0.3 + pi - 0.2)
+    cmd, st = step(-0.3, -PI / 2, 8.0, -0.3 + PI - 0.2)
+    assert st.swing == 1 and cmd.pan_rate_rad_s == pytest.approx(cfg.max_pan_rate_rad_s)
+    assert cmd.tilt_rate_rad_s >= 0.0  # never pushed past the tilt limit
+    cmd, st = step(0.3, -PI / 2, 8.0, 0.3 - PI + 0.2)  # mirror image: the other way
+    assert st.swing == -1 and cmd.pan_rate_rad_s == pytest.approx(-cfg.max_pan_rate_rad_s)
+    # pan 1.0 rad, target at azimuth 1.0 + 2.4: the short way (+2.4 rad) would cross +pi, so the long way round
+    cmd, st = step(1.0, -PI / 2, 8.0, 1.0 + 2.4)
+    assert st.swing == -1
+    # outside the keyhole (30 deg off the axis > 18 deg half field of view): the law as is
+    cmd, st = step(0.3, -1.2, 30.0, 0.3 + PI - 0.2)
+    assert st.swing == 0
+    assert I.Ibvs(I.IbvsConfig(keyhole_swing=False), FX, FY, CX, CY).step(
+        _meas(pan=0.3, tilt=-PI / 2, u=CX, v=CY + 100.0), np.zeros(3), 500.0, MOUNT)[1].swing == 0
+
+
+@pytest.mark.parametrize("uav", [StraightUav([-600.0, -100.0, 500.0], 0.0),
+                                 CircleUav([-450.0, 250.0], 200.0, 500.0, theta0=PI)], ids=["straight", "circle"])
+def test_law_untouched_away_from_the_keyhole(uav):
+    on = _fly(uav, I.IbvsConfig(), 8.0)
+    off = _fly(uav, I.IbvsConfig(keyhole_swing=False), 8.0)
+    assert np.all(on["swing"] == 0)
+    np.testing.assert_array_equal(on["pan_cmd"], off["pan_cmd"])
+    np.testing.assert_array_equal(on["tilt_cmd"], off["tilt_cmd"])
+
+
+@pytest.mark.parametrize("lateral_miss_m", [0.0, 5.0, -5.0, 30.0])
+def test_overflight_keeps_the_target_in_the_image(lateral_miss_m):
+    """Straight and level over a still ship at 300 m: the line of sight passes (near) the pan axis and the
+    azimuth turns through 180 deg faster than the pan can follow. The plain law stalls with the target on
+    the far side of the axis (tilt pinned at -90 deg) and loses it; the swing keeps it in the image."""
+    uav = StraightUav([lateral_miss_m, -250.0, 300.0], 0.0)
+    on = _fly(uav, I.IbvsConfig(), 20.0, start_px=(CX, CY), ship_vel=np.zeros(3))
+    off = _fly(uav, I.IbvsConfig(keyhole_swing=False), 20.0, start_px=(CX, CY), ship_vel=np.zeros(3))
+    assert on["in_image"].all() and all(m == "track" for m in on["modes"])
+    assert on["err"][-1] < 1.0  # recentred behind the UAV
+    assert np.all(np.abs(on["pan"]) <= PI)
+    if abs(lateral_miss_m) <= 5.0:
+        assert on["swing"].any()
+        assert not off["in_image"].all()  # what the handling fixes
+    else:  # 5.7 deg off the axis at most: the pan keeps up, no swing, the law exactly as without the handling
+        assert not on["swing"].any() and off["in_image"].all()
+        np.testing.assert_array_equal(on["pan_cmd"], off["pan_cmd"])
+
+
+class RollReversalUav:
+    """Straight at V_UAV, nose 15 deg down, reversing its bank from -35 to +35 deg (cosine profile) from t0 over
+    tr s: the pan axis (body z) sweeps across a ship below and behind, as in the paper mission's Phase 2 entry."""
+
+    def __init__(self, p0, heading_ned, t0=1.0, tr=2.5):
+        self.p0, self.psi = np.asarray(p0, float), heading_ned
+        c = F.course_enu_from_heading_ned(heading_ned)
+        self.vel = V_UAV * np.array([math.cos(c), math.sin(c), 0.0])
+        self.t0, self.tr = t0, tr
+        self.r0, self.r1, self.pitch = math.radians(-35.0), math.radians(35.0), math.radians(-15.0)
+
+    def state(self, t):
+        tau = min(max((t - self.t0) / self.tr, 0.0), 1.0)
+        roll = self.r0 + (self.r1 - self.r0) * 0.5 * (1.0 - math.cos(PI * tau))
+        roll_rate = (self.r1 - self.r0) * PI / (2.0 * self.tr) * math.sin(PI * tau)
+        euler = np.array([roll, self.pitch, self.psi])
+        return self.p0 + self.vel * t, self.vel, euler, F.body_rates_from_euler_rates(euler, [roll_rate, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("ship_north_m", [-300.0, -200.0])
+def test_keyhole_pass_across_the_pan_limit_keeps_the_target_in_the_image(ship_north_m):
+    """The paper-mission case: 880 m above a ship 450-500 m away (moving at 5 m/s), banked toward it, the
+    ship 12 deg off the pan axis at body azimuth -107 deg (or 11 deg at -80 deg); the bank reversal sweeps
+    the axis past it (closest 5 deg; 0.3 deg) and its azimuth runs round the back to about +100 deg.
+    Followed by the plain law, the pan runs into its -180 deg stop (or stalls with the ship on the far side
+    of the axis, tilt at -90 deg) and loses the ship. With the handling the pan unwinds the other way round
+    while the ship is near the axis: in the image throughout (within 520 px of the centre)."""
+    uav = RollReversalUav([-400.0, -ship_north_m, 880.0], 0.0)
+    on = _fly(uav, I.IbvsConfig(), 7.0, start_px=(CX, CY))
+    off = _fly(uav, I.IbvsConfig(keyhole_swing=False), 7.0, start_px=(CX, CY))
+    assert on["in_image"].all() and all(m == "track" for m in on["modes"])
+    assert np.max(np.abs(on["pan"])) < PI - 0.5  # never near a pan stop
+    starts = np.nonzero(np.diff(on["swing"]) != 0)[0]
+    assert len(starts) == 2 and on["swing"][starts[0] + 1] == 1  # one swing, unwinding away from -180 deg
+    assert on["off_axis_deg"][starts[0] + 1] < 13.0  # started while the ship was near the axis
+    assert on["err"][-1] < 1.0
+    assert not off["in_image"].all()
+    if ship_north_m == -300.0:
+        assert np.min(off["pan"]) == -PI  # the plain law pins the pan at its stop
