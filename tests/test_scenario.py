@@ -59,10 +59,21 @@ def test_overrides_by_path():
     assert s.initial.airspeed_m_s == 25 and s.seed == 4
 
 
-@pytest.mark.parametrize("path", sorted(SCENARIO_DIR.rglob("*.yaml")), ids=lambda p: p.name)
+BATCH_DIR = SCENARIO_DIR / "batches"
+
+
+@pytest.mark.parametrize("path", sorted(p for p in SCENARIO_DIR.rglob("*.yaml") if BATCH_DIR not in p.parents),
+                         ids=lambda p: p.name)
 def test_shipped_scenarios_validate(path):
     scenario, text = load_scenario(path)
     assert scenario.name == path.stem and text
+
+
+@pytest.mark.parametrize("path", sorted(BATCH_DIR.glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_batch_specs_validate(path, tmp_path):
+    from fwsim.batch import load_spec
+    name, jobs = load_spec(path, tmp_path)
+    assert name and jobs
 
 
 def test_cli_reports_bad_scenario_in_one_line(tmp_path):
