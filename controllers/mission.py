@@ -248,6 +248,7 @@ class FlightSoftware:
         ref = np.array([pos[0], pos[1], pos[2] - h])
         g = self.cfg.detection_gate
         b = np.asarray(meas.det_bbox_px, dtype=float)
+        box = None
         if course is not None and np.all(np.isfinite(b)):
             box = predicted_box_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref, course)
             if box is not None:
@@ -256,7 +257,7 @@ class FlightSoftware:
                     if abs(det - pred) > g.box_size_tolerance * pred + g.box_size_tolerance_px:
                         return meas, f"box {name} off the model's"
         off = box_centre_offset_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
-                                   course, h, tm.headings_when_unknown)
+                                   course, h, tm.headings_when_unknown, box_px=box)
         if off is None:
             return meas, ""
         return dataclasses.replace(meas, det_u_px=float(meas.det_u_px) - float(off[0]),

@@ -129,7 +129,7 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
 
 def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam,
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
-                         headings_when_unknown: int = 8) -> np.ndarray | None:
+                         headings_when_unknown: int = 8, box_px: np.ndarray | None = None) -> np.ndarray | None:
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
     ``ref_enu_m``: the ship's waterline centre (estimated); the tracked point is
@@ -137,7 +137,8 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     bow, counter-clockwise from East (``atan2(v_n, v_e)``), or None when
     unknown (then the offset is averaged over ``headings_when_unknown``
     headings). None when the ship (or the tracked point) is not wholly in front
-    of the camera, or no part of it falls in the image.
+    of the camera, or no part of it falls in the image. ``box_px``: the
+    :func:`predicted_box_px` for ``course_enu_rad`` when the caller already has it.
     """
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     ref = np.asarray(ref_enu_m, dtype=float)
@@ -150,7 +151,8 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
     offsets = []
     for course in courses:
-        box = predicted_box_px(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref, course)
+        box = box_px if box_px is not None and course_enu_rad is not None else \
+            predicted_box_px(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref, course)
         if box is None:
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
