@@ -115,3 +115,20 @@ def test_idle_dive_stays_bounded(gamma_deg):
     alpha = np.degrees(tr.arr("alpha_rad"))
     assert alpha.min() > -10.0 and alpha.max() < 10.0
     assert math.degrees(flight_path_rad(tr.states[-1])) == pytest.approx(gamma_deg, abs=1.0)
+
+
+def test_adverse_yaw_from_roll_rate_scales_with_lift():
+    """Cnp = -CL/8 (strip theory): the yaw moment per unit of roll rate follows the wing's lift
+    coefficient, so it is the cruise value when lifting and near zero when the wing does not lift."""
+    a = Airframe("fwuav")
+    s = a.reset([0.0, 0.0, 500.0], 22.0, 0.0, 0.0)
+    for elevator in (0.0, 0.25):  # trimmed, then pushed toward zero lift
+        for _ in range(30):
+            s = a.step(ActuatorCommand(s.t_s, 0.5, elevator, 0.0, a.trim.throttle_norm))
+        p = a.property("velocities/p-aero-rad_sec")
+        qs = a.property("aero/qbar-area")
+        cl = a.property("aero/force/lift-alpha") / qs
+        cnp = a.property("aero/moment/yaw-p") / (qs * a.property("metrics/bw-ft") * a.property("aero/bi2vel") * p)
+        assert abs(p) > 0.2
+        assert cnp == pytest.approx(-cl / 8.0, rel=1e-6)
+    assert abs(cl) < 0.3  # the push really unloaded the wing
