@@ -18,10 +18,14 @@ Two command modes, both used by the paper:
 (b) ``AccelCommand`` (what BPNG needs, DESIGN.md section 5): airspeed and an
     acceleration perpendicular to the velocity. Bank-to-turn: the specific
     force the wing must make is f = a_perp - g_perp (gravity compensated);
-    the bank about the velocity is chosen so the lift points along f (limited
-    to max_bank_rad), the pitch rate makes its size (feed-forward a/V plus a
-    loop on the accelerometer's normal specific force), and the rudder only
-    coordinates (sideslip to zero).
+    the bank about the velocity is chosen so the lift points along f
+    (``bank_from_specific_force``: a positive load, past 90 deg of bank when
+    f points below the velocity's horizon, or a negative load nearer
+    upright, whichever is nearer the present bank; limited to
+    max_bank_rad), the aircraft rolls about the velocity (stability axis) to
+    it, the pitch rate makes its size (feed-forward a/V plus a loop on the
+    accelerometer's normal specific force), and the rudder only coordinates
+    (sideslip to zero).
 
 Loops are named output_from_input (mavsim style). Gains come from the
 aircraft's ``autopilot.yaml``: feedback gains are scaled by (V_ref / V)^2,
@@ -77,6 +81,7 @@ class AutopilotParams(BaseModel):
     normal_accel_ki: Gain
     max_bank_rad: Gain
     max_roll_rate_rad_s: Gain
+    max_roll_accel_rad_s2: Gain
     max_pitch_rate_rad_s: Gain
     max_load_factor: Gain
     min_load_factor: Gain
@@ -125,6 +130,28 @@ class _PI:
         return _clip(out, self.lo, self.hi)
 
 
+def bank_from_specific_force(fl: float, fr: float, bank: float, max_bank: float,
+                             max_push_m_s2: float = math.inf) -> float:
+    """Bank about the velocity that points the lift along the wanted specific force (fl up, fr right).
+
+    Two ways give the force: a positive load with the lift along it (bank
+    ``atan2(fr, fl)``, beyond 90 deg when the force points below the
+    horizon of the velocity), or, when the force has a downward part, a
+    negative load with the wing nearer upright (bank ``atan2(-fr, -fl)``).
+    Their banks lie 180 deg apart; the one nearer the present bank is
+    taken, so the set-point never flips between them while the aircraft
+    rolls toward one (a flip costs a half roll in the last seconds of a
+    dive). The negative load is an option only while the force is within
+    ``max_push_m_s2`` (what the wing may push); both banks are limited to
+    ``max_bank``.
+    """
+    pull = _clip(math.atan2(fr, fl), -max_bank, max_bank)
+    if fl >= 0.0 or math.hypot(fl, fr) > max_push_m_s2:
+        return pull
+    push = _clip(math.atan2(-fr, -fl), -max_bank, max_bank)
+    return pull if abs(wrap_pi(pull - bank)) <= abs(wrap_pi(push - bank)) else push
+
+
 class Autopilot:
     """Airspeed, body-rate and acceleration loops of a small fixed wing."""
 
@@ -139,6 +166,7 @@ class Autopilot:
         self.elevator_from_pitch_rate = _PI(v("pitch_rate_kp"), v("pitch_rate_ki"), -1.0, 1.0)
         self.rudder_from_sideslip = _PI(v("sideslip_kp"), v("sideslip_ki"), -1.0, 1.0)
         self._normal_accel_integ = 0.0
+        self._p_sp = 0.0
 
     # ------------------------------------------------------------------ modes
     def _rates_from_rate_command(self, cmd: RateCommand, st: AirframeState, V: float):
@@ -176,18 +204,19 @@ class Autopilot:
         l0 = l0 / n_l0 if n_l0 > 1e-3 else -z_b
         r0 = cross3(vhat, l0)
         fl, fr = float(f_req @ l0), float(f_req @ r0)
-        if fl >= 0.0:
-            bank_sp = math.atan2(fr, fl)
-        else:  # push over: keep the wing upright and fly a negative load
-            bank_sp = math.atan2(-fr, -fl)
         max_bank = pv("max_bank_rad")
-        bank_sp = _clip(bank_sp, -max_bank, max_bank)
         lift_dir = -z_b
         bank = math.atan2(float(lift_dir @ r0), float(lift_dir @ l0))
+        bank_sp = bank_from_specific_force(fl, fr, bank, max_bank, -pv("min_load_factor") * G_M_S2)
         # rotation of the velocity that the commanded acceleration asks for
         omega_v = cross3(vhat, a_perp) / speed
         p_ff, q_ff, r_ff = float(omega_v @ x_b), float(omega_v @ y_b), float(omega_v @ z_b)
-        p = p_ff + pv("bank_kp") * wrap_pi(bank_sp - bank)
+        # bank about the velocity (stability axis), not the body x axis: a body-x roll turns the angle of
+        # attack into sideslip (p sin(alpha)), which at a dive's dynamic pressure is a large side force
+        roll_v = pv("bank_kp") * wrap_pi(bank_sp - bank)
+        ca, sa = math.cos(st.alpha_rad), math.sin(st.alpha_rad)
+        p = p_ff + roll_v * ca
+        r_ff = r_ff + roll_v * sa
         # normal specific force: wanted along the current lift direction, measured by the accelerometer
         n_sp = _clip(float(f_req @ lift_dir), pv("min_load_factor") * G_M_S2, pv("max_load_factor") * G_M_S2)
         n_meas = -float(st.specific_force_frd_m_s2[2])
@@ -215,6 +244,8 @@ class Autopilot:
         else:
             p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_accel_command(cmd, st, V)
         p_sp = _clip(p_sp, -pv("max_roll_rate_rad_s"), pv("max_roll_rate_rad_s"))
+        dp = pv("max_roll_accel_rad_s2") * dt  # the roll-rate set-point slews: a step asks what no aileron gives
+        p_sp = self._p_sp = _clip(p_sp, self._p_sp - dp, self._p_sp + dp)
         q_sp = _clip(q_sp, -pv("max_pitch_rate_rad_s"), pv("max_pitch_rate_rad_s"))
         p, q, r = st.body_rates_frd_rad_s
 

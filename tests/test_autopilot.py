@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from controllers.script import perpendicular_axes
-from fwsim.autopilot import load_autopilot_params
+from fwsim.autopilot import bank_from_specific_force, load_autopilot_params
 from fwsim.messages import AccelCommand, RateCommand
-from flight import Flight
+from flight import Flight, flight_path_rad
 
 DEG = math.pi / 180.0
 
@@ -121,3 +121,44 @@ def test_accel_mode_pull_up_and_push_over(up):
     assert np.max(np.abs(np.degrees(tr.arr("euler_ned_rad")[w, 0]))) < 2.0
     gamma_rate = np.diff(np.arcsin(tr.arr("vel_enu_m_s")[w, 2] / np.linalg.norm(tr.arr("vel_enu_m_s")[w], axis=1)))
     assert np.sign(gamma_rate.mean()) == np.sign(up)
+
+
+def test_bank_from_specific_force_pull_push_and_no_flip():
+    """The bank that points the lift along the wanted force: a positive load beyond 90 deg or a negative
+    load nearer upright, whichever is nearer the present bank; never a flip between them as the force
+    crosses the velocity's horizon."""
+    mb = math.radians(137.0)
+    assert bank_from_specific_force(9.8, 0.0, 0.0, mb) == pytest.approx(0.0)
+    assert bank_from_specific_force(5.0, 5.0, 0.0, mb) == pytest.approx(math.radians(45.0))
+    # left and down: pull past -90 deg when already banked left, push (bank right, negative load) from upright
+    assert bank_from_specific_force(-3.0, -4.0, math.radians(-60.0), mb) == pytest.approx(math.atan2(-4.0, -3.0))
+    assert bank_from_specific_force(-3.0, -4.0, math.radians(10.0), mb) == pytest.approx(math.atan2(4.0, 3.0))
+    # a push the wing cannot make (more than max_push) is flown as a pull
+    assert bank_from_specific_force(-3.0, -4.0, math.radians(10.0), mb, max_push_m_s2=4.9) == pytest.approx(
+        math.atan2(-4.0, -3.0))
+    # the force's up part goes from +3 to -3 while it points left: the set-point moves smoothly
+    bank, prev = math.radians(-60.0), None
+    for fl in np.linspace(3.0, -3.0, 61):
+        bank = bank_from_specific_force(fl, -6.0, bank, mb)
+        if prev is not None:
+            assert abs(bank - prev) < math.radians(5.0)
+        prev = bank
+
+
+def test_accel_mode_left_and_down_in_a_steep_dive_rolls_past_90_deg():
+    """In a 45 deg dive, 8 m/s^2 left and 12 m/s^2 down (more than gravity's normal part): the autopilot
+    rolls the lift past 90 deg and pulls; after 1 s the achieved acceleration is within 30 % of the
+    command (which turns with the velocity as the dive steepens by ~15 deg/s), the bank set-point stays
+    on the left side throughout, and the dive steepens."""
+    f = Flight()
+    f.fly(1.0, _accel(0.0, 0.0))
+    f.fly(8.0, _accel(0.0, -6.0), stop=lambda s: flight_path_rad(s) < math.radians(-45.0))
+    assert flight_path_rad(f.state) < math.radians(-44.0)
+    gamma0 = flight_path_rad(f.state)
+    tr = f.fly(2.0, _accel(-8.0, -12.0))
+    bank_sp = tr.sp("bank_sp_rad")
+    assert np.all(bank_sp < -math.radians(90.0)), np.degrees(bank_sp).max()
+    w = tr.window(1.0, 2.0)
+    err = np.linalg.norm(tr.sp("accel_enu_m_s2")[w] - tr.sp("accel_sp_enu_m_s2")[w], axis=1)
+    assert np.max(err) < 0.3 * math.hypot(8.0, 12.0), np.max(err)
+    assert flight_path_rad(tr.states[-1]) < gamma0 - math.radians(10.0)
