@@ -140,7 +140,7 @@ switch farther out.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -176,6 +176,20 @@ class BpngConfig(BaseModel):
     min_tgo_s: float = Field(0.5, gt=0, le=10, description="floor of t_go = |r| / |V_p|, s")
     max_accel_m_s2: float = Field(
         25.0, gt=0, le=200, description="cap on |u| (direction kept), m/s^2, gravity not included")
+    aim_at_contact: bool = Field(
+        True,
+        description="steer to where the approach along the impact direction first meets the ship's outline "
+                    "(controllers.target_model), not to the aim point inside it: the law's impact angle is "
+                    "reached where the path ends, and a dive meets the deck, side or superstructure up to "
+                    "~20 m before the aim point")
+    contact_standoff_m: float = Field(
+        2.0, ge=0, le=100,
+        description="the steering point lies this much farther out than the outline's surface (the last "
+                    "metres are flown straight, along the impact direction through the aim point)")
+    endgame_tgo_s: float = Field(
+        0.1, ge=0, le=10,
+        description="below this time to go to the steering point the command is zero: the UAV flies "
+                    "straight (gravity compensated) where the LOS rate of a near hit grows without bound")
     aim_height_m: float = Field(
         0.0, ge=-50, le=100,
         description="height of the aim point above the given target position (the ship's waterline "
@@ -309,6 +323,8 @@ class BpngStatus:
     accel_bias: np.ndarray  # (3,) -(N_f theta / t_go) n x V_p, m/s^2
     accel_cmd: np.ndarray  # (3,) commanded (perpendicular, capped), m/s^2
     saturated: bool = False  # the max_accel cap was active
+    aim_enu_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) the point steered to
+    endgame: bool = False  # inside endgame_tgo_s: flying straight
 
 
 class Bpng:
@@ -319,29 +335,37 @@ class Bpng:
         self.v_f_enu = vf_enu(self.cfg.impact_flight_path_deg, self.cfg.impact_heading_deg)
         self.v_f_enu.setflags(write=False)
         self._aim_offset = np.array([0.0, 0.0, self.cfg.aim_height_m])
+        self._endgame = False  # latched: the endgame lasts to the impact
 
     def aim_point(self, target_pos_enu) -> np.ndarray:
         """The point BPNG steers to: the target position raised by ``aim_height_m``."""
         return np.asarray(target_pos_enu, dtype=float) + self._aim_offset
 
     def step(self, t_s: float, uav_pos_enu, uav_vel_enu, target_pos_enu,
-             target_vel_enu) -> tuple[AccelCommand, BpngStatus]:
-        """One guidance update (positions m, velocities m/s, world ENU)."""
+             target_vel_enu, aim_enu=None) -> tuple[AccelCommand, BpngStatus]:
+        """One guidance update (positions m, velocities m/s, world ENU).
+
+        ``aim_enu``: the point to steer to, when the caller has placed it
+        (e.g. on the ship's surface); by default :meth:`aim_point` of the target.
+        """
         cfg = self.cfg
         p = np.asarray(uav_pos_enu, dtype=float)
         v = np.asarray(uav_vel_enu, dtype=float)
-        q = self.aim_point(target_pos_enu)
+        q = self.aim_point(target_pos_enu) if aim_enu is None else np.asarray(aim_enu, dtype=float)
         vq = np.asarray(target_vel_enu, dtype=float)
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(q))
                 and np.all(np.isfinite(vq))):
             nan3 = np.full(3, np.nan)
             return (AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=np.zeros(3)),
-                    BpngStatus(t_s, math.nan, math.nan, nan3, math.nan, nan3, nan3, np.zeros(3)))
+                    BpngStatus(t_s, math.nan, math.nan, nan3, math.nan, nan3, nan3, np.zeros(3), aim_enu_m=nan3))
         k = bpng_accel(q - p, vq - v, v, self.v_f_enu, n_sigma=cfg.n_sigma, n_f=cfg.n_f,
                        min_tgo_s=cfg.min_tgo_s, max_accel_m_s2=cfg.max_accel_m_s2)
-        cmd = AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=k.accel_cmd.copy())
+        # once inside, stay inside: past the steering point the range grows again and the LOS turns round
+        endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * float(np.linalg.norm(v))
+        a = np.zeros(3) if endgame else k.accel_cmd.copy()
+        cmd = AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=a)
         status = BpngStatus(t_s=t_s, t_go_s=float(k.t_go_s), range_m=float(k.range_m),
                             los_rate_rad_s=k.los_rate_rad_s, theta_err_rad=float(k.theta_err_rad),
-                            accel_pn=k.accel_pn, accel_bias=k.accel_bias, accel_cmd=k.accel_cmd,
-                            saturated=bool(k.saturated))
+                            accel_pn=k.accel_pn, accel_bias=k.accel_bias, accel_cmd=a,
+                            saturated=bool(k.saturated) and not endgame, aim_enu_m=q.copy(), endgame=endgame)
         return cmd, status

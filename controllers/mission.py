@@ -32,6 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from controllers.bpng import Bpng
 from controllers.camera_model import PinholeCamera, depth_on_plane
+from controllers.nav import Navigation
 from controllers.nmpc import Nmpc
 from controllers.ibvs import Ibvs
 from controllers.path import OrbitFollower, PathFollower
@@ -84,8 +85,14 @@ class SwitchConfig(BaseModel):
     dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long")
     min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
     approach_window_deg: float | None = Field(
-        10.0, gt=0, le=180,
-        description="bearing from the UAV to the target within this of the impact heading (none: any bearing)")
+        5.0, gt=0, le=180,
+        description="bearing from the UAV to the target within this of the impact heading plus the lead "
+                    "(none: any bearing)")
+    approach_lead_deg: float = Field(
+        5.0, ge=-90, le=90,
+        description="the window's centre lies this far past the impact heading in the direction the UAV goes "
+                    "round the target: the middle of the terminal law's capture region from a loiter, which "
+                    "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,6 +130,7 @@ class FlightSoftware:
         if self.kind == "script":
             self._script = ScriptedCommands(controllers_cfg.script)
             return
+        self._nav = Navigation(controllers_cfg.navigation)
         path = controllers_cfg.initial_path
         self._path = PathFollower(path.airspeed_m_s, initial_cfg.pos_enu_m, math.radians(initial_cfg.heading_deg),
                                   path.waypoints_enu_m, path.max_bank_deg)
@@ -211,14 +219,44 @@ class FlightSoftware:
             self._in_tol_since = meas.t_s
         if meas.t_s - self._in_tol_since < sw.dwell_s:
             return ""
-        rel = self._target(meas.t_s)[0][:2] - meas.pos_enu_m[:2]
+        target, target_vel = self._target(meas.t_s)
+        rel = target[:2] - meas.pos_enu_m[:2]
         bearing = math.degrees(math.atan2(rel[0], rel[1]))  # clockwise from North
         off = (bearing - self.cfg.bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
-        if sw.approach_window_deg is not None and abs(off) > sw.approach_window_deg:
+        rel_vel = np.asarray(meas.vel_enu_m_s, float)[:2] - target_vel[:2]
+        clockwise = float(rel[0] * rel_vel[1] - rel[1] * rel_vel[0]) > 0.0  # the bearing grows
+        lead = sw.approach_lead_deg if clockwise else -sw.approach_lead_deg
+        if sw.approach_window_deg is not None and abs(off - lead) > sw.approach_window_deg:
             return ""
         return (f"radius error {radial:+.1f} m (tol {sw.radius_tol_m:g}), altitude error {alt_err:+.1f} m "
                 f"(tol {sw.altitude_tol_m:g}) for {meas.t_s - self._in_tol_since:.1f} s; bearing to target "
-                f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading")
+                f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading "
+                f"({'clockwise' if clockwise else 'counter-clockwise'} round the target, lead {lead:+g} deg)")
+
+    def _contact_aim(self, meas: Measurements, target: np.ndarray, target_vel: np.ndarray) -> np.ndarray | None:
+        """Where the approach through the aim point along the impact direction (relative to the moving ship)
+        first meets the ship's outline, ``contact_standoff_m`` farther out; None: steer to the aim point.
+
+        The ship's heading comes from the estimated course; when the course is unknown the deepest entry
+        over ``headings_when_unknown`` headings is taken (the steering point then lies in the air at worst,
+        and the last metres are flown straight)."""
+        b = self.cfg.bpng
+        if not b.aim_at_contact:
+            return None
+        aim = self._bpng.aim_point(target)
+        speed = max(float(np.linalg.norm(meas.vel_enu_m_s)), 1.0)
+        d = speed * self._bpng.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
+        d = d / max(float(np.linalg.norm(d)), 1e-9)
+        tm = self.cfg.target_model
+        spd = math.hypot(float(target_vel[0]), float(target_vel[1]))
+        courses = [math.atan2(float(target_vel[1]), float(target_vel[0]))] if spd >= tm.min_speed_for_course_m_s \
+            else [2.0 * math.pi * k / tm.headings_when_unknown for k in range(tm.headings_when_unknown)]
+        depth = 0.0
+        for c in courses:
+            cs, sn = math.cos(c), math.sin(c)
+            R_se = np.array([[cs, sn, 0.0], [-sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ENU -> ship (x bow, y port)
+            depth = max(depth, self._outline.entry_depth_m(R_se @ (aim - target), R_se @ d))
+        return aim - (depth + b.contact_standoff_m) * d
 
     def _gate(self, meas: Measurements) -> str:
         """Why the UKF should not use this detection ('' to use it); see :class:`DetectionGateConfig`."""
@@ -266,6 +304,7 @@ class FlightSoftware:
     def step(self, meas: Measurements) -> FlightSoftwareOutput:
         if self.kind == "script":
             return self._scripted(meas)
+        meas = self._nav.step(meas)  # the UAV's position between GNSS fixes
         events = []
         logs = {}
         motion = CameraMotion.from_measurements(meas, self.mount) if math.isfinite(meas.pan_rad) else None
@@ -330,7 +369,8 @@ class FlightSoftware:
             target, target_vel = self._target(meas.t_s)
             target = target.copy()
             target[2] = 0.0  # the estimate's plane height is a camera-model detail; BPNG adds its aim height
-            cmd, bstat = self._bpng.step(meas.t_s, meas.pos_enu_m, meas.vel_enu_m_s, target, target_vel)
+            cmd, bstat = self._bpng.step(meas.t_s, meas.pos_enu_m, meas.vel_enu_m_s, target, target_vel,
+                                         self._contact_aim(meas, target, target_vel))
             logs["/fsw/bpng"] = bstat
             status = FlightSoftwareStatus(meas.t_s, 3, "terminal", "accel", locked=True, lock_t_s=self._search.lock_t_s,
                                           radial_err_m=self._radial_error(meas))

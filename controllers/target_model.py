@@ -95,11 +95,36 @@ class ShipOutline:
         def box(x0, x1, y0, y1, z0, z1):
             return [(x, y, z) for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
 
-        pts += box(-0.32 * L, -0.04 * L, -0.36 * W, 0.36 * W, hh, 0.5 * H)  # deckhouse
-        pts += box(-0.20 * L, -0.07 * L, -0.42 * W, 0.42 * W, 0.5 * H, 0.65 * H)  # wheelhouse
-        pts += box(-0.30 * L, -0.23 * L, -0.08 * W, 0.08 * W, 0.5 * H, 0.85 * H)  # funnel
+        solids = [(-0.32 * L, -0.04 * L, -0.36 * W, 0.36 * W, hh, 0.5 * H),  # deckhouse
+                  (-0.20 * L, -0.07 * L, -0.42 * W, 0.42 * W, 0.5 * H, 0.65 * H),  # wheelhouse
+                  (-0.30 * L, -0.23 * L, -0.08 * W, 0.08 * W, 0.5 * H, 0.85 * H)]  # funnel
+        for b in solids:
+            pts += box(*b)
         pts += box(-0.145 * L, -0.125 * L, -0.015 * W, 0.015 * W, 0.65 * H, H)  # mast
         self.points_ship_m = np.array(pts, dtype=float)
+        #: boxes (lo, hi) a dive can strike: the hull (its bow taper ignored) and the solid superstructure
+        #: (the mast is too thin to count on)
+        self.solid_boxes_ship_m = [(np.array([-0.5 * L, -0.5 * W, 0.0]), np.array([0.5 * L, 0.5 * W, hh]))] + [
+            (np.array([b[0], b[2], b[4]]), np.array([b[1], b[3], b[5]])) for b in solids]
+
+    def entry_depth_m(self, point_ship_m, dir_ship) -> float:
+        """How far before ``point_ship_m`` a straight path along ``dir_ship`` (unit, ship frame) first meets
+        the ship's solid outline: 0 when the point lies outside it and nothing is in the way."""
+        p = np.asarray(point_ship_m, dtype=float)
+        d = np.asarray(dir_ship, dtype=float)
+        depth = 0.0
+        for lo, hi in self.solid_boxes_ship_m:  # slabs: the ray p - s d, s >= 0, inside the box for s in [a, b]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t0, t1 = (p - lo) / d, (p - hi) / d  # s where p - s d crosses each face
+            inside = (p >= lo) & (p <= hi)
+            par = d == 0.0
+            if np.any(par & ~inside):
+                continue
+            a = float(np.max(np.where(par, -np.inf, np.minimum(t0, t1))))
+            b = float(np.min(np.where(par, np.inf, np.maximum(t0, t1))))
+            if b >= max(a, 0.0):
+                depth = max(depth, b)
+        return depth
 
 
 def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,

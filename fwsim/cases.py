@@ -1,9 +1,10 @@
 """Generated scenarios: the terminal phase flown from the loiter ring, for sweeps and tests.
 
 :func:`terminal_case` starts the UAV on the Phase 2 loiter circle (R, H) around
-the ship's start point, flying clockwise (ship on its right), ``arc_deg`` of
-arc before the bearing to the ship equals the impact heading, with the gimbal
-on the ship. The lock comes at once, the NMPC loiter holds the ring, and the
+the ship's start point, going clockwise round the moving ship (ship on its
+right; heading such that the motion relative to the ship runs along the
+circle), ``arc_deg`` of arc before the bearing to the ship equals the impact
+heading, with the gimbal on the ship. The lock comes at once, the NMPC loiter holds the ring, and the
 logged 2 -> 3 switch fires inside its approach window about 10 s in; the dive
 takes ~20-25 s. Everything else (UKF, ship model, BPNG gains) is the paper
 mission's, so a case isolates the terminal phase of the full chain in ~35 s of
@@ -23,14 +24,29 @@ from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
 __all__ = ["terminal_case"]
 
 
+def _orbit_heading_deg(bearing_rad: float, ship_heading_deg: float, ship_speed_m_s: float,
+                       airspeed_m_s: float) -> float:
+    """Heading (deg, clockwise from North) that moves the UAV clockwise around the moving ship, relative
+    to it along the circle (no radial part): the steady loiter the NMPC would settle into. Without it a
+    fast ship's loiter can settle into the other orbit, which goes the opposite way round relative to the
+    ship (both keep the radius), and reaches the approach window a lap later."""
+    t_hat = np.array([math.sin(bearing_rad - math.pi / 2), math.cos(bearing_rad - math.pi / 2)])  # ship on the right
+    hs = math.radians(ship_heading_deg)
+    vs = ship_speed_m_s * np.array([math.sin(hs), math.cos(hs)])
+    along = float(vs @ t_hat)
+    w = -along + math.sqrt(max(along**2 - float(vs @ vs) + airspeed_m_s**2, 0.0))  # V_uav = V_ship + w t_hat
+    v = vs + w * t_hat
+    return math.degrees(math.atan2(v[0], v[1]))
+
+
 def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float, ship_speed_m_s: float,
                   seed: int = 1, arc_deg: float = 25.0, radius_m: float = 500.0, altitude_m: float = 500.0,
-                  duration_s: float = 90.0) -> dict:
+                  duration_s: float = 90.0, airspeed_m_s: float = 22.0) -> dict:
     """A scenario (as a dict, ready for ``yaml.safe_dump`` / ``parse_scenario``) for one terminal case."""
     d = copy.deepcopy(yaml.safe_load((SCENARIO_DIR / "paper_mission.yaml").read_text()))
     b0 = math.radians(psi_f_deg - arc_deg)  # bearing UAV -> ship at the start; clockwise it grows to psi_f
     pos = np.array([-radius_m * math.sin(b0), -radius_m * math.cos(b0), altitude_m])
-    heading_deg = math.degrees(b0) - 90.0  # the ship abeam on the right
+    heading_deg = _orbit_heading_deg(b0, ship_heading_deg, ship_speed_m_s, airspeed_m_s)
     euler = np.array([0.0, 0.0, math.radians(heading_deg)])
     mount = np.array(d["camera"]["gimbal"]["mount_offset_frd_m"], dtype=float)
     R = dcm_enu_from_frd(euler)
@@ -38,7 +54,7 @@ def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float,
     d.update(name=f"terminal_th{theta_f_deg:+.0f}_psi{psi_f_deg:.0f}_ship{ship_heading_deg:.0f}at{ship_speed_m_s:g}",
              description="terminal phase from the loiter ring (fwsim.cases.terminal_case)", seed=int(seed),
              duration_s=float(duration_s))
-    d["initial"] = {"pos_enu_m": [round(float(x), 3) for x in pos], "airspeed_m_s": 22.0,
+    d["initial"] = {"pos_enu_m": [round(float(x), 3) for x in pos], "airspeed_m_s": float(airspeed_m_s),
                     "heading_deg": round(heading_deg % 360.0, 4)}
     d["target"] = {"initial_pos_enu_m": [0.0, 0.0, 0.0], "heading_deg": float(ship_heading_deg),
                    "speed_m_s": float(ship_speed_m_s), "motion": {"model": "constant_velocity"}}

@@ -121,6 +121,7 @@ class Measurements:
     body_rates_frd_rad_s: np.ndarray  # (3,) gyroscopes omega_p
     airspeed_m_s: float  # pitot
     height_above_sea_m: float  # altimeter (h in the depth model d = h / cos alpha)
+    nav_t_s: float = math.nan  # when the position and velocity fix was taken (they are held between fixes)
     pan_rad: float = math.nan  # gimbal encoders
     tilt_rad: float = math.nan
     pan_rate_rad_s: float = math.nan

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from controllers.bpng import BpngConfig
 from controllers.ibvs import IbvsConfig
 from controllers.mission import DetectionGateConfig, ReacquireConfig, SwitchConfig
+from controllers.nav import NavigationConfig
 from controllers.nmpc import NmpcConfig
 from controllers.search import AcquisitionConfig
 from controllers.target_model import ShipModelConfig
@@ -120,6 +121,7 @@ class Orbit(_Strict):
 
 class Controllers(_Strict):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
+    navigation: NavigationConfig = Field(default_factory=NavigationConfig)
     script: list[ScriptStep] = Field(default_factory=list)
     initial_path: InitialPath = Field(default_factory=InitialPath)
     acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)

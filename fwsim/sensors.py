@@ -83,14 +83,14 @@ class Sensors:
         if self._gnss.due(t):
             self._gnss.value = (uav.pos_enu_m + self._n("position", c.position_noise_m, 3),
                                 uav.vel_enu_m_s + self._n("velocity", c.velocity_noise_m_s, 3),
-                                uav.pos_enu_m)
+                                uav.pos_enu_m, t)
         if self._ahrs.due(t):
             self._ahrs.value = (uav.euler_ned_rad + self._n("attitude", c.attitude_noise_rad, 3),
                                 uav.body_rates_frd_rad_s + self._n("gyro", c.gyro_noise_rad_s, 3))
         if self._air.due(t):
             self._air.value = (uav.airspeed_m_s + self._n("airspeed", c.airspeed_noise_m_s),
                                uav.height_above_sea_m + self._n("height", c.height_noise_m))
-        pos, vel, pos_true = self._gnss.value
+        pos, vel, pos_true, nav_t = self._gnss.value
         euler, rates = self._ahrs.value
         airspeed, height = self._air.value
         kw = {}
@@ -109,4 +109,5 @@ class Sensors:
             kw.update(det_new=detection is not None, det_valid=det.detected, det_exposure_t_s=det.exposure_t_s,
                       det_u_px=det.u_px, det_v_px=det.v_px, det_bbox_px=det.bbox_px)
         return Measurements(t_s=t, pos_enu_m=pos, vel_enu_m_s=vel, euler_ned_rad=euler,
-                            body_rates_frd_rad_s=rates, airspeed_m_s=airspeed, height_above_sea_m=height, **kw)
+                            body_rates_frd_rad_s=rates, airspeed_m_s=airspeed, height_above_sea_m=height, nav_t_s=nav_t,
+                            **kw)

@@ -339,3 +339,22 @@ def test_flipped_bias_sign_misses_the_impact_angle():
     miss, gam, hdg, _, _ = _fly(p, v, q, vq, vf, bias_sign=-1.0)
     err = max(abs(gam[0] - th), abs((hdg[0] - ps + 180.0) % 360.0 - 180.0))
     assert err > 2.0 * ANGLE_DEG, (miss[0], gam[0], hdg[0])  # ~11 deg: arrives at -19 deg instead of -30
+
+
+def test_endgame_flies_straight_and_the_caller_may_place_the_aim():
+    """Inside endgame_tgo_s of the steering point the command is zero, to the impact; ``aim_enu`` replaces
+    the aim point."""
+    b = Bpng(BpngConfig(endgame_tgo_s=0.25))
+    v = np.array([0.0, 40.0, -20.0])
+    aim = np.array([3.0, 9.0, -2.0])  # 9.7 m ahead, off the velocity: PN would command a large turn
+    cmd, st = b.step(0.0, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=aim)
+    assert st.endgame and np.all(cmd.accel_enu_m_s2 == 0.0)
+    assert st.aim_enu_m == pytest.approx(aim)
+    far = np.array([30.0, 90.0, -60.0])
+    cmd, st = b.step(0.1, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=far)
+    assert st.endgame and np.all(cmd.accel_enu_m_s2 == 0.0)  # latched: past the point the LOS turns round
+    b = Bpng(BpngConfig(endgame_tgo_s=0.25))
+    cmd, st = b.step(0.0, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=far)
+    assert not st.endgame and np.linalg.norm(cmd.accel_enu_m_s2) > 1.0
+    _, st = b.step(0.0, np.zeros(3), v, np.array([100.0, 0.0, 0.0]), np.zeros(3))
+    assert st.aim_enu_m == pytest.approx(b.aim_point([100.0, 0.0, 0.0]))

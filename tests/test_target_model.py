@@ -119,3 +119,18 @@ def test_innovation_gate_rejects_an_outlier_and_keeps_the_state():
 def test_ukf_gate_config_defaults_are_on():
     c = UkfConfig()
     assert c.innovation_gate > 0 and c.innovation_gate_max_rejects >= 1
+
+
+def test_entry_depth_to_deck_side_superstructure_and_clear_air():
+    """How far before the aim point (midships, 3.75 m up) a straight dive meets the outline: the deck from
+    above, the side from abeam, the deckhouse when coming in low from astern; 0 from a point in clear air."""
+    o = ShipOutline(ShipModelConfig())
+    aim = np.array([0.0, 0.0, 3.75])
+    assert o.entry_depth_m(aim, [0.0, 0.0, -1.0]) == pytest.approx(7.5 - 3.75)  # vertical: the deck (0.3 H)
+    assert o.entry_depth_m(aim, [0.0, -1.0, 0.0]) == pytest.approx(12.5)  # level from port: the side
+    th = math.radians(-20.0)
+    from_astern = np.array([math.cos(th), 0.0, math.sin(th)])  # bow-wards and down
+    depth = o.entry_depth_m(aim, from_astern)
+    hit = aim - depth * from_astern
+    assert -0.32 * 55.0 <= hit[0] <= -0.04 * 55.0 and hit[2] > 7.5  # on the deckhouse, aft of midships
+    assert o.entry_depth_m([0.0, 0.0, 30.0], [0.0, 0.0, -1.0]) == 0.0

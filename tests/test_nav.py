@@ -1,0 +1,72 @@
+"""Navigation between GNSS fixes (controllers/nav.py)."""
+import math
+
+import numpy as np
+import pytest
+
+from controllers.nav import Navigation, NavigationConfig
+from fwsim.messages import Measurements
+from fwsim.sensors import Sensors, SensorsConfig
+
+
+def _truth(t, v=np.array([30.0, -40.0, -20.0])):
+    return np.array([100.0, 200.0, 500.0]) + v * t, v
+
+
+def _fly(nav, sigma_m, seconds=20.0, fsw_hz=30.0, gnss_hz=10.0, seed=3):
+    """A straight flight sampled like the loop does: fixes at gnss_hz held, read at fsw_hz."""
+    rng = np.random.default_rng(seed)
+    errs_nav, errs_held = [], []
+    fix = None
+    for k in range(int(seconds * fsw_hz)):
+        t = k / fsw_hz
+        if fix is None or t + 1e-9 >= fix[0] + 1.0 / gnss_hz:
+            p, v = _truth(t)
+            fix = (t, p + rng.normal(0.0, sigma_m, 3), v)
+        meas = Measurements(t, fix[1], fix[2], np.zeros(3), np.zeros(3), 22.0, 500.0, nav_t_s=fix[0])
+        out = nav.step(meas)
+        errs_nav.append(np.linalg.norm(out.pos_enu_m - _truth(t)[0]))
+        errs_held.append(np.linalg.norm(meas.pos_enu_m - _truth(t)[0]))
+    return np.array(errs_nav[30:]), np.array(errs_held[30:])
+
+
+def test_propagation_removes_the_hold_lag():
+    """Noise-free fixes at 10 Hz held (54 m/s, read at 30 Hz) lag up to 3.6 m; propagated with the velocity:
+    none."""
+    nav, held = _fly(Navigation(), 0.0)
+    assert held.max() > 3.5
+    assert nav.max() < 1e-9
+
+
+def test_blending_smooths_fix_noise_as_predicted():
+    """White fix noise sigma per axis: the blended error per axis is sigma sqrt(K / (2 - K))."""
+    sigma, k = 0.5, 0.1
+    nav, held = _fly(Navigation(NavigationConfig(fix_gain=k)), sigma, seconds=120.0)
+    per_axis = np.sqrt(np.mean(nav**2) / 3.0)
+    assert per_axis == pytest.approx(sigma * math.sqrt(k / (2.0 - k)), rel=0.25)
+    assert per_axis < 0.3 * np.sqrt(np.mean(held**2) / 3.0)
+
+
+def test_off_passes_the_fix_through_and_a_gap_restarts():
+    meas = Measurements(1.0, np.array([1.0, 2.0, 3.0]), np.array([10.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
+                        22.0, 3.0, nav_t_s=0.9)
+    assert Navigation(NavigationConfig(propagate=False)).step(meas) is meas
+    nav = Navigation()
+    nav.step(meas)
+    later = Measurements(5.0, np.array([50.0, 2.0, 3.0]), np.array([10.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
+                         22.0, 3.0, nav_t_s=5.0)
+    assert nav.step(later).pos_enu_m == pytest.approx([50.0, 2.0, 3.0])  # 4 s without a fix: restart
+
+
+def test_sensors_stamp_the_fix_time():
+    from fwsim.messages import AirframeState
+    s = Sensors(SensorsConfig(gnss_rate_hz=10.0), seed=1)
+    fields = {n: 0.0 for n in AirframeState.__dataclass_fields__}
+    stamps = []
+    for k in range(12):
+        t = k / 30.0
+        st = AirframeState(**{**fields, "t_s": t, "pos_enu_m": np.zeros(3), "vel_enu_m_s": np.zeros(3),
+                              "euler_ned_rad": np.zeros(3), "body_rates_frd_rad_s": np.zeros(3),
+                              "specific_force_frd_m_s2": np.zeros(3)})
+        stamps.append(s.sample(st).nav_t_s)
+    assert stamps[:4] == pytest.approx([0.0, 0.0, 0.0, 0.1])
