@@ -43,6 +43,7 @@ from controllers.ukf import CameraMotion, UkfTargetEstimator
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at, wrap_pi
 from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
 
+_TOO_CLOSE = "target closer than min_range_m"  # a gate the max_skipped_in_a_row escape does not lift
 GIMBAL_ANGLE_GAIN_1_S = 3.0  # scripted gimbal angles: joint rate per rad of encoder error
 
 
@@ -70,6 +71,11 @@ class DetectionGateConfig(BaseModel):
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")
     edge_px: float = Field(6.0, ge=0, le=100, description="a box edge this close to the image border touches it")
+    min_range_m: float = Field(
+        120.0, ge=0, le=10000,
+        description="skip detections while the estimated range to the target is below this: close in the box "
+                    "centre no longer follows the ship model (perspective, parts of the ship out of the image) "
+                    "and the estimate coasts on its velocity; 0: never")
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
@@ -258,9 +264,28 @@ class FlightSoftware:
             depth = max(depth, self._outline.entry_depth_m(R_se @ (aim - target), R_se @ d))
         return aim - (depth + b.contact_standoff_m) * d
 
+    def _initialise(self, meas: Measurements, motion: CameraMotion) -> str:
+        """Start the UKF from this detection; '' when it did, else why not (e.g. the ray misses the sea)."""
+        try:
+            self._ukf.initialise(meas, motion)
+        except ValueError as exc:
+            return str(exc)
+        return ""
+
+    def _too_close_to_restart(self, meas: Measurements) -> bool:
+        """After a reset, the last estimate (extrapolated) is nearer than the detection gate's min_range_m:
+        a restart would take the close-in detections the gate distrusts, so it keeps extrapolating."""
+        g = self.cfg.detection_gate
+        if g.min_range_m <= 0.0 or self._last_est is None:
+            return False
+        return float(np.linalg.norm(self._target(meas.t_s)[0] - meas.pos_enu_m)) < g.min_range_m
+
     def _gate(self, meas: Measurements) -> str:
         """Why the UKF should not use this detection ('' to use it); see :class:`DetectionGateConfig`."""
         g = self.cfg.detection_gate
+        if g.min_range_m > 0.0 and self._ukf.initialised and np.all(np.isfinite(meas.cam_pos_enu_m)):
+            if float(np.linalg.norm(np.asarray(self._ukf.pos_enu_m, float) - meas.cam_pos_enu_m)) < g.min_range_m:
+                return _TOO_CLOSE
         b = np.asarray(meas.det_bbox_px, dtype=float)
         cam = self.camera
         e = g.edge_px
@@ -310,14 +335,15 @@ class FlightSoftware:
         motion = CameraMotion.from_measurements(meas, self.mount) if math.isfinite(meas.pan_rad) else None
         # Phase 1 acquisition: lock, then start the estimator
         if self._search.observe(meas) and motion is not None:
-            self._ukf.initialise(meas, motion)
-            events.append(f"target locked after {self._search.cfg.lock_detections} detections; UKF initialised")
+            why = self._initialise(meas, motion)
+            events.append(f"target locked after {self._search.cfg.lock_detections} detections; "
+                          + ("UKF initialised" if not why else f"UKF not initialised yet ({why})"))
         elif self._ukf.initialised and motion is not None:
             self._ukf.predict(meas.t_s, motion)
             if meas.det_new and meas.det_valid:
                 used, why = self._debiased(meas, motion)
                 why = self._gate(meas) or why
-                if why and self._gated_in_a_row < self.cfg.detection_gate.max_skipped_in_a_row:
+                if why and (why == _TOO_CLOSE or self._gated_in_a_row < self.cfg.detection_gate.max_skipped_in_a_row):
                     self.gated[why] = self.gated.get(why, 0) + 1
                     self._gated_in_a_row += 1
                 else:
@@ -326,8 +352,8 @@ class FlightSoftware:
             if not self._ukf.initialised:
                 events.append(f"UKF reset itself at t = {meas.t_s:.2f} s (non-finite prediction: the target left "
                               "the camera's front half-space); extrapolating the last estimate")
-        elif self._search.locked and motion is not None and meas.det_new and meas.det_valid:
-            self._ukf.initialise(meas, motion)
+        elif self._search.locked and motion is not None and meas.det_new and meas.det_valid \
+                and not self._too_close_to_restart(meas) and not self._initialise(meas, motion):
             events.append(f"UKF re-initialised from a detection at t = {meas.t_s:.2f} s")
         if self._ukf.initialised:
             est = self._ukf.estimate()

@@ -13,6 +13,7 @@ flight instead of ~140 s.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 
 import numpy as np
@@ -21,7 +22,7 @@ import yaml
 from fwsim import SCENARIO_DIR
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
 
-__all__ = ["terminal_case"]
+__all__ = ["terminal_case", "sweep_cases", "fly_case", "case_line", "CASE_KEYS"]
 
 
 def _orbit_heading_deg(bearing_rad: float, ship_heading_deg: float, ship_speed_m_s: float,
@@ -65,3 +66,53 @@ def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float,
     c["switch"] = dict(c["switch"], dwell_s=5.0, min_loiter_s=5.0)
     c["bpng"] = dict(c["bpng"], impact_flight_path_deg=float(theta_f_deg), impact_heading_deg=float(psi_f_deg))
     return d
+
+
+#: metrics of a terminal case that the sweep reports
+CASE_KEYS = ["hit", "miss_distance_m", "impact_fpa_error_deg", "impact_heading_error_deg", "switch_time_s",
+             "impact_time_s", "ukf_pos_err_max_after_convergence_m", "target_in_fov_fraction_after_lock"]
+
+
+def sweep_cases(quick: bool = False) -> list[tuple[float, float, float, float]]:
+    """(theta_f, psi_f, ship heading, ship speed) of the terminal sweep: impact flight-path angles -20..-60 deg
+    x six impact headings all round, the ship's course and speed cycling through 0/5/10 m/s and six courses
+    relative to psi_f; then the paper's angles against ship courses all round at 0, 5 and 10 m/s (42 cases;
+    ``quick``: every fifth)."""
+    speeds, rel = [0.0, 5.0, 10.0], [0.0, 90.0, 180.0, 270.0, 45.0, 135.0]
+    out = []
+    for i, (tf, pf) in enumerate(itertools.product([-20.0, -30.0, -40.0, -50.0, -60.0], range(0, 360, 60))):
+        out.append((tf, float(pf), (pf + rel[i % 6]) % 360.0, speeds[i % 3]))
+    out += [(-30.0, 30.0, float(sh), v) for sh in (0, 90, 180, 270) for v in speeds]
+    return out[::5] if quick else out
+
+
+def fly_case(case, out_dir, seed: int = 1, bounds=(3.0, 3.0)) -> dict:
+    """Fly one sweep case to a log in ``out_dir``; its row: the case, wall time, how the run ended, the
+    :data:`CASE_KEYS` metrics and ``ok`` (hit, miss and both impact-angle errors within ``bounds``:
+    metres, degrees)."""
+    import time
+    from pathlib import Path
+
+    from fwsim.loop import run
+    from fwsim.metrics import compute_metrics
+    from fwsim.scenario import parse_scenario
+    text = yaml.safe_dump(terminal_case(*case, seed=seed), sort_keys=False)
+    sc = parse_scenario(text)
+    t0 = time.perf_counter()
+    res = run(sc, text, Path(out_dir) / f"{sc.name}.mcap")
+    m = compute_metrics(res.log_path)
+    row = {"theta_f_deg": case[0], "psi_f_deg": case[1], "ship_heading_deg": case[2], "ship_speed_m_s": case[3],
+           "wall_s": round(time.perf_counter() - t0, 2), "end": res.reason}
+    row.update({k: m.get(k, math.nan) for k in CASE_KEYS})
+    row["ok"] = bool(row["hit"] == 1.0 and row["miss_distance_m"] <= bounds[0]
+                     and abs(row["impact_fpa_error_deg"]) <= bounds[1]
+                     and abs(row["impact_heading_error_deg"]) <= bounds[1])
+    return row
+
+
+def case_line(row: dict) -> str:
+    """One readable line for a sweep row."""
+    return (f"{'ok ' if row['ok'] else 'BAD'} theta_f {row['theta_f_deg']:+4.0f} psi_f {row['psi_f_deg']:3.0f} "
+            f"ship {row['ship_heading_deg']:3.0f} deg @ {row['ship_speed_m_s']:4.1f} m/s | hit {row['hit']:.0f} "
+            f"miss {row['miss_distance_m']:7.2f} m  fpa err {row['impact_fpa_error_deg']:+6.2f}  "
+            f"heading err {row['impact_heading_error_deg']:+6.2f} deg | {row['end']}")
