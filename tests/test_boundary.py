@@ -56,3 +56,28 @@ initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
     assert out.command.roll_rate_rad_s < 0  # roll left, back toward the path
     assert out.command.pitch_rate_rad_s > 0  # climb back to 500 m
     assert math.isclose(out.status.altitude_sp_m, 500.0)
+
+
+def test_a_detection_above_the_horizon_does_not_stop_the_flight_software():
+    """A lock whose detection ray misses the sea (the camera looking up) cannot start the UKF: the flight
+    software says so in its events and goes on flying; a later detection below the horizon starts it."""
+    s = parse_scenario("""
+name: b
+duration_s: 10
+initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
+controllers: {acquisition: {lock_detections: 1}}
+camera: {gimbal: {initial_tilt_rad: 0.5}}
+""")
+    fsw = FlightSoftware(s.controllers, s.initial, s.camera)
+
+    def meas(t, tilt):
+        return Measurements(t, np.array([0.0, 22.0 * t, 500.0]), np.array([0.0, 22.0, 0.0]), np.zeros(3),
+                            np.zeros(3), 22.0, 500.0, pan_rad=0.0, tilt_rad=tilt, pan_rate_rad_s=0.0,
+                            tilt_rate_rad_s=0.0, cam_pos_enu_m=np.array([0.0, 22.0 * t, 499.9]), det_new=True,
+                            det_valid=True, det_u_px=640.0, det_v_px=360.0,
+                            det_bbox_px=np.array([600.0, 340.0, 680.0, 380.0]))
+    out = fsw.step(meas(0.0, 0.5))  # tilted 29 deg up: the ray through the image centre never meets the sea
+    assert any("not initialised" in e for e in out.events), out.events
+    assert not fsw._ukf.initialised
+    out = fsw.step(meas(1 / 30, -0.8))  # looking down: the next detection starts it
+    assert fsw._ukf.initialised and any("re-initialised" in e for e in out.events), out.events
