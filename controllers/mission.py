@@ -239,6 +239,16 @@ class FlightSoftware:
                 f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading "
                 f"({'clockwise' if clockwise else 'counter-clockwise'} round the target, lead {lead:+g} deg)")
 
+    def _course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
+        """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
+        when it is unknown: slower than ``min_speed_for_course_m_s`` or less sure than
+        ``max_vel_std_for_course_m_s`` (controllers.target_model)."""
+        tm = self.cfg.target_model
+        if math.hypot(float(vel_enu[0]), float(vel_enu[1])) < tm.min_speed_for_course_m_s \
+                or vel_std_m_s > tm.max_vel_std_for_course_m_s:
+            return None
+        return math.atan2(float(vel_enu[1]), float(vel_enu[0]))
+
     def _contact_aim(self, meas: Measurements, target: np.ndarray, target_vel: np.ndarray) -> np.ndarray | None:
         """Where the approach through the aim point along the impact direction (relative to the moving ship)
         first meets the ship's outline, ``contact_standoff_m`` farther out; None: steer to the aim point.
@@ -254,9 +264,9 @@ class FlightSoftware:
         d = speed * self._bpng.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
         d = d / max(float(np.linalg.norm(d)), 1e-9)
         tm = self.cfg.target_model
-        spd = math.hypot(float(target_vel[0]), float(target_vel[1]))
-        courses = [math.atan2(float(target_vel[1]), float(target_vel[0]))] if spd >= tm.min_speed_for_course_m_s \
-            else [2.0 * math.pi * k / tm.headings_when_unknown for k in range(tm.headings_when_unknown)]
+        course = self._course(target_vel)
+        courses = [course] if course is not None else \
+            [2.0 * math.pi * k / tm.headings_when_unknown for k in range(tm.headings_when_unknown)]
         depth = 0.0
         for c in courses:
             cs, sn = math.cos(c), math.sin(c)
@@ -302,11 +312,7 @@ class FlightSoftware:
         if not tm.enabled:
             return meas, ""
         pos, vel = self._ukf.pos_enu_m, self._ukf.vel_enu_m_s
-        speed = math.hypot(float(vel[0]), float(vel[1]))
-        vel_std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
-        course = None
-        if speed >= tm.min_speed_for_course_m_s and vel_std <= tm.max_vel_std_for_course_m_s:
-            course = math.atan2(float(vel[1]), float(vel[0]))
+        course = self._course(vel, math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0)))
         h = self.cfg.ukf.target_plane_height_m
         ref = np.array([pos[0], pos[1], pos[2] - h])
         g = self.cfg.detection_gate
