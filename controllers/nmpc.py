@@ -51,14 +51,14 @@ Solvers (``NmpcConfig.solver``):
     (psi_dot ~ tan(phi)/V times large multipliers on big radius errors) and its real-time
     iteration then oscillates period-2 in u_p during the approach. ``rti_iterations`` QPs per call
     (default 1); a cold start (first call, after a reset) iterates up to ``cold_start_iterations``
-    within 90 % of ``max_solve_ms``. A call at the same t_s as the previous one does not shift, so
+    (with ``budget: wall_clock``, also within 90 % of ``max_solve_ms``). A call at the same t_s as the previous one does not shift, so
     repeated calls keep iterating toward the optimum.
   * ``rti_qrqp``: the same with CasADi's sparse active-set qrqp (far slower here and unreliable on
     this QP: kept for comparison only).
   * ``fatrop``: the full NLP with the structure-exploiting interior point Fatrop (exact Hessian).
   * ``ipopt``: the full NLP with IPOPT (exact Hessian, converged to ``ipopt_tol``): the reference.
 
-A failed or late (``solve_ms > max_solve_ms``) solve never raises: the result carries the
+A failed or (``budget: wall_clock`` only) late (``solve_ms > max_solve_ms``) solve never raises: the result carries the
 previous successful plan's input for this time (the shifted plan's first input), ``fallback``
 is true and ``status`` says why; ``Nmpc.fallback_count`` counts them.
 
@@ -134,7 +134,13 @@ class NmpcConfig(BaseModel):
                                   description="cold start stops when the largest input step is below this")
     ipopt_tol: float = Field(1e-8, gt=0.0, le=1e-2, description="IPOPT convergence tolerance")
     max_solve_ms: float = Field(50.0, ge=0.0, le=1e5,
-                                description="time budget of one solve; a later result is not applied")
+                                description="time budget of one solve (budget: wall_clock): a later result is "
+                                            "not applied, and a cold start stops at 90 % of it")
+    budget: Literal["iterations", "wall_clock"] = Field(
+        "iterations",
+        description="iterations: a solve is bounded by its iteration counts only, so a run is the same on any "
+                    "machine and load (same seed, same log); wall_clock: also by max_solve_ms of the wall "
+                    "clock, as on a real-time mission computer (results then depend on the machine)")
     reset_after_failures: int = Field(3, ge=1, le=1000,
                                       description="consecutive failed solves before the warm start is rebuilt")
     pitch_from: Literal["attitude", "flight_path"] = Field(
@@ -629,7 +635,7 @@ class Nmpc:
         try:
             if self._is_rti:
                 # iterate within 90 % of the budget (always at least one QP)
-                deadline = t_start + 0.9e-3 * cfg.max_solve_ms
+                deadline = t_start + 0.9e-3 * cfg.max_solve_ms if cfg.budget == "wall_clock" else math.inf
                 n_it = cfg.cold_start_iterations if cold else cfg.rti_iterations
                 w, iters, ok, why = self._rti(w0, p, lbw, ubw, lbc, ubc, n_it, cold, deadline)
             else:
@@ -654,7 +660,7 @@ class Nmpc:
             else:
                 self._w, self._t_prev = w0, t_s  # keep the shifted plan as the warm start
         solve_ms = (time.perf_counter() - t_start) * 1e3
-        late = solve_ms > cfg.max_solve_ms
+        late = cfg.budget == "wall_clock" and solve_ms > cfg.max_solve_ms
         if ok and not late:
             u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
             self._plan = (t_s, U[:, :3].copy())

@@ -145,11 +145,21 @@ def test_attitude_outside_its_bounds_is_still_feasible():
 
 
 def test_late_solve_returns_a_fallback_without_raising():
-    n = Nmpc(NmpcConfig(max_solve_ms=0.0))
+    n = Nmpc(NmpcConfig(max_solve_ms=0.0, budget="wall_clock"))
     r = n.solve(0.0, [-800.0, 0.0, 600.0, 0.0, 0.0, 0.5 * math.pi], [0, 0, 0], SHIP_V)
     assert r.fallback and r.status == "fallback:late"
     assert np.allclose(r.u0, [22.0, 0.0, 0.0])  # no plan yet: hold attitude at the reference airspeed
     assert n.fallback_count == 1
+
+
+def test_iteration_budget_ignores_the_wall_clock():
+    """The default budget counts iterations only: a zero time budget changes nothing, so a run does not
+    depend on the machine or its load."""
+    x0 = [-800.0, 0.0, 600.0, 0.0, 0.0, 0.5 * math.pi]
+    a = Nmpc(NmpcConfig(max_solve_ms=0.0)).solve(0.0, x0, [0, 0, 0], SHIP_V)
+    b = Nmpc(NmpcConfig(max_solve_ms=1e5)).solve(0.0, x0, [0, 0, 0], SHIP_V)
+    assert a.status == "ok" and not a.fallback
+    assert a.iterations == b.iterations and np.array_equal(a.u0, b.u0)
 
 
 @pytest.mark.parametrize("solver", ["rti_hpipm", "ipopt"])

@@ -66,6 +66,19 @@ def test_same_seed_same_metrics(tmp_path):
     np.testing.assert_array_equal(la.table("/uav/state")["pos_enu_m"], lb.table("/uav/state")["pos_enu_m"])
 
 
+def test_same_seed_same_log_with_the_nmpc_and_the_ukf(tmp_path):
+    """The full flight software (lock, UKF, NMPC loiter) twice with one seed: the same flight, to the bit,
+    whatever the machine's load (the NMPC's budget counts iterations, not milliseconds)."""
+    logs = []
+    for name in ("a.mcap", "b.mcap"):
+        fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, name, duration_s=25)
+        logs.append(read_log(tmp_path / name))
+    na, nb = logs[0].table("/fsw/nmpc"), logs[1].table("/fsw/nmpc")
+    assert len(na["t_s"]) > 50  # the NMPC flew
+    np.testing.assert_array_equal(na["iterations"], nb["iterations"])
+    np.testing.assert_array_equal(logs[0].table("/uav/state")["pos_enu_m"], logs[1].table("/uav/state")["pos_enu_m"])
+
+
 def test_paper_mission_flies_its_initial_path(tmp_path):
     """Phase 1's initial path: straight toward the ship's start point at 1000 m."""
     result = fly(SCENARIO_DIR / "paper_mission.yaml", tmp_path, duration_s=30, **{"controllers.after_lock": "path"})
