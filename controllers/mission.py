@@ -38,7 +38,7 @@ from controllers.ibvs import Ibvs
 from controllers.path import OrbitFollower, PathFollower
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
-from controllers.target_model import ShipOutline, box_centre_offset_px, predicted_box_px
+from controllers.target_model import ShapeHeading, ShipOutline, box_centre_offset_px, predicted_boxes_px
 from controllers.ukf import CameraMotion, UkfTargetEstimator
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at, wrap_pi
 from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
@@ -64,7 +64,8 @@ class DetectionGateConfig(BaseModel):
     box_size_tolerance: float = Field(
         0.1, ge=0, le=10,
         description="skip a detection whose box width or height differs from the one the ship model predicts "
-                    "(course known) by more than this fraction plus box_size_tolerance_px: part of the ship is "
+                    "(for the course, or for every heading the box shapes allow) by more than this fraction plus "
+                    "box_size_tolerance_px: part of the ship is "
                     "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
     box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
     skip_overflowing_box: bool = Field(
@@ -118,6 +119,19 @@ class NmpcStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class ShipHeadingStatus:
+    """The ship's heading as the box shapes tell it (controllers.target_model.ShapeHeading), for the log."""
+
+    t_s: float
+    best_heading_deg: float  # the most likely heading, clockwise from North (the scenario's convention)
+    best_weight: float  # its posterior weight (of all candidate headings)
+    reverse_weight: float  # the weight of the opposite heading (bow and stern swapped)
+    updates: int  # detections used so far
+    in_use: bool  # the flight software corrects detections with it (the course is unknown and it is ready)
+    course_deg: float  # the course from the estimated velocity when known (clockwise from North), else NaN
+
+
+@dataclass(frozen=True, slots=True)
 class FlightSoftwareOutput:
     command: AutopilotCommand
     gimbal: GimbalCommand
@@ -156,6 +170,8 @@ class FlightSoftware:
         self._search = GimbalSearch(controllers_cfg.acquisition)
         self._ukf = UkfTargetEstimator(self.camera, controllers_cfg.ukf)
         self._outline = ShipOutline(controllers_cfg.target_model)
+        self._shape = ShapeHeading(controllers_cfg.target_model.heading_from_shape, self._outline, self.camera,
+                                   controllers_cfg.detection_gate.edge_px)
         self.gated: dict[str, int] = {}  # detections the UKF did not use, by reason
         self._gated_in_a_row = 0
         self._ibvs = Ibvs(controllers_cfg.ibvs, self.camera.fx, self.camera.fy, self.camera.cx, self.camera.cy)
@@ -242,20 +258,37 @@ class FlightSoftware:
     def _course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
         """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
         when it is unknown: slower than ``min_speed_for_course_m_s`` or less sure than
-        ``max_vel_std_for_course_m_s`` (controllers.target_model)."""
+        ``max_vel_std_for_course_m_s`` (controllers.target_model), or off the ship's axis as the box shapes
+        tell it (a ship moves along its axis: such a velocity is the estimate's error)."""
         tm = self.cfg.target_model
         if math.hypot(float(vel_enu[0]), float(vel_enu[1])) < tm.min_speed_for_course_m_s \
                 or vel_std_m_s > tm.max_vel_std_for_course_m_s:
             return None
-        return math.atan2(float(vel_enu[1]), float(vel_enu[0]))
+        course = math.atan2(float(vel_enu[1]), float(vel_enu[0]))
+        if self._shape.ready and \
+                self._shape.off_axis_rad(course) > math.radians(tm.heading_from_shape.max_course_off_axis_deg):
+            return None
+        return course
+
+    def _headings(self, course: float | None) -> tuple[np.ndarray, np.ndarray]:
+        """The ship's possible headings (bow direction, counter-clockwise from East) and their weights: the
+        course when it is known, else those the box shapes allow (:class:`ShapeHeading`), else
+        ``headings_when_unknown`` equally likely ones."""
+        if course is not None:
+            return np.array([course]), np.ones(1)
+        shaped = self._shape.headings()
+        if shaped is not None:
+            return shaped
+        n = self.cfg.target_model.headings_when_unknown
+        return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n)
 
     def _contact_aim(self, meas: Measurements, target: np.ndarray, target_vel: np.ndarray) -> np.ndarray | None:
         """Where the approach through the aim point along the impact direction (relative to the moving ship)
         first meets the ship's outline, ``contact_standoff_m`` farther out; None: steer to the aim point.
 
         The ship's heading comes from the estimated course; when the course is unknown the deepest entry
-        over ``headings_when_unknown`` headings is taken (the steering point then lies in the air at worst,
-        and the last metres are flown straight)."""
+        over the headings the box shapes allow (or, before they tell, ``headings_when_unknown`` headings) is
+        taken (the steering point then lies in the air at worst, and the last metres are flown straight)."""
         b = self.cfg.bpng
         if not b.aim_at_contact:
             return None
@@ -263,12 +296,8 @@ class FlightSoftware:
         speed = max(float(np.linalg.norm(meas.vel_enu_m_s)), 1.0)
         d = speed * self._bpng.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
         d = d / max(float(np.linalg.norm(d)), 1e-9)
-        tm = self.cfg.target_model
-        course = self._course(target_vel)
-        courses = [course] if course is not None else \
-            [2.0 * math.pi * k / tm.headings_when_unknown for k in range(tm.headings_when_unknown)]
         depth = 0.0
-        for c in courses:
+        for c in self._headings(self._course(target_vel))[0]:
             cs, sn = math.cos(c), math.sin(c)
             R_se = np.array([[cs, sn, 0.0], [-sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ENU -> ship (x bow, y port)
             depth = max(depth, self._outline.entry_depth_m(R_se @ (aim - target), R_se @ d))
@@ -304,6 +333,22 @@ class FlightSoftware:
             return "box spans the image"
         return ""
 
+    def _shape_update(self, meas: Measurements, motion: CameraMotion, logs: dict) -> None:
+        """Feed the detected box to the ship-heading-from-shape estimator; log its state when it took it."""
+        pos = self._ukf.pos_enu_m
+        ref = np.array([pos[0], pos[1], pos[2] - self.cfg.ukf.target_plane_height_m])
+        if not self._shape.update(meas.t_s, motion.pos_enu_m, motion.R_enu_from_cam, ref, meas.det_bbox_px):
+            return
+        w = self._shape.weights()
+        k = int(np.argmax(w))
+        std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+        course = self._course(self._ukf.vel_enu_m_s, std)
+        logs["/fsw/ship_heading"] = ShipHeadingStatus(
+            meas.t_s, (90.0 - math.degrees(float(self._shape.courses_enu_rad[k]))) % 360.0, float(w[k]),
+            float(w[(k + len(w) // 2) % len(w)]), self._shape.updates,
+            bool(course is None and self._shape.ready),
+            math.nan if course is None else (90.0 - math.degrees(course)) % 360.0)
+
     def _debiased(self, meas: Measurements, motion: CameraMotion) -> tuple[Measurements, str]:
         """The detection with the ship's box-centre offset removed (controllers.target_model), so that it
         is the image of the point the UKF tracks; unchanged when the model is off or does not apply.
@@ -317,16 +362,21 @@ class FlightSoftware:
         ref = np.array([pos[0], pos[1], pos[2] - h])
         g = self.cfg.detection_gate
         b = np.asarray(meas.det_bbox_px, dtype=float)
+        courses, weights = self._headings(course)
         box = None
-        if course is not None and np.all(np.isfinite(b)):
-            box = predicted_box_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref, course)
-            if box is not None:
-                for i, name in ((0, "width"), (1, "height")):
-                    pred, det = box[i + 2] - box[i], b[i + 2] - b[i]
-                    if abs(det - pred) > g.box_size_tolerance * pred + g.box_size_tolerance_px:
-                        return meas, f"box {name} off the model's"
+        if (course is not None or self._shape.ready) and np.all(np.isfinite(b)):
+            boxes = predicted_boxes_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
+                                       courses)
+            if np.all(np.isfinite(boxes)):
+                box = boxes[0]
+                pred = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
+                det = np.array([b[2] - b[0], b[3] - b[1]])
+                off = np.abs(det[None, :] - pred) > g.box_size_tolerance * pred + g.box_size_tolerance_px
+                if np.all(np.any(off, axis=1)):  # no heading the ship may have explains this box
+                    return meas, f"box {'width' if off[int(np.argmax(weights)), 0] else 'height'} off the model's"
         off = box_centre_offset_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
-                                   course, h, tm.headings_when_unknown, box_px=box)
+                                   course, h, tm.headings_when_unknown, box_px=box,
+                                   courses_weights=None if course is not None else (courses, weights))
         if off is None:
             return meas, ""
         return dataclasses.replace(meas, det_u_px=float(meas.det_u_px) - float(off[0]),
@@ -347,8 +397,11 @@ class FlightSoftware:
         elif self._ukf.initialised and motion is not None:
             self._ukf.predict(meas.t_s, motion)
             if meas.det_new and meas.det_valid:
+                gate = self._gate(meas)
+                if gate != _TOO_CLOSE:
+                    self._shape_update(meas, motion, logs)
                 used, why = self._debiased(meas, motion)
-                why = self._gate(meas) or why
+                why = gate or why
                 if why and (why == _TOO_CLOSE or self._gated_in_a_row < self.cfg.detection_gate.max_skipped_in_a_row):
                     self.gated[why] = self.gated.get(why, 0) + 1
                     self._gated_in_a_row += 1

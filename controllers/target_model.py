@@ -25,8 +25,13 @@ that centre's offset from the projection of ``r_q``::
 so that the corrected pixel is (to first order) the image of ``r_q`` itself,
 which is what the UKF's measurement model assumes. When the course is unknown
 (estimated speed below ``min_speed_for_course_m_s``) the offset is averaged
-over ``headings_when_unknown`` headings: the part that does not depend on the
-course (the height of the box centre) is still removed.
+over the headings the box shapes allow (:class:`ShapeHeading`: a still ship's
+heading from the sizes of its boxes seen from round the loiter ring), or before
+they tell, over ``headings_when_unknown`` headings: the part that does not
+depend on the course (the height of the box centre) is still removed. The same
+headings drive the box-size check (a detection no plausible heading explains is
+skipped), and a ship's axis from the shapes vetoes an estimated velocity
+across it (the UKF's error, not a course: ships move along their axis).
 
 What it does not model: the UAV's own wing hiding part of the ship (the box
 shrinks; the correction then over- or under-shoots until the wing clears),
@@ -46,10 +51,44 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from controllers.camera_model import PinholeCamera
 
-__all__ = ["ShipModelConfig", "ShipOutline", "box_centre_offset_px", "predicted_box_px"]
+__all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipOutline", "box_centre_offset_px",
+           "predicted_box_px", "predicted_boxes_px"]
 
 #: points closer than this in front of the camera make the projection meaningless: no correction
 _MIN_DEPTH_M = 0.5
+
+
+class ShapeHeadingConfig(BaseModel):
+    """The ship's heading from the shapes of its detected boxes, for when its course is unknown (a ship
+    that lies still or moves too slowly for the estimated velocity to tell): :class:`ShapeHeading`."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = Field(True, description="false: an unknown course stays unknown (the offset is averaged "
+                                            "over headings_when_unknown headings)")
+    headings: int = Field(72, ge=4, le=720, description="candidate headings all round")
+    rate_hz: float = Field(3.0, gt=0, le=240, description="detections used per second at most (consecutive "
+                                                          "frames carry nearly the same information)")
+    sigma_fraction: float = Field(0.05, ge=0, le=1, description="std. dev. of a box side against the model's, "
+                                                                "as a fraction of the predicted side")
+    sigma_px: float = Field(3.0, gt=0, le=100, description="std. dev. of a box side against the model's, px "
+                                                           "(detector noise, model's coarseness)")
+    max_effective_updates: float = Field(
+        60.0, gt=0, le=10000,
+        description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
+                    "misfit repeats from frame to frame and must not make the heading look surer than it is")
+    min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
+    min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
+                                                            "times the largest are dropped")
+    tell_bow_from_stern: bool = Field(
+        True, description="trust the box shapes to tell the bow from the stern (the superstructure stands aft, "
+                          "which shows in the box heights, most of all as the view steepens in the dive); "
+                          "false: a heading and its opposite count alike (the fore-aft part of the offset is "
+                          "then not removed)")
+    max_course_off_axis_deg: float = Field(
+        25.0, gt=0, le=90,
+        description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
+                    "course: a ship moves along its axis, so such a velocity is the estimate's error")
 
 
 class ShipModelConfig(BaseModel):
@@ -71,6 +110,7 @@ class ShipModelConfig(BaseModel):
                                       "taken as unknown")
     headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
                                                                    "when the course is unknown")
+    heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
 
 
 class ShipOutline:
@@ -152,9 +192,120 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
     return np.array([u0, v0, u1, v1])
 
 
+def predicted_boxes_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,
+                       courses_enu_rad) -> np.ndarray:
+    """:func:`predicted_box_px` for many courses at once: (n, 4), a row of NaN where that function gives None."""
+    c = np.asarray(courses_enu_rad, dtype=float)
+    R_ce = np.asarray(R_enu_from_cam, dtype=float).T
+    pts = outline.points_ship_m
+    cs, sn = np.cos(c)[:, None], np.sin(c)[:, None]
+    rel = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
+    enu = np.stack([cs * pts[None, :, 0] - sn * pts[None, :, 1] + rel[0],
+                    sn * pts[None, :, 0] + cs * pts[None, :, 1] + rel[1],
+                    np.broadcast_to(pts[None, :, 2] + rel[2], (len(c), len(pts)))], axis=-1)  # (n, m, 3)
+    p = enu @ R_ce.T
+    z = p[..., 2]
+    ok = np.all(z >= _MIN_DEPTH_M, axis=1)
+    zs = np.where(z >= _MIN_DEPTH_M, z, 1.0)
+    u = camera.fx * p[..., 0] / zs + camera.cx
+    v = camera.fy * p[..., 1] / zs + camera.cy
+    W = camera.width_px if camera.width_px > 0 else math.inf
+    H = camera.height_px if camera.height_px > 0 else math.inf
+    box = np.stack([np.maximum(u.min(axis=1), 0.0), np.maximum(v.min(axis=1), 0.0),
+                    np.minimum(u.max(axis=1), W - 1.0), np.minimum(v.max(axis=1), H - 1.0)], axis=1)
+    ok &= (box[:, 0] <= box[:, 2]) & (box[:, 1] <= box[:, 3])
+    box[~ok] = np.nan
+    return box
+
+
+class ShapeHeading:
+    """The ship's heading from the sizes of its detected boxes: a posterior over ``cfg.headings`` headings.
+
+    The width and height of the box around the silhouette depend on the ship's heading relative to the line
+    of sight, so a loiter round the ship, which sees it from many bearings, tells its heading (often up to
+    bow or stern: where the two differ in the model's box sizes, the fit picks the right one). Each used
+    detection adds, for every candidate heading, the robust (Cauchy) log-likelihood of its box sides against
+    :func:`predicted_boxes_px` for that heading; the posterior is tempered so that it never counts more than
+    ``max_effective_updates`` detections. A detection whose box touches the image border says nothing of the
+    size and is not used; nor is one taken less than ``1 / rate_hz`` after the last used one.
+
+    The box sizes come from the flight software's coarse outline (a priori knowledge of the ship class) and
+    its own estimate of where the ship is: nothing here reads the simulated ship.
+    """
+
+    def __init__(self, cfg: ShapeHeadingConfig, outline: ShipOutline, camera: PinholeCamera, edge_px: float = 6.0):
+        self.cfg = cfg
+        self.outline = outline
+        self.camera = camera
+        self.edge_px = float(edge_px)
+        self.courses_enu_rad = 2.0 * math.pi * np.arange(cfg.headings) / cfg.headings
+        self.loglik = np.zeros(cfg.headings)
+        self.updates = 0
+        self._last_t = -math.inf
+
+    def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px) -> bool:
+        """Use one detected box (u0, v0, u1, v1); True when it was used."""
+        c = self.cfg
+        b = np.asarray(box_px, dtype=float)
+        if not c.enabled or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9 or not np.all(np.isfinite(b)):
+            return False
+        cam, e = self.camera, self.edge_px
+        if cam.width_px > 0 and (b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e
+                                 or b[3] >= cam.height_px - 1.0 - e):
+            return False
+        pred = predicted_boxes_px(self.outline, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, self.courses_enu_rad)
+        if not np.all(np.isfinite(pred)):
+            return False
+        size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
+        size_det = np.array([b[2] - b[0], b[3] - b[1]])
+        r = (size_det[None, :] - size_pred) / (c.sigma_fraction * size_pred + c.sigma_px)
+        self.loglik -= np.sum(np.log1p(0.5 * r * r), axis=1)
+        self.updates += 1
+        self._last_t = t_s
+        return True
+
+    def weights(self) -> np.ndarray:
+        """Posterior weight of each candidate heading (sums to 1; uniform before any update). Unless
+        ``tell_bow_from_stern``, a heading and its opposite share their summed weight equally."""
+        scale = min(1.0, self.cfg.max_effective_updates / max(self.updates, 1))
+        lw = scale * (self.loglik - np.max(self.loglik))
+        w = np.exp(lw)
+        w = w / np.sum(w)
+        n = len(w)
+        if not self.cfg.tell_bow_from_stern and n % 2 == 0:
+            w = 0.5 * (w + np.roll(w, n // 2))
+        return w
+
+    def axis_enu_rad(self) -> float:
+        """Direction of the ship's fore-aft axis (counter-clockwise from East, in [0, pi)): the most likely
+        heading folded onto its opposite."""
+        w = self.weights()
+        n = len(w)
+        k = int(np.argmax(w[: n // 2] + np.roll(w, n // 2)[: n // 2])) if n % 2 == 0 else int(np.argmax(w))
+        return float(self.courses_enu_rad[k]) % math.pi
+
+    @property
+    def ready(self) -> bool:
+        return self.cfg.enabled and self.updates >= self.cfg.min_updates
+
+    def headings(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(courses, weights) of the plausible headings (weights renormalised), or None while not ready."""
+        if not self.ready:
+            return None
+        w = self.weights()
+        keep = w >= self.cfg.min_weight * np.max(w)
+        return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+
+    def off_axis_rad(self, course_enu_rad: float) -> float:
+        """How far (rad, 0..pi/2) a direction lies off the ship's axis."""
+        d = (course_enu_rad - self.axis_enu_rad()) % math.pi
+        return min(d, math.pi - d)
+
+
 def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam,
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
-                         headings_when_unknown: int = 8, box_px: np.ndarray | None = None) -> np.ndarray | None:
+                         headings_when_unknown: int = 8, box_px: np.ndarray | None = None,
+                         courses_weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
     ``ref_enu_m``: the ship's waterline centre (estimated); the tracked point is
@@ -163,7 +314,9 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     unknown (then the offset is averaged over ``headings_when_unknown``
     headings). None when the ship (or the tracked point) is not wholly in front
     of the camera, or no part of it falls in the image. ``box_px``: the
-    :func:`predicted_box_px` for ``course_enu_rad`` when the caller already has it.
+    :func:`predicted_box_px` for ``course_enu_rad`` when the caller already has it. ``courses_weights``:
+    with an unknown course, the headings to average over and their weights (:meth:`ShapeHeading.headings`)
+    instead of ``headings_when_unknown`` equal ones.
     """
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     ref = np.asarray(ref_enu_m, dtype=float)
@@ -172,8 +325,13 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         return None
     uv_tracked = np.array([camera.fx * tracked[0] / tracked[2] + camera.cx,
                            camera.fy * tracked[1] / tracked[2] + camera.cy])
-    courses = [course_enu_rad] if course_enu_rad is not None else \
-        [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
+    weights = None
+    if course_enu_rad is not None:
+        courses = [course_enu_rad]
+    elif courses_weights is not None:
+        courses, weights = list(courses_weights[0]), np.asarray(courses_weights[1], dtype=float)
+    else:
+        courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
     offsets = []
     for course in courses:
         box = box_px if box_px is not None and course_enu_rad is not None else \
@@ -181,4 +339,4 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if box is None:
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
-    return np.mean(np.array(offsets), axis=0)
+    return np.average(np.array(offsets), axis=0, weights=weights)

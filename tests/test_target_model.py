@@ -6,12 +6,16 @@ import numpy as np
 import pytest
 
 from controllers.camera_model import PinholeCamera
-from controllers.target_model import ShipModelConfig, ShipOutline, box_centre_offset_px, predicted_box_px
+from controllers.mission import FlightSoftware
+from controllers.target_model import (ShapeHeading, ShapeHeadingConfig, ShipModelConfig, ShipOutline,
+                                      box_centre_offset_px, predicted_box_px, predicted_boxes_px)
 from controllers.ukf import UkfConfig, UnscentedCore
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import dcm_enu_from_frd
 from fwsim.geometry import uav_mesh
 from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
+from fwsim.messages import Measurements
+from fwsim.scenario import parse_scenario
 from fwsim.target import Ship, TargetConfig
 
 CAM_CFG = CameraConfig(hfov_deg=60.0)
@@ -134,3 +138,178 @@ def test_entry_depth_to_deck_side_superstructure_and_clear_air():
     hit = aim - depth * from_astern
     assert -0.32 * 55.0 <= hit[0] <= -0.04 * 55.0 and hit[2] > 7.5  # on the deckhouse, aft of midships
     assert o.entry_depth_m([0.0, 0.0, 30.0], [0.0, 0.0, -1.0]) == 0.0
+
+
+def ring_views(ship_heading_deg: float, az_deg: range, elevation_deg: float = 45.0, rng_m: float = 707.0):
+    """Ray-cast detections (noise-free boxes) from a loiter ring round a still ship: (cam_pos, R_enu_cam, box)."""
+    ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pos_ship, R_ship = ship.pose(0.0)
+    mount = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
+    look = np.array([0.0, 0.0, 6.0])
+    e = math.radians(elevation_deg)
+    for az in az_deg:
+        a = math.radians(az)
+        d = np.array([math.cos(e) * math.sin(a), math.cos(e) * math.cos(a), math.sin(e)])
+        pos = look + rng_m * d
+        euler = np.array([0.0, 0.0, math.atan2(-d[0], -d[1])])
+        R = dcm_enu_from_frd(euler)
+        pan, tilt = pan_tilt_pointing_at(R.T @ (look - (pos + R @ mount)))
+        cp, Rc = camera_pose_world(pos, euler, mount, pan, tilt)
+        yield cp, Rc, cam.detect(0.0, cp, Rc, FAR_UAV, Pose(R_ship, pos_ship)).bbox_px
+
+
+def _shape_from(views_, cfg: ShapeHeadingConfig = ShapeHeadingConfig()) -> ShapeHeading:
+    sh = ShapeHeading(cfg, ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    for k, (cp, Rc, box) in enumerate(views_):
+        sh.update(float(k), cp, Rc, np.zeros(3), box)
+    return sh
+
+
+def _deg_off(a_deg: float, b_deg: float, period: float = 360.0) -> float:
+    d = (a_deg - b_deg) % period
+    return min(d, period - d)
+
+
+def test_predicted_boxes_for_many_courses_match_the_single_course_function():
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    courses = np.radians([0.0, 33.0, 90.0, 211.0])
+    n = 0
+    for cp, Rc, _ in views(0.0):
+        many = predicted_boxes_px(outline, fsw_cam, cp, Rc, np.zeros(3), courses)
+        for c, row in zip(courses, many):
+            one = predicted_box_px(outline, fsw_cam, cp, Rc, np.zeros(3), float(c))
+            if one is None:
+                assert np.all(np.isnan(row))
+            else:
+                np.testing.assert_allclose(row, one, atol=1e-9)
+                n += 1
+    assert n > 100
+    behind = predicted_boxes_px(outline, fsw_cam, np.array([0.0, 0.0, 500.0]), np.eye(3), np.zeros(3), courses)
+    assert np.all(np.isnan(behind))  # the camera looks up, away from the ship: no box
+
+
+@pytest.mark.parametrize("ship_heading_deg", [0.0, 37.0, 130.0, 250.0, 300.0])
+def test_ship_heading_from_box_shapes_over_a_loiter_ring(ship_heading_deg):
+    """A lap of the loiter ring (ray-cast boxes of the harness's ship mesh, the flight software's coarse
+    outline) tells a still ship's heading, bow and stern included, to within one 5-degree bin."""
+    sh = _shape_from(ring_views(ship_heading_deg, range(0, 360, 5)))
+    assert sh.ready and sh.updates == 72
+    w = sh.weights()
+    best = 90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(w))]))
+    assert _deg_off(best, ship_heading_deg) <= 5.0, best
+    assert _deg_off(90.0 - math.degrees(sh.axis_enu_rad()), ship_heading_deg, 180.0) <= 5.0
+    k = int(np.argmax(w))
+    assert w[(k + len(w) // 2) % len(w)] < 0.5 * w[k]  # the opposite heading is less likely
+    courses, weights = sh.headings()
+    assert np.isclose(np.sum(weights), 1.0) and len(courses) < 10
+
+
+@pytest.mark.parametrize("ship_heading_deg", [0.0, 37.0, 250.0])
+def test_a_short_arc_tells_the_axis(ship_heading_deg):
+    """60 degrees of arc are enough for the ship's axis (bow and stern may stay ambiguous)."""
+    sh = _shape_from(ring_views(ship_heading_deg, range(0, 60, 5)))
+    assert _deg_off(90.0 - math.degrees(sh.axis_enu_rad()), ship_heading_deg, 180.0) <= 5.0
+
+
+def test_bow_and_stern_count_alike_unless_told_apart():
+    views_ = list(ring_views(130.0, range(0, 360, 10)))
+    told = _shape_from(views_).weights()
+    folded = _shape_from(views_, ShapeHeadingConfig(tell_bow_from_stern=False)).weights()
+    half = len(folded) // 2
+    np.testing.assert_allclose(folded, np.roll(folded, half))
+    assert not np.allclose(told, np.roll(told, half))
+    np.testing.assert_allclose(folded, 0.5 * (told + np.roll(told, half)), rtol=0, atol=1e-12)
+
+
+def test_shape_heading_skips_border_boxes_and_keeps_its_rate():
+    sh = ShapeHeading(ShapeHeadingConfig(rate_hz=2.0), ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    cp, Rc, box = next(ring_views(0.0, range(0, 5, 5)))
+    assert sh.update(0.0, cp, Rc, np.zeros(3), box)
+    assert not sh.update(0.3, cp, Rc, np.zeros(3), box)  # within 1 / rate_hz of the last one
+    touching = box.copy()
+    touching[0] = 2.0
+    assert not sh.update(1.0, cp, Rc, np.zeros(3), touching)
+    assert not sh.update(2.0, cp, Rc, np.zeros(3), np.full(4, np.nan))
+    assert sh.update(3.0, cp, Rc, np.zeros(3), box) and sh.updates == 2
+    assert not sh.ready and sh.headings() is None  # min_updates not reached
+
+
+def _fresh_fsw() -> FlightSoftware:
+    s = parse_scenario("name: s\nduration_s: 10\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n")
+    return FlightSoftware(s.controllers, s.initial, s.camera)
+
+
+def _fsw_with_shape(ship_heading_deg: float, elevations_deg=(45.0,)) -> FlightSoftware:
+    fsw = _fresh_fsw()
+    k = 0
+    for el in elevations_deg:
+        for cp, Rc, box in ring_views(ship_heading_deg, range(0, 360, 10), elevation_deg=el):
+            fsw._shape.update(float(k), cp, Rc, np.zeros(3), box)
+            k += 1
+    return fsw
+
+
+def test_a_velocity_off_the_ship_axis_gives_no_course():
+    """A ship moves along its axis: the flight software takes an estimated velocity across it for the
+    estimate's error (a still ship's UKF can pick up a metre or two per second) and keeps the shape's heading."""
+    fsw = _fsw_with_shape(30.0)  # bow 30 deg clockwise from North: course 60 deg counter-clockwise from East
+    along = 3.0 * np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
+    assert math.isclose(fsw._course(along), math.radians(60.0))
+    assert math.isclose(fsw._course(-along), math.radians(-120.0))  # astern is on the axis too
+    across = 3.0 * np.array([math.cos(math.radians(150.0)), math.sin(math.radians(150.0)), 0.0])
+    assert fsw._course(across) is None
+    courses, weights = fsw._headings(None)
+    best = math.degrees(float(courses[int(np.argmax(weights))]))
+    assert _deg_off(best, 60.0) <= 5.0
+    fresh = _fresh_fsw()
+    assert fresh._course(across) is not None  # before the shapes tell the axis, any direction is taken
+    assert len(fresh._headings(None)[0]) == fresh.cfg.target_model.headings_when_unknown
+
+
+class _StillEstimate:
+    """Stands in for the UKF: the ship's point estimated exactly, no velocity."""
+
+    def __init__(self, h: float):
+        self.pos_enu_m = np.array([0.0, 0.0, h])
+        self.vel_enu_m_s = np.zeros(3)
+        self.pos_vel_cov = np.eye(6) * 0.01
+
+
+def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one_corrected():
+    """Course unknown (still ship): once the shapes tell the heading (here from rings at three elevations),
+    the correction is as good as with the true heading, where averaging over all headings leaves several
+    pixels; and the box-size gate works as with a known course."""
+    import dataclasses
+
+    from controllers.ukf import CameraMotion
+    fsw = _fsw_with_shape(0.0, (30.0, 45.0, 60.0))
+    blind = _fresh_fsw()
+    fsw._ukf = blind._ukf = _StillEstimate(fsw.cfg.ukf.target_plane_height_m)
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    h = fsw.cfg.ukf.target_plane_height_m
+    errs = []  # (shape, all headings, true heading), px
+    for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=30.0, rng_m=400.0):
+        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        row = []
+        for f in (fsw, blind):
+            used, why = f._debiased(meas, motion)
+            assert why == ""
+            row.append(float(np.hypot(used.det_u_px - truth[0], used.det_v_px - truth[1])))
+        off = box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), math.radians(90.0), h)
+        row.append(float(np.hypot(meas.det_u_px - off[0] - truth[0], meas.det_v_px - off[1] - truth[1])))
+        errs.append(row)
+        cut = box.copy()
+        cut[2] = cut[0] + 0.5 * (box[2] - box[0])  # the right half hidden
+        assert fsw._debiased(dataclasses.replace(meas, det_bbox_px=cut), motion)[1] == "box width off the model's"
+        assert blind._debiased(dataclasses.replace(meas, det_bbox_px=cut), motion)[1] == ""  # nothing to compare
+    shape, every, true = np.mean(np.array(errs), axis=0)
+    assert shape < true + 0.5, errs
+    assert every > 3.0 * shape, errs
