@@ -270,12 +270,29 @@ class FlightSoftware:
             return None
         return course
 
-    def _headings(self, course: float | None) -> tuple[np.ndarray, np.ndarray]:
-        """The ship's possible headings (bow direction, counter-clockwise from East) and their weights: the
-        course when it is known, else those the box shapes allow (:class:`ShapeHeading`), else
-        ``headings_when_unknown`` equally likely ones."""
+    def _headings(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """The ship's possible headings (bow direction, counter-clockwise from East) and their weights, from
+        its estimated velocity (std ``vel_std_m_s``) and the box shapes (:class:`ShapeHeading`):
+
+        * course known (:meth:`_course`) and shapes ready: the shapes' posterior times the course's
+          likelihood (a ship's bow points along its course; the course's std is the velocity's over the
+          speed, at least ``fuse_min_course_std_deg``), so each sharpens the other;
+        * course known, shapes not ready: the course alone;
+        * course unknown: the headings the shapes allow, else ``headings_when_unknown`` equal ones.
+        """
+        course = self._course(vel_enu, vel_std_m_s)
+        sh = self.cfg.target_model.heading_from_shape
         if course is not None:
-            return np.array([course]), np.ones(1)
+            if not (self._shape.ready and sh.fuse_with_course):
+                return np.array([course]), np.ones(1)
+            speed = math.hypot(float(vel_enu[0]), float(vel_enu[1]))
+            sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
+            d = (self._shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
+            w = self._shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
+            if not np.sum(w) > 0.0:
+                return np.array([course]), np.ones(1)
+            keep = w >= sh.min_weight * np.max(w)
+            return self._shape.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
         shaped = self._shape.headings()
         if shaped is not None:
             return shaped
@@ -297,7 +314,7 @@ class FlightSoftware:
         d = speed * self._bpng.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
         d = d / max(float(np.linalg.norm(d)), 1e-9)
         depth = 0.0
-        for c in self._headings(self._course(target_vel))[0]:
+        for c in self._headings(target_vel)[0]:
             cs, sn = math.cos(c), math.sin(c)
             R_se = np.array([[cs, sn, 0.0], [-sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ENU -> ship (x bow, y port)
             depth = max(depth, self._outline.entry_depth_m(R_se @ (aim - target), R_se @ d))
@@ -357,12 +374,14 @@ class FlightSoftware:
         if not tm.enabled:
             return meas, ""
         pos, vel = self._ukf.pos_enu_m, self._ukf.vel_enu_m_s
-        course = self._course(vel, math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0)))
+        std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+        course = self._course(vel, std)
         h = self.cfg.ukf.target_plane_height_m
         ref = np.array([pos[0], pos[1], pos[2] - h])
         g = self.cfg.detection_gate
         b = np.asarray(meas.det_bbox_px, dtype=float)
-        courses, weights = self._headings(course)
+        courses, weights = self._headings(vel, std)
+        single = len(courses) == 1
         box = None
         if (course is not None or self._shape.ready) and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
@@ -375,8 +394,9 @@ class FlightSoftware:
                 if np.all(np.any(off, axis=1)):  # no heading the ship may have explains this box
                     return meas, f"box {'width' if off[int(np.argmax(weights)), 0] else 'height'} off the model's"
         off = box_centre_offset_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
-                                   course, h, tm.headings_when_unknown, box_px=box,
-                                   courses_weights=None if course is not None else (courses, weights))
+                                   float(courses[0]) if single else None, h, tm.headings_when_unknown,
+                                   box_px=box if single else None,
+                                   courses_weights=None if single else (courses, weights))
         if off is None:
             return meas, ""
         return dataclasses.replace(meas, det_u_px=float(meas.det_u_px) - float(off[0]),

@@ -85,6 +85,11 @@ class ShapeHeadingConfig(BaseModel):
                           "which shows in the box heights, most of all as the view steepens in the dive); "
                           "false: a heading and its opposite count alike (the fore-aft part of the offset is "
                           "then not removed)")
+    fuse_with_course: bool = Field(
+        True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
+                          "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
+    fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
+                                                                         "least this, deg")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "

@@ -260,12 +260,12 @@ def test_a_velocity_off_the_ship_axis_gives_no_course():
     assert math.isclose(fsw._course(-along), math.radians(-120.0))  # astern is on the axis too
     across = 3.0 * np.array([math.cos(math.radians(150.0)), math.sin(math.radians(150.0)), 0.0])
     assert fsw._course(across) is None
-    courses, weights = fsw._headings(None)
+    courses, weights = fsw._headings(np.zeros(3))
     best = math.degrees(float(courses[int(np.argmax(weights))]))
     assert _deg_off(best, 60.0) <= 5.0
     fresh = _fresh_fsw()
     assert fresh._course(across) is not None  # before the shapes tell the axis, any direction is taken
-    assert len(fresh._headings(None)[0]) == fresh.cfg.target_model.headings_when_unknown
+    assert len(fresh._headings(np.zeros(3))[0]) == fresh.cfg.target_model.headings_when_unknown
 
 
 class _StillEstimate:
@@ -313,3 +313,24 @@ def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one
     shape, every, true = np.mean(np.array(errs), axis=0)
     assert shape < true + 0.5, errs
     assert every > 3.0 * shape, errs
+
+
+def test_a_known_course_and_the_shapes_sharpen_each_other():
+    """A moving ship: the shapes' heading posterior times the course's likelihood. An uncertain course
+    (velocity std 0.9 m/s at 5 m/s) 15 deg off the shapes' heading gives way to them; a sure one (std 0.05 m/s,
+    floored at fuse_min_course_std_deg) pulls the result toward itself."""
+    fsw = _fsw_with_shape(30.0)  # course 60 deg counter-clockwise from East
+    off = math.radians(75.0)
+    vel = 5.0 * np.array([math.cos(off), math.sin(off), 0.0])
+    courses, weights = fsw._headings(vel, 0.9)
+    unsure = math.degrees(float(np.angle(np.sum(weights * np.exp(1j * courses)))))
+    assert abs(unsure - 60.0) < 5.0, unsure
+    courses, weights = fsw._headings(vel, 0.05)
+    sure = math.degrees(float(np.angle(np.sum(weights * np.exp(1j * courses)))))
+    assert unsure + 2.0 < sure <= 75.0, (unsure, sure)
+    plain = _fsw_with_shape(30.0)
+    plain.cfg = plain.cfg.model_copy(update={"target_model": plain.cfg.target_model.model_copy(
+        update={"heading_from_shape": plain.cfg.target_model.heading_from_shape.model_copy(
+            update={"fuse_with_course": False})})})
+    courses, weights = plain._headings(vel, 0.9)
+    assert len(courses) == 1 and math.isclose(float(courses[0]), off)
