@@ -136,6 +136,17 @@ optimal path bow under the LOS; with the ship crossing the impact heading it
 can level off a few metres below the sea hundreds of metres short. The law
 knows nothing of the sea: keep |theta_f| near or above the LOS angle, or
 switch farther out.
+
+The bias angle cap (``bias_angle_cap_deg``, 90 by default; a departure from
+the printed law). Around a fast ship the loiter's ground velocity at the
+switch can point more than 90 deg off V_f (a 10 m/s ship crossing the impact
+heading: 102 deg). There the bias term, ``N_f theta / t_go`` with theta past
+90 deg, cancels the PN term and the UAV flies on with ~0.6 m/s^2 of command,
+away from the ship. The law is the small-angle optimum; beyond 90 deg the
+bias keeps its 90-deg value, the PN term turns the UAV onto a collision
+course and the bias takes over as theta comes down. Below 90 deg nothing
+changes. ``None`` restores the printed law; ``tests/test_bpng.py`` flies the
+case both ways.
 """
 from __future__ import annotations
 
@@ -174,6 +185,12 @@ class BpngConfig(BaseModel):
         description="airspeed commanded in the dive, m/s (the autopilot holds it with throttle only; "
                     "at idle the UAV still gains speed diving)")
     min_tgo_s: float = Field(0.5, gt=0, le=10, description="floor of t_go = |r| / |V_p|, s")
+    bias_angle_cap_deg: float | None = Field(
+        90.0, gt=0, le=180,
+        description="the bias term uses min(theta, this): the law is the small-angle optimum, and from a "
+                    "loiter round a fast ship the UAV can start more than 90 deg off V_f, where the bias "
+                    "(away from V_f) cancels the PN term and the UAV flies straight on, away from the ship; "
+                    "none: the paper's law as printed")
     max_accel_m_s2: float = Field(
         25.0, gt=0, le=200, description="cap on |u| (direction kept), m/s^2, gravity not included")
     aim_at_contact: bool = Field(
@@ -246,11 +263,12 @@ def _norm(a):
 
 
 def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: float,
-               max_accel_m_s2: float) -> BpngTerms:
+               max_accel_m_s2: float, bias_angle_cap_rad: float = math.inf) -> BpngTerms:
     """Eq. (1) with its guards, vectorised over leading axes (inputs (..., 3), world ENU).
 
     ``r = r_q - r_p``, ``r_dot = V_q - V_p``, ``v_p`` the UAV velocity, ``v_f``
-    the wanted terminal direction (any length > 0).
+    the wanted terminal direction (any length > 0). ``bias_angle_cap_rad``: the
+    bias term takes ``min(theta, cap)`` (``BpngConfig.bias_angle_cap_deg``).
     """
     r = np.asarray(r, dtype=float)
     r_dot = np.asarray(r_dot, dtype=float)
@@ -281,7 +299,7 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
         n = np.where(anti[..., None], _antiparallel_axis(v_hat, r), n)
 
     a_pn = n_sigma * np.cross(omega, v_p)
-    a_bias = -(n_f * theta / t_go)[..., None] * np.cross(n, v_p)  # turns V_p AWAY from V_f (see docstring)
+    a_bias = -(n_f * np.minimum(theta, bias_angle_cap_rad) / t_go)[..., None] * np.cross(n, v_p)  # AWAY from V_f
     a = a_pn + a_bias
     a = a - _dot(a, v_hat)[..., None] * v_hat  # perpendicular to V_p
     mag = _norm(a)
@@ -359,7 +377,9 @@ class Bpng:
             return (AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=np.zeros(3)),
                     BpngStatus(t_s, math.nan, math.nan, nan3, math.nan, nan3, nan3, np.zeros(3), aim_enu_m=nan3))
         k = bpng_accel(q - p, vq - v, v, self.v_f_enu, n_sigma=cfg.n_sigma, n_f=cfg.n_f,
-                       min_tgo_s=cfg.min_tgo_s, max_accel_m_s2=cfg.max_accel_m_s2)
+                       min_tgo_s=cfg.min_tgo_s, max_accel_m_s2=cfg.max_accel_m_s2,
+                       bias_angle_cap_rad=math.inf if cfg.bias_angle_cap_deg is None
+                       else math.radians(cfg.bias_angle_cap_deg))
         # once inside, stay inside: past the steering point the range grows again and the LOS turns round
         endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * float(np.linalg.norm(v))
         a = np.zeros(3) if endgame else k.accel_cmd.copy()

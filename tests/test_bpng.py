@@ -12,7 +12,9 @@ from fwsim.frames import dcm_enu_from_frd, enu_from_ned
 from fwsim.messages import AccelCommand
 
 CFG = BpngConfig()
-GAINS = dict(n_sigma=CFG.n_sigma, n_f=CFG.n_f, min_tgo_s=CFG.min_tgo_s, max_accel_m_s2=CFG.max_accel_m_s2)
+GAINS = dict(n_sigma=CFG.n_sigma, n_f=CFG.n_f, min_tgo_s=CFG.min_tgo_s, max_accel_m_s2=CFG.max_accel_m_s2,
+             bias_angle_cap_rad=math.radians(CFG.bias_angle_cap_deg))
+PRINTED = dict(GAINS, bias_angle_cap_rad=math.inf)  # the law as printed (no cap on the bias angle)
 
 
 def _angle(a, b):
@@ -170,7 +172,8 @@ def test_guards_parallel_antiparallel_tgo_and_range():
         b = t.accel_bias
         assert np.all(np.isfinite(b)) and abs(b[2]) < 1e-12 and abs(b[0]) < 1e-12  # horizontal, perpendicular
         assert np.sign(b[1]) == side  # toward the target's side
-        assert np.linalg.norm(b) == pytest.approx(CFG.n_f * math.pi / t.t_go_s * 25.0)
+        cap = min(math.pi, math.radians(CFG.bias_angle_cap_deg))
+        assert np.linalg.norm(b) == pytest.approx(CFG.n_f * cap / t.t_go_s * 25.0)
         assert np.linalg.norm(t.accel_cmd) <= CFG.max_accel_m_s2 + 1e-12
     # anti-parallel with a vertical velocity (dive straight down, V_f straight up): still finite and level
     vd = np.array([0.0, 0.0, -25.0])
@@ -254,15 +257,16 @@ SHIPS = {"10mps_east": (10.0, 90.0), "6mps_ssw": (6.0, 200.0)}  # speed m/s, hea
 MISS_M, ANGLE_DEG = 3.0, 3.0
 
 
-def _fly(p, v, q, vq, vf, bias_sign=1.0, t_max_s=250.0):
+def _fly(p, v, q, vq, vf, bias_sign=1.0, t_max_s=250.0, gains=None):
     """Point-mass UAV at constant speed turned by the BPNG command (gravity compensated by the autopilot)."""
+    gains = GAINS if gains is None else gains
     n = len(p)
     done = np.zeros(n, bool)
     miss = np.full(n, np.inf)
     v_imp = np.zeros((n, 3))
     min_h = np.full(n, np.inf)  # lowest height above the ship's plane while > 10 m from it
     for _ in range(int(t_max_s / DT)):
-        t = bpng_accel(q - p, vq - v, v, vf, **GAINS)
+        t = bpng_accel(q - p, vq - v, v, vf, **gains)
         a = t.accel_cmd
         if bias_sign != 1.0:  # the flipped bias, with the same perpendicular projection and cap
             a = t.accel_pn + bias_sign * t.accel_bias
@@ -339,6 +343,40 @@ def test_flipped_bias_sign_misses_the_impact_angle():
     miss, gam, hdg, _, _ = _fly(p, v, q, vq, vf, bias_sign=-1.0)
     err = max(abs(gam[0] - th), abs((hdg[0] - ps + 180.0) % 360.0 - 180.0))
     assert err > 2.0 * ANGLE_DEG, (miss[0], gam[0], hdg[0])  # ~11 deg: arrives at -19 deg instead of -30
+
+
+def test_bias_angle_cap_only_acts_past_it():
+    v = np.array([20.0, 0.0, 0.0])
+    for ang, same in ((60.0, True), (89.0, True), (120.0, False)):
+        vf = [math.cos(math.radians(ang)), math.sin(math.radians(ang)), 0.0]
+        capped = bpng_accel([500.0, 50.0, -100.0], -v, v, vf, **GAINS)
+        printed = bpng_accel([500.0, 50.0, -100.0], -v, v, vf, **PRINTED)
+        assert np.allclose(capped.accel_bias, printed.accel_bias) == same
+        np.testing.assert_allclose(capped.accel_pn, printed.accel_pn)
+        if not same:  # the bias keeps its 90-degree value, direction unchanged
+            np.testing.assert_allclose(capped.accel_bias, printed.accel_bias * (90.0 / ang), rtol=1e-9)
+    assert BpngConfig(bias_angle_cap_deg=None).bias_angle_cap_deg is None
+
+
+def test_from_a_loiter_round_a_fast_ship_the_cap_keeps_the_ship_in_the_capture_region():
+    """The loiter round a 10 m/s ship crossing the impact heading (theta_f -30, psi_f 30, ship heading 270):
+    at the switch (bearing to the ship = psi_f) the ground velocity is ~100 deg off V_f. The printed law's
+    bias cancels the PN term and the UAV flies away; with the cap it turns in and hits at the impact angle."""
+    from fwsim.cases import _orbit_heading_deg
+    th, ps, ship_hdg, ship_speed = -30.0, 30.0, 270.0, 10.0
+    b = math.radians(ps)  # bearing UAV -> ship at the switch
+    p = np.array([[-500.0 * math.sin(b), -500.0 * math.cos(b), 500.0]])
+    h = math.radians(_orbit_heading_deg(b, ship_hdg, ship_speed, 22.0))
+    vq = ship_speed * np.array([[math.sin(math.radians(ship_hdg)), math.cos(math.radians(ship_hdg)), 0.0]])
+    v = np.array([[22.0 * math.sin(h), 22.0 * math.cos(h), 0.0]]) + vq  # ground velocity on the orbit
+    v = V_UAV * v / np.linalg.norm(v)
+    vf = vf_enu(th, ps)[None]
+    assert math.degrees(_angle(v[0], vf[0])) > 90.0
+    miss, gam, hdg, _, done = _fly(p, v, np.zeros((1, 3)), vq, vf, gains=PRINTED, t_max_s=120.0)
+    assert not (done[0] and miss[0] < MISS_M)  # the printed law does not get there
+    miss, gam, hdg, _, done = _fly(p, v, np.zeros((1, 3)), vq, vf)
+    assert done[0] and miss[0] < MISS_M, miss[0]
+    assert abs(gam[0] - th) < ANGLE_DEG and abs((hdg[0] - ps + 180.0) % 360.0 - 180.0) < ANGLE_DEG, (gam, hdg)
 
 
 def test_endgame_flies_straight_and_the_caller_may_place_the_aim():
