@@ -1,4 +1,4 @@
-"""The terminal sweep of issue 6 (slow: ~4 min on 2 cores; run with ``pytest -m slow``).
+"""The terminal sweep of issue 6 (slow: ~2-3 min on 2 cores; run with ``pytest -m slow``).
 
 Impact angles theta_f -20..-60 deg, six impact headings all round, ship courses all round at 0, 5 and
 10 m/s, each flown from the loiter ring with the full flight software (fwsim.cases): every case must hit
