@@ -22,24 +22,30 @@ CAM_CFG = CameraConfig(hfov_deg=60.0)
 FAR_UAV = Pose(np.eye(3), np.array([1e5, 1e5, 1e5]))  # the UAV out of every ray's way
 
 
+def _look_from(cam, ship_pose, rng_m: float, elevation_deg: float, azimuth_deg: float):
+    """The camera ``rng_m`` from a point 6 m above the ship's centre, at that elevation and azimuth, the UAV
+    heading at the ship and the gimbal on it: (cam_pos, R_enu_cam, ray-cast frame)."""
+    look = np.array([0.0, 0.0, 6.0])
+    mount = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
+    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
+    d = np.array([math.cos(e) * math.sin(a), math.cos(e) * math.cos(a), math.sin(e)])
+    pos = look + rng_m * d
+    euler = np.array([0.0, 0.0, math.atan2(-d[0], -d[1])])
+    R = dcm_enu_from_frd(euler)
+    pan, tilt = pan_tilt_pointing_at(R.T @ (look - (pos + R @ mount)))
+    cp, Rc = camera_pose_world(pos, euler, mount, pan, tilt)
+    return cp, Rc, cam.detect(0.0, cp, Rc, FAR_UAV, ship_pose)
+
+
 def views(ship_heading_deg: float):
     """Camera poses around the ship: elevations 20-75 deg, azimuths all round, ranges 150-1200 m."""
     ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pos_ship, R_ship = ship.pose(0.0)
-    mount = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
     for rng in (150.0, 400.0, 1200.0):
         for el in (20.0, 45.0, 75.0):
             for az in range(0, 360, 45):
-                e, a = math.radians(el), math.radians(az)
-                look = np.array([0.0, 0.0, 6.0])
-                d = np.array([math.cos(e) * math.sin(a), math.cos(e) * math.cos(a), math.sin(e)])
-                pos = look + rng * d
-                euler = np.array([0.0, 0.0, math.atan2(-d[0], -d[1])])
-                R = dcm_enu_from_frd(euler)
-                pan, tilt = pan_tilt_pointing_at(R.T @ (look - (pos + R @ mount)))
-                cp, Rc = camera_pose_world(pos, euler, mount, pan, tilt)
-                frame = cam.detect(0.0, cp, Rc, FAR_UAV, Pose(R_ship, pos_ship))
+                cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), rng, el, az)
                 if frame.visible_px:
                     yield cp, Rc, frame
 
@@ -145,18 +151,9 @@ def ring_views(ship_heading_deg: float, az_deg: range, elevation_deg: float = 45
     ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pos_ship, R_ship = ship.pose(0.0)
-    mount = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
-    look = np.array([0.0, 0.0, 6.0])
-    e = math.radians(elevation_deg)
     for az in az_deg:
-        a = math.radians(az)
-        d = np.array([math.cos(e) * math.sin(a), math.cos(e) * math.cos(a), math.sin(e)])
-        pos = look + rng_m * d
-        euler = np.array([0.0, 0.0, math.atan2(-d[0], -d[1])])
-        R = dcm_enu_from_frd(euler)
-        pan, tilt = pan_tilt_pointing_at(R.T @ (look - (pos + R @ mount)))
-        cp, Rc = camera_pose_world(pos, euler, mount, pan, tilt)
-        yield cp, Rc, cam.detect(0.0, cp, Rc, FAR_UAV, Pose(R_ship, pos_ship)).bbox_px
+        cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), rng_m, elevation_deg, az)
+        yield cp, Rc, frame.bbox_px
 
 
 def _shape_from(views_, cfg: ShapeHeadingConfig = ShapeHeadingConfig()) -> ShapeHeading:
