@@ -127,7 +127,7 @@ class ShipHeadingStatus:
     best_weight: float  # its posterior weight (of all candidate headings)
     reverse_weight: float  # the weight of the opposite heading (bow and stern swapped)
     updates: int  # detections used so far
-    in_use: bool  # the flight software corrects detections with it (the course is unknown and it is ready)
+    in_use: bool  # it alone gives the heading (course unknown, shapes ready); with a course the two are fused
     course_deg: float  # the course from the estimated velocity when known (clockwise from North), else NaN
 
 
@@ -350,6 +350,10 @@ class FlightSoftware:
             return "box spans the image"
         return ""
 
+    def _vel_std(self) -> float:
+        """The UKF's horizontal velocity std (the larger axis), m/s."""
+        return math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+
     def _shape_update(self, meas: Measurements, motion: CameraMotion, logs: dict) -> None:
         """Feed the detected box to the ship-heading-from-shape estimator; log its state when it took it."""
         pos = self._ukf.pos_enu_m
@@ -358,7 +362,7 @@ class FlightSoftware:
             return
         w = self._shape.weights()
         k = int(np.argmax(w))
-        std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+        std = self._vel_std()
         course = self._course(self._ukf.vel_enu_m_s, std)
         logs["/fsw/ship_heading"] = ShipHeadingStatus(
             meas.t_s, (90.0 - math.degrees(float(self._shape.courses_enu_rad[k]))) % 360.0, float(w[k]),
@@ -374,7 +378,7 @@ class FlightSoftware:
         if not tm.enabled:
             return meas, ""
         pos, vel = self._ukf.pos_enu_m, self._ukf.vel_enu_m_s
-        std = math.sqrt(max(float(np.max(np.diag(self._ukf.pos_vel_cov)[3:5])), 0.0))
+        std = self._vel_std()
         course = self._course(vel, std)
         h = self.cfg.ukf.target_plane_height_m
         ref = np.array([pos[0], pos[1], pos[2] - h])
