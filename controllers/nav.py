@@ -30,7 +30,10 @@ is turned with the gyros (attitude from the AHRS, both at their own rates)::
     v_hat <- v_hat + (omega_enu x v_hat) dt                      (between fixes)
 
 which leaves out only the change of speed along the path (gravity and drag,
-~5 m/s^2 in a dive, a small part of the line-of-sight rate).
+~5 m/s^2 in a dive, a small part of the line-of-sight rate). It is the air
+velocity that turns with the airframe, so in wind ``v_hat - wind`` turns; the
+wind is estimated from the fixes in near-level flight (fix velocity minus the
+airspeed along the nose, horizontal, blended with ``wind_gain``).
 
 Nothing here imports the truth side of the harness (DESIGN.md section 1).
 """
@@ -47,6 +50,9 @@ from fwsim.messages import Measurements
 
 __all__ = ["NavigationConfig", "Navigation"]
 
+_LEVEL_PITCH_RAD = math.radians(15.0)  # the wind is estimated only below this pitch
+_LEVEL_BANK_RAD = math.radians(45.0)  # and this bank
+
 
 class NavigationConfig(BaseModel):
     """How the flight software turns GNSS fixes into its position."""
@@ -60,6 +66,11 @@ class NavigationConfig(BaseModel):
     turn_velocity: bool = Field(
         True, description="turn the fix velocity with the gyros between fixes (dV/dt = omega x V: the flight "
                           "path turns with the airframe); false: hold it")
+    wind_gain: float = Field(
+        0.02, ge=0, le=1,
+        description="weight of each fix's wind (fix velocity minus airspeed along the nose, horizontal; taken in "
+                    "near-level flight only) in the running wind estimate; the velocity turns with the gyros "
+                    "relative to the air, V - wind; 0: no wind estimate")
     max_gap_s: float = Field(1.0, gt=0, le=60,
                              description="a fix older than this when the next arrives: restart from the fix")
 
@@ -73,7 +84,20 @@ class Navigation:
         self._t = math.nan  # time of _pos
         self._fix_t = math.nan  # time of the last fix blended in
         self._vel = None  # the fix velocity turned with the gyros
+        self.wind_enu_m_s = np.zeros(3)  # running estimate of the (horizontal) wind
         self._v_out = None  # the velocity used at the last step
+
+    def _update_wind(self, v_fix, R_enu_from_frd, meas: Measurements) -> None:
+        """Blend this fix's horizontal wind into the estimate, in near-level, gently banked flight (where
+        the air velocity lies along the nose to within the angle of attack)."""
+        k = self.cfg.wind_gain
+        phi, theta = float(meas.euler_ned_rad[0]), float(meas.euler_ned_rad[1])
+        if k <= 0.0 or not math.isfinite(meas.airspeed_m_s) or abs(theta) > _LEVEL_PITCH_RAD \
+                or abs(phi) > _LEVEL_BANK_RAD:
+            return
+        w = np.asarray(v_fix, dtype=float) - meas.airspeed_m_s * R_enu_from_frd[:, 0]
+        w[2] = 0.0
+        self.wind_enu_m_s = self.wind_enu_m_s + k * (w - self.wind_enu_m_s)
 
     def step(self, meas: Measurements) -> Measurements:
         """The measurements with ``pos_enu_m`` replaced by the propagated, blended position (and
@@ -83,11 +107,14 @@ class Navigation:
         t = meas.t_s
         v = np.asarray(meas.vel_enu_m_s, dtype=float)
         if self.cfg.turn_velocity and np.all(np.isfinite(meas.body_rates_frd_rad_s)):
-            w = dcm_enu_from_frd(meas.euler_ned_rad) @ np.asarray(meas.body_rates_frd_rad_s, float)
+            R = dcm_enu_from_frd(meas.euler_ned_rad)
+            if meas.nav_t_s != self._fix_t:
+                self._update_wind(v, R, meas)
+            w = R @ np.asarray(meas.body_rates_frd_rad_s, float)
             if self._vel is None or meas.nav_t_s != self._fix_t or t - self._t > self.cfg.max_gap_s:
-                self._vel = v + np.cross(w, v) * (t - meas.nav_t_s)
+                self._vel = v + np.cross(w, v - self.wind_enu_m_s) * (t - meas.nav_t_s)
             else:
-                self._vel = self._vel + np.cross(w, self._vel) * (t - self._t)
+                self._vel = self._vel + np.cross(w, self._vel - self.wind_enu_m_s) * (t - self._t)
             v_now = self._vel
         else:
             v_now = v

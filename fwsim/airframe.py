@@ -117,10 +117,8 @@ class Airframe:
         fdm["ic/long-gc-rad"] = lon
         fdm["ic/h-sl-ft"] = alt / FT
         fdm["ic/terrain-elevation-ft"] = 0.0
-        wind_ned = np.array([self._wind_enu[1], self._wind_enu[0], -self._wind_enu[2]])
-        fdm["atmosphere/wind-north-fps"] = wind_ned[0] / FT
-        fdm["atmosphere/wind-east-fps"] = wind_ned[1] / FT
-        fdm["atmosphere/wind-down-fps"] = wind_ned[2] / FT
+        for axis in ("north", "east", "down"):  # trimmed in still air; the wind comes after (below)
+            fdm[f"atmosphere/wind-{axis}-fps"] = 0.0
         fdm["ic/vt-fps"] = airspeed_m_s / FT
         fdm["ic/psi-true-rad"] = heading_ned_rad
         fdm["ic/gamma-rad"] = flight_path_rad
@@ -150,7 +148,34 @@ class Airframe:
         else:
             self.trim = TrimResult(False, fdm["fcs/throttle-cmd-norm"], 0.0, 0.0, 0.0,
                                    fdm["aero/alpha-rad"], "not trimmed")
+        if np.any(self._wind_enu != 0.0):
+            self._add_wind()
         return self.state()
+
+    def _add_wind(self) -> None:
+        """Put the trimmed aircraft into the scenario's wind with its air-relative state unchanged.
+
+        JSBSim's run_ic() sets the atmosphere's wind from the initial conditions': set on the atmosphere
+        before it, the wind was zeroed and did nothing. Given to the initial conditions (JSBSim ignores
+        writes to ic/vw-north-fps and ic/vw-east-fps; ic/vw-mag-fps with ic/vw-dir-deg take), the
+        initial airspeed came out at 6 m/s with 180 deg of alpha and the trim failed. So: trim in still
+        air, restart from the same attitude with the ground velocity plus the wind, then set the wind on
+        the atmosphere.
+        """
+        fdm = self._fdm
+        wind_ned = np.array([self._wind_enu[1], self._wind_enu[0], -self._wind_enu[2]])
+        v_ned = np.array([fdm["velocities/v-north-fps"], fdm["velocities/v-east-fps"],
+                          fdm["velocities/v-down-fps"]]) + wind_ned / FT
+        fdm["ic/phi-rad"] = fdm["attitude/phi-rad"]
+        fdm["ic/theta-rad"] = fdm["attitude/theta-rad"]
+        fdm["ic/psi-true-rad"] = fdm["attitude/psi-rad"]
+        fdm["ic/vn-fps"], fdm["ic/ve-fps"], fdm["ic/vd-fps"] = (float(x) for x in v_ned)
+        fdm["ic/vw-mag-fps"] = math.hypot(wind_ned[0], wind_ned[1]) / FT
+        fdm["ic/vw-dir-deg"] = math.degrees(math.atan2(wind_ned[1], wind_ned[0]))
+        if not fdm.run_ic():
+            raise AirframeError("JSBSim rejected the initial conditions with the wind")
+        for axis, w in zip(("north", "east", "down"), wind_ned):
+            fdm[f"atmosphere/wind-{axis}-fps"] = w / FT
 
     # ------------------------------------------------------------------ stepping
     def step(self, act: ActuatorCommand) -> AirframeState:

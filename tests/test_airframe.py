@@ -132,3 +132,32 @@ def test_adverse_yaw_from_roll_rate_scales_with_lift():
         assert abs(p) > 0.2
         assert cnp == pytest.approx(-cl / 8.0, rel=1e-6)
     assert abs(cl) < 0.3  # the push really unloaded the wing
+
+
+def _open_loop(wind_enu, seconds=3.0):
+    """Trimmed at 22 m/s heading 30 deg, controls held at the trim: (states every second, airframe)."""
+    a = Airframe("fwuav", wind_enu_m_s=wind_enu)
+    states = [a.reset(np.array([0.0, 0.0, 500.0]), 22.0, math.radians(30.0))]
+    tr = a.trim
+    for k in range(int(seconds * 120)):
+        s = a.step(ActuatorCommand(0.0, 0.0, tr.elevator_norm, 0.0, tr.throttle_norm))
+        if (k + 1) % 120 == 0:
+            states.append(s)
+    return states, a
+
+
+def test_the_scenario_wind_moves_the_aircraft_and_nothing_else():
+    """In a constant wind the ground velocity is the still-air one plus the wind, and the air-relative
+    flight (airspeed, attitude, height) is the same (the wind once did nothing: JSBSim's run_ic() zeroed it)."""
+    wind = np.array([6.0, -5.0, 0.0])
+    calm, _ = _open_loop((0.0, 0.0, 0.0))
+    windy, a = _open_loop(tuple(wind))
+    assert a.property("atmosphere/wind-east-fps") * 0.3048 == pytest.approx(6.0)
+    assert a.property("atmosphere/wind-north-fps") * 0.3048 == pytest.approx(-5.0)
+    for c, w in zip(calm, windy):
+        np.testing.assert_allclose(w.vel_enu_m_s, c.vel_enu_m_s + wind, atol=0.05)
+        assert w.airspeed_m_s == pytest.approx(c.airspeed_m_s, abs=0.02)
+        np.testing.assert_allclose(w.euler_ned_rad, c.euler_ned_rad, atol=1e-3)
+        assert w.pos_enu_m[2] == pytest.approx(c.pos_enu_m[2], abs=0.05)
+    drift = windy[-1].pos_enu_m[:2] - calm[-1].pos_enu_m[:2]
+    np.testing.assert_allclose(drift, 3.0 * wind[:2], atol=0.2)  # 3 s of drift
