@@ -142,3 +142,14 @@ def test_in_wind_the_air_velocity_turns_and_the_wind_is_learnt_in_level_flight()
     assert np.linalg.norm(nav.wind_enu_m_s - wind) < 0.3
     ignored = _turn_in_wind(Navigation(NavigationConfig(wind_gain=0.0)), wind)
     assert learnt < 0.1 and ignored > 0.25, (learnt, ignored)
+
+
+def test_a_missing_attitude_or_airspeed_leaves_the_wind_and_velocity_finite():
+    nav = Navigation()
+    for k, (euler, airspeed) in enumerate([(np.zeros(3), 22.0), (np.full(3, np.nan), 22.0),
+                                           (np.zeros(3), math.nan), (np.zeros(3), 22.0)]):
+        t = 0.1 * k
+        out = nav.step(Measurements(t, np.array([0.0, 2.2 * k, 500.0]), np.array([0.0, 22.0, 0.0]), euler,
+                                    np.array([0.0, 0.0, 0.1]), airspeed, 500.0, nav_t_s=t))
+        assert np.all(np.isfinite(out.vel_enu_m_s)) and np.all(np.isfinite(out.pos_enu_m))
+    assert np.all(np.isfinite(nav.wind_enu_m_s))
