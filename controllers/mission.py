@@ -285,7 +285,7 @@ class FlightSoftware:
         if course is not None:
             if not (self._shape.ready and sh.fuse_with_course):
                 return np.array([course]), np.ones(1)
-            speed = math.hypot(float(vel_enu[0]), float(vel_enu[1]))
+            speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
             sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             d = (self._shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
             w = self._shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
