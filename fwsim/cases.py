@@ -86,17 +86,20 @@ def sweep_cases(quick: bool = False) -> list[tuple[float, float, float, float]]:
     return out[::5] if quick else out
 
 
-def fly_case(case, out_dir, seed: int = 1, bounds=(3.0, 3.0)) -> dict:
+def fly_case(case, out_dir, seed: int = 1, bounds=(3.0, 3.0), overrides: dict | None = None) -> dict:
     """Fly one sweep case to a log in ``out_dir``; its row: the case, wall time, how the run ended, the
     :data:`CASE_KEYS` metrics and ``ok`` (hit, miss and both impact-angle errors within ``bounds``:
-    metres, degrees)."""
+    metres, degrees). ``overrides``: scenario fields set on the case (``{"world.wind_enu_m_s": [5, -4, 0]}``)."""
     import time
     from pathlib import Path
 
     from fwsim.loop import run
     from fwsim.metrics import compute_metrics
-    from fwsim.scenario import parse_scenario
-    text = yaml.safe_dump(terminal_case(*case, seed=seed), sort_keys=False)
+    from fwsim.scenario import parse_scenario, set_path
+    d = terminal_case(*case, seed=seed)
+    for path, value in (overrides or {}).items():
+        set_path(d, path, value)
+    text = yaml.safe_dump(d, sort_keys=False)
     sc = parse_scenario(text)
     t0 = time.perf_counter()
     res = run(sc, text, Path(out_dir) / f"{sc.name}.mcap")

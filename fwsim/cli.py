@@ -16,24 +16,13 @@ import json
 import sys
 from pathlib import Path
 
-import yaml
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.scenario import ScenarioError, load_scenario, parse_sets
 
 console = Console(stderr=True)
-
-
-def _parse_sets(items: list[str]) -> dict:
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise ScenarioError(f"--set {item}: expected PATH=VALUE (e.g. initial.airspeed_m_s=24)")
-        key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
-    return out
 
 
 def _fmt(v) -> str:
@@ -69,7 +58,7 @@ def cmd_run(args) -> int:
         except LiveViewError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-    scenario, text = load_scenario(args.scenario, _parse_sets(args.set))
+    scenario, text = load_scenario(args.scenario, parse_sets(args.set))
     log_path = Path(args.log) if args.log else default_log_path(scenario, Path(args.out))
     if target is None:
         return _fly(args, scenario, text, log_path, None)

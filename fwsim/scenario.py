@@ -197,6 +197,17 @@ def _format_errors(source: str, exc: ValidationError) -> str:
     return "\n".join(lines)
 
 
+def parse_sets(items: list[str]) -> dict[str, Any]:
+    """``["a.b=1", "c=[1, 2]"]`` (command-line ``--set`` items) -> ``{"a.b": 1, "c": [1, 2]}``, values as YAML."""
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ScenarioError(f"--set {item}: expected PATH=VALUE (e.g. initial.airspeed_m_s=24)")
+        key, value = item.split("=", 1)
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
 def set_path(data: dict, path: str, value: Any) -> None:
     """Set ``a.b.c`` (list indices allowed: ``script.2.t_s``) in nested YAML data."""
     keys = path.split(".")

@@ -85,3 +85,11 @@ def test_cli_reports_bad_scenario_in_one_line(tmp_path):
     err = proc.stderr.strip()
     assert err == f"error: {bad}: initial.airspeed_m_s: Input should be greater than 0 (got 0)"
     assert "Traceback" not in proc.stderr
+
+
+def test_parse_sets_reads_yaml_values_and_names_a_bad_item():
+    from fwsim.scenario import ScenarioError, parse_sets
+    assert parse_sets(["seed=3", "world.wind_enu_m_s=[5, -4, 0]", " a.b = x "]) == \
+        {"seed": 3, "world.wind_enu_m_s": [5, -4, 0], "a.b": "x"}
+    with pytest.raises(ScenarioError, match="--set seed3: expected PATH=VALUE"):
+        parse_sets(["seed3"])

@@ -8,6 +8,7 @@ writes the rows as CSV. The same sweep is the slow test
 
     python tools/terminal_sweep.py --workers 2 --csv runs/terminal_sweep.csv
     python tools/terminal_sweep.py --quick            # every fifth case
+    python tools/terminal_sweep.py --set "world.wind_enu_m_s=[5, -4, 0]"   # every case in a wind
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from fwsim.cases import case_line, fly_case, sweep_cases
+from fwsim.scenario import parse_sets
 
 
 def main(argv=None) -> int:
@@ -29,13 +31,18 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default="runs/terminal_sweep", help="folder for the logs")
     ap.add_argument("--csv", help="write the rows here")
+    ap.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                    help="override a field of every case, e.g. --set \"world.wind_enu_m_s=[5, -4, 0]\" "
+                         "(repeatable)")
     args = ap.parse_args(argv)
+    overrides = parse_sets(args.set)
     todo = sweep_cases(args.quick)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     rows = []
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
-        for row in pool.map(fly_case, todo, itertools.repeat(args.out), itertools.repeat(args.seed)):
+        for row in pool.map(fly_case, todo, itertools.repeat(args.out), itertools.repeat(args.seed),
+                            itertools.repeat((3.0, 3.0)), itertools.repeat(overrides)):
             rows.append(row)
             print(case_line(row), flush=True)
     n_ok = sum(r["ok"] for r in rows)
