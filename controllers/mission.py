@@ -386,12 +386,13 @@ class FlightSoftware:
         b = np.asarray(meas.det_bbox_px, dtype=float)
         courses, weights = self._headings(vel, std)
         single = len(courses) == 1
-        box = None
+        boxes = None
         if (course is not None or self._shape.ready) and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
                                        courses)
-            if np.all(np.isfinite(boxes)):
-                box = boxes[0]
+            if not np.all(np.isfinite(boxes)):
+                boxes = None
+            else:
                 pred = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 off = np.abs(det[None, :] - pred) > g.box_size_tolerance * pred + g.box_size_tolerance_px
@@ -399,7 +400,7 @@ class FlightSoftware:
                     return meas, f"box {'width' if off[int(np.argmax(weights)), 0] else 'height'} off the model's"
         off = box_centre_offset_px(self._outline, self.camera, motion.pos_enu_m, motion.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, h, tm.headings_when_unknown,
-                                   box_px=box if single else None,
+                                   boxes_px=boxes,
                                    courses_weights=None if single else (courses, weights))
         if off is None:
             return meas, ""

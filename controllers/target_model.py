@@ -247,6 +247,7 @@ class ShapeHeading:
         self.loglik = np.zeros(cfg.headings)
         self.updates = 0
         self._last_t = -math.inf
+        self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
 
     def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px) -> bool:
         """Use one detected box (u0, v0, u1, v1); True when it was used."""
@@ -266,12 +267,18 @@ class ShapeHeading:
         r = (size_det[None, :] - size_pred) / (c.sigma_fraction * size_pred + c.sigma_px)
         self.loglik -= np.sum(np.log1p(0.5 * r * r), axis=1)
         self.updates += 1
+        self._weights = None
         self._last_t = t_s
         return True
 
     def weights(self) -> np.ndarray:
         """Posterior weight of each candidate heading (sums to 1; uniform before any update). Unless
         ``tell_bow_from_stern``, a heading and its opposite share their summed weight equally."""
+        if self._weights is None:
+            self._weights = self._posterior()
+        return self._weights.copy()
+
+    def _posterior(self) -> np.ndarray:
         scale = min(1.0, self.cfg.max_effective_updates / max(self.updates, 1))
         lw = scale * (self.loglik - np.max(self.loglik))
         w = np.exp(lw)
@@ -309,7 +316,7 @@ class ShapeHeading:
 
 def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam,
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
-                         headings_when_unknown: int = 8, box_px: np.ndarray | None = None,
+                         headings_when_unknown: int = 8, boxes_px: np.ndarray | None = None,
                          courses_weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
@@ -318,8 +325,9 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     bow, counter-clockwise from East (``atan2(v_n, v_e)``), or None when
     unknown (then the offset is averaged over ``headings_when_unknown``
     headings). None when the ship (or the tracked point) is not wholly in front
-    of the camera, or no part of it falls in the image. ``box_px``: the
-    :func:`predicted_box_px` for ``course_enu_rad`` when the caller already has it. ``courses_weights``:
+    of the camera, or no part of it falls in the image. ``boxes_px``: the caller's
+    :func:`predicted_boxes_px` rows for the courses used (``course_enu_rad``, or those of
+    ``courses_weights``), so that they are not projected twice. ``courses_weights``:
     with an unknown course, the headings to average over and their weights (:meth:`ShapeHeading.headings`)
     instead of ``headings_when_unknown`` equal ones.
     """
@@ -338,10 +346,10 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     else:
         courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
     offsets = []
-    for course in courses:
-        box = box_px if box_px is not None and course_enu_rad is not None else \
+    for i, course in enumerate(courses):
+        box = boxes_px[i] if boxes_px is not None else \
             predicted_box_px(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref, course)
-        if box is None:
+        if box is None or not np.all(np.isfinite(box)):
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
     return np.average(np.array(offsets), axis=0, weights=weights)
