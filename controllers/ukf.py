@@ -78,8 +78,10 @@ class UkfConfig(BaseModel):
         0.5, ge=0, le=100,
         description="altimeter error in the flat-sea depth; adds (range / height * this) to the r_c noise, m")
     target_accel_noise_m_s2: float = Field(
-        0.2, gt=0, le=50,
-        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2")
+        0.05, gt=0, le=50,
+        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2; small: "
+                    "a ship holds its velocity for tens of seconds, and a larger value lets the dive's "
+                    "geometry-dependent box-centre errors pass into the velocity, which the last seconds coast on")
     target_vertical_accel_noise_m_s2: float = Field(
         0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
     feature_process_noise: float = Field(
