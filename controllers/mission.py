@@ -11,9 +11,10 @@ Phases (paper, "Simulation"):
    estimated target at R, H; ``path`` keeps the initial path (no Phase 2).
 3. Terminal: quaternion BPNG (controllers/bpng.py) through the autopilot's
    acceleration mode, once the switch condition holds (``switch``: radius and
-   altitude within tolerances for ``dwell_s``, after ``min_loiter_s``, and the
-   bearing from the UAV to the target within ``approach_window_deg`` of the
-   impact heading). The reason is logged as an event.
+   altitude held within tolerances for ``dwell_s``, at least ``min_loiter_s``
+   in Phase 2 (the two run side by side), and the bearing from the UAV to the
+   target within ``approach_window_deg`` of the impact heading). The reason is
+   logged as an event.
 
 IBVS runs in every phase once locked. The UKF predicts every step and updates
 on each new detection. A scripted command list can stand in for the mission.
@@ -89,7 +90,8 @@ class SwitchConfig(BaseModel):
     enabled: bool = Field(True, description="false: loiter until the run ends")
     radius_tol_m: float = Field(25.0, gt=0, le=1000, description="|distance to the estimate - R| below this")
     altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
-    dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long")
+    dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long (counted from Phase "
+                                                             "2's start on, alongside min_loiter_s)")
     min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
     approach_window_deg: float | None = Field(
         5.0, gt=0, le=180,
@@ -229,7 +231,7 @@ class FlightSoftware:
     def _switch_reason(self, meas: Measurements) -> str:
         """Why Phase 3 starts now, or "" while the switch condition does not hold."""
         sw = self.cfg.switch
-        if not sw.enabled or meas.t_s - self._phase2_t < sw.min_loiter_s:
+        if not sw.enabled:
             return ""
         R, H = self._loiter_radius_altitude()
         radial = self._radial_error(meas)
@@ -239,7 +241,8 @@ class FlightSoftware:
             return ""
         if math.isnan(self._in_tol_since):
             self._in_tol_since = meas.t_s
-        if meas.t_s - self._in_tol_since < sw.dwell_s:
+        # the dwell and the minimum loiter run side by side (the dwell may start before min_loiter_s is up)
+        if meas.t_s - self._in_tol_since < sw.dwell_s or meas.t_s - self._phase2_t < sw.min_loiter_s:
             return ""
         target, target_vel = self._target(meas.t_s)
         rel = target[:2] - meas.pos_enu_m[:2]

@@ -4,6 +4,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import controllers
 from controllers.mission import FlightSoftware
@@ -81,3 +82,30 @@ camera: {gimbal: {initial_tilt_rad: 0.5}}
     assert not fsw._ukf.initialised
     out = fsw.step(meas(1 / 30, -0.8))  # looking down: the next detection starts it
     assert fsw._ukf.initialised and any("re-initialised" in e for e in out.events), out.events
+
+
+def test_the_switch_dwell_runs_alongside_the_minimum_loiter():
+    """2 -> 3 needs the radius and altitude held for dwell_s and at least min_loiter_s in Phase 2; the two
+    run side by side, so a UAV on the ring from the start may switch at min_loiter_s (the approach window
+    is often only a few seconds wide, and counting the dwell only after the minimum loiter used to miss it);
+    leaving the tolerance restarts the dwell."""
+    s = parse_scenario("""
+name: b
+duration_s: 10
+initial: {pos_enu_m: [0, -500, 500], airspeed_m_s: 22, heading_deg: 90}
+controllers: {switch: {dwell_s: 5, min_loiter_s: 5, approach_window_deg: null}}
+""")
+    fsw = FlightSoftware(s.controllers, s.initial, s.camera)
+    fsw._target = lambda t_s: (np.zeros(3), np.zeros(3))
+    fsw._phase2_t = 0.0
+
+    def meas(t, radius=500.0):
+        return Measurements(t, np.array([0.0, -radius, 500.0]), np.array([22.0, 0.0, 0.0]), np.zeros(3),
+                            np.zeros(3), 22.0, 500.0)
+    times = np.round(np.arange(0.0, 10.0, 0.1), 6)
+    first = next(t for t in times if fsw._switch_reason(meas(t)))
+    assert first == pytest.approx(5.0)
+    fsw._phase2_t, fsw._in_tol_since = 0.0, math.nan
+    off_ring_at = 3.0
+    first = next(t for t in times if fsw._switch_reason(meas(t, 600.0 if t == off_ring_at else 500.0)))
+    assert first == pytest.approx(off_ring_at + 0.1 + 5.0)
