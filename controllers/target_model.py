@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.special
 from pydantic import BaseModel, ConfigDict, Field
 
 from controllers.camera_model import PinholeCamera
@@ -73,6 +74,14 @@ class ShapeHeadingConfig(BaseModel):
                                                                 "as a fraction of the predicted side")
     sigma_px: float = Field(3.0, gt=0, le=100, description="std. dev. of a box side against the model's, px "
                                                            "(detector noise, model's coarseness)")
+    size_bias_range: tuple[float, float] = Field(
+        (-0.15, 0.05),
+        description="the detected boxes' widths (and, apart, heights) may all be off the model's by one "
+                    "unknown fraction in this range (a detector shrinks boxes and misses thin parts such as a "
+                    "mast): each heading's likelihood is marginalised over it, so that such a bias, which "
+                    "favours whichever heading predicts the smaller boxes, cannot pass for evidence. "
+                    "(0, 0): none")
+    size_bias_steps: int = Field(13, ge=1, le=101, description="grid points over size_bias_range")
     max_effective_updates: float = Field(
         60.0, gt=0, le=10000,
         description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
@@ -244,7 +253,10 @@ class ShapeHeading:
         self.camera = camera
         self.edge_px = float(edge_px)
         self.courses_enu_rad = 2.0 * math.pi * np.arange(cfg.headings) / cfg.headings
-        self.loglik = np.zeros(cfg.headings)
+        lo, hi = cfg.size_bias_range
+        self.size_biases = np.linspace(lo, hi, cfg.size_bias_steps) if hi > lo else np.array([lo])
+        self._loglik_bias = np.zeros((cfg.headings, len(self.size_biases), 2))  # heading, bias, (width, height)
+        self.loglik = np.zeros(cfg.headings)  # marginalised over the size bias
         self.updates = 0
         self._last_t = -math.inf
         self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
@@ -264,8 +276,10 @@ class ShapeHeading:
             return False
         size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
-        r = (size_det[None, :] - size_pred) / (c.sigma_fraction * size_pred + c.sigma_px)
-        self.loglik -= np.sum(np.log1p(0.5 * r * r), axis=1)
+        scaled = size_pred[:, None, :] * (1.0 + self.size_biases)[None, :, None]  # (headings, biases, 2)
+        r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
+        self._loglik_bias -= np.log1p(0.5 * r * r)
+        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
         self.updates += 1
         self._weights = None
         self._last_t = t_s
