@@ -202,11 +202,17 @@ class BpngConfig(BaseModel):
     contact_standoff_m: float = Field(
         2.0, ge=0, le=100,
         description="the steering point lies this much farther out than the outline's surface (the last "
-                    "metres are flown straight, along the impact direction through the aim point)")
+                    "metres are flown in the endgame, along the impact direction through the aim point)")
     endgame_tgo_s: float = Field(
-        0.1, ge=0, le=10,
-        description="below this time to go to the steering point the command is zero: the UAV flies "
-                    "straight (gravity compensated) where the LOS rate of a near hit grows without bound")
+        0.4, ge=0, le=10,
+        description="below this time to go to the steering point the law's command is dropped (see "
+                    "endgame_align_s): there the LOS rate of a near hit grows without bound, and chasing it "
+                    "(saturated, the bank swinging) undid up to 5 deg of the impact angle in the last 0.3 s")
+    endgame_align_s: float | None = Field(
+        0.25, gt=0, le=10,
+        description="in the endgame, turn the velocity onto V_f with this time constant (a = |V| theta / "
+                    "this, toward V_f, perpendicular to V, capped): the law is still finishing its turn "
+                    "there; none: fly straight (gravity compensated)")
     aim_height_m: float = Field(
         0.0, ge=-50, le=100,
         description="height of the aim point above the given target position (the ship's waterline "
@@ -342,7 +348,7 @@ class BpngStatus:
     accel_cmd: np.ndarray  # (3,) commanded (perpendicular, capped), m/s^2
     saturated: bool = False  # the max_accel cap was active
     aim_enu_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) the point steered to
-    endgame: bool = False  # inside endgame_tgo_s: flying straight
+    endgame: bool = False  # inside endgame_tgo_s: the law dropped (V turned onto V_f, or straight)
 
 
 class Bpng:
@@ -382,7 +388,17 @@ class Bpng:
                        else math.radians(cfg.bias_angle_cap_deg))
         # once inside, stay inside: past the steering point the range grows again and the LOS turns round
         endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * float(np.linalg.norm(v))
-        a = np.zeros(3) if endgame else k.accel_cmd.copy()
+        a = k.accel_cmd.copy()
+        if endgame:
+            a = np.zeros(3)
+            speed = float(np.linalg.norm(v))
+            if cfg.endgame_align_s is not None and speed > 1e-6:
+                vh = v / speed
+                perp = self.v_f_enu - float(self.v_f_enu @ vh) * vh  # toward V_f, perpendicular to V
+                n = float(np.linalg.norm(perp))
+                if n > 1e-12:
+                    mag = min(speed * float(k.theta_err_rad) / cfg.endgame_align_s, cfg.max_accel_m_s2)
+                    a = perp / n * mag
         cmd = AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=a)
         status = BpngStatus(t_s=t_s, t_go_s=float(k.t_go_s), range_m=float(k.range_m),
                             los_rate_rad_s=k.los_rate_rad_s, theta_err_rad=float(k.theta_err_rad),

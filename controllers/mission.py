@@ -308,7 +308,8 @@ class FlightSoftware:
 
         The ship's heading comes from the estimated course; when the course is unknown the deepest entry
         over the headings the box shapes allow (or, before they tell, ``headings_when_unknown`` headings) is
-        taken (the steering point then lies in the air at worst, and the last metres are flown straight)."""
+        taken (the steering point then lies in the air at worst, and the last metres are flown in the
+        endgame, along V_f)."""
         b = self.cfg.bpng
         if not b.aim_at_contact:
             return None

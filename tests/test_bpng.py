@@ -380,9 +380,9 @@ def test_from_a_loiter_round_a_fast_ship_the_cap_keeps_the_ship_in_the_capture_r
 
 
 def test_endgame_flies_straight_and_the_caller_may_place_the_aim():
-    """Inside endgame_tgo_s of the steering point the command is zero, to the impact; ``aim_enu`` replaces
-    the aim point."""
-    b = Bpng(BpngConfig(endgame_tgo_s=0.25))
+    """Inside endgame_tgo_s of the steering point (endgame_align_s none) the command is zero, to the impact;
+    ``aim_enu`` replaces the aim point."""
+    b = Bpng(BpngConfig(endgame_tgo_s=0.25, endgame_align_s=None))
     v = np.array([0.0, 40.0, -20.0])
     aim = np.array([3.0, 9.0, -2.0])  # 9.7 m ahead, off the velocity: PN would command a large turn
     cmd, st = b.step(0.0, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=aim)
@@ -391,8 +391,42 @@ def test_endgame_flies_straight_and_the_caller_may_place_the_aim():
     far = np.array([30.0, 90.0, -60.0])
     cmd, st = b.step(0.1, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=far)
     assert st.endgame and np.all(cmd.accel_enu_m_s2 == 0.0)  # latched: past the point the LOS turns round
-    b = Bpng(BpngConfig(endgame_tgo_s=0.25))
+    b = Bpng(BpngConfig(endgame_tgo_s=0.25, endgame_align_s=None))
     cmd, st = b.step(0.0, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=far)
     assert not st.endgame and np.linalg.norm(cmd.accel_enu_m_s2) > 1.0
     _, st = b.step(0.0, np.zeros(3), v, np.array([100.0, 0.0, 0.0]), np.zeros(3))
     assert st.aim_enu_m == pytest.approx(b.aim_point([100.0, 0.0, 0.0]))
+
+
+def test_endgame_turns_the_velocity_onto_v_f_whatever_the_los_does():
+    """With endgame_align_s the endgame ignores the LOS (which a near hit spins) and turns V onto V_f: the
+    command is perpendicular to V, in the plane of V and V_f, toward V_f, of size |V| theta / tau (capped);
+    integrated, the angle decays like exp(-t / tau) and no LOS is needed."""
+    tau = 0.25
+    b = Bpng(BpngConfig(impact_flight_path_deg=-30.0, impact_heading_deg=30.0, endgame_tgo_s=0.4,
+                        endgame_align_s=tau))
+    vf = vf_enu(-30.0, 30.0)
+    # 4 deg above V_f (shallower), 40 m/s, the steering point 10 m ahead and 2 m to the side
+    axis = np.cross(vf, [0.0, 0.0, 1.0])
+    axis /= np.linalg.norm(axis)
+    th = math.radians(4.0)
+    vhat = vf * math.cos(th) + np.cross(axis, vf) * math.sin(th) + axis * (axis @ vf) * (1 - math.cos(th))
+    v = 40.0 * vhat
+    theta0 = math.acos(float(np.clip(vhat @ vf, -1, 1)))
+    aim = 10.0 * vhat + 2.0 * axis
+    cmd, st = b.step(0.0, np.zeros(3), v, np.zeros(3), np.zeros(3), aim_enu=aim)
+    a = cmd.accel_enu_m_s2
+    assert st.endgame
+    assert abs(a @ v) < 1e-9 * np.linalg.norm(a) * 40.0
+    assert np.linalg.norm(a) == pytest.approx(40.0 * theta0 / tau, rel=1e-9)
+    assert np.linalg.det(np.stack([v, vf, a])) == pytest.approx(0.0, abs=1e-6)  # in the plane of V and V_f
+    assert a @ vf > 0.0  # toward V_f
+    # fly it as a point mass (speed kept): the angle decays like exp(-t / tau)
+    p, dt = np.zeros(3), 0.002
+    for k in range(100):
+        cmd, st = b.step(k * dt, p, v, np.zeros(3), np.zeros(3), aim_enu=aim)
+        v = v + cmd.accel_enu_m_s2 * dt
+        v *= 40.0 / np.linalg.norm(v)
+        p = p + v * dt
+    theta = math.acos(float(np.clip(v @ vf / 40.0, -1, 1)))
+    assert theta == pytest.approx(theta0 * math.exp(-0.2 / tau), rel=0.02)
