@@ -361,6 +361,19 @@ class Bpng:
         self._aim_offset = np.array([0.0, 0.0, self.cfg.aim_height_m])
         self._endgame = False  # latched: the endgame lasts to the impact
 
+    def _endgame_accel(self, v: np.ndarray, theta_rad: float) -> np.ndarray:
+        """The endgame's command: V turned onto V_f (``endgame_align_s``), or zero (fly straight)."""
+        cfg = self.cfg
+        speed = float(np.linalg.norm(v))
+        if cfg.endgame_align_s is None or speed <= 1e-6:
+            return np.zeros(3)
+        vh = v / speed
+        perp = self.v_f_enu - float(self.v_f_enu @ vh) * vh  # toward V_f, perpendicular to V
+        n = float(np.linalg.norm(perp))
+        if n <= 1e-12:
+            return np.zeros(3)
+        return perp / n * min(speed * theta_rad / cfg.endgame_align_s, cfg.max_accel_m_s2)
+
     def aim_point(self, target_pos_enu) -> np.ndarray:
         """The point BPNG steers to: the target position raised by ``aim_height_m``."""
         return np.asarray(target_pos_enu, dtype=float) + self._aim_offset
@@ -388,17 +401,7 @@ class Bpng:
                        else math.radians(cfg.bias_angle_cap_deg))
         # once inside, stay inside: past the steering point the range grows again and the LOS turns round
         endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * float(np.linalg.norm(v))
-        a = k.accel_cmd.copy()
-        if endgame:
-            a = np.zeros(3)
-            speed = float(np.linalg.norm(v))
-            if cfg.endgame_align_s is not None and speed > 1e-6:
-                vh = v / speed
-                perp = self.v_f_enu - float(self.v_f_enu @ vh) * vh  # toward V_f, perpendicular to V
-                n = float(np.linalg.norm(perp))
-                if n > 1e-12:
-                    mag = min(speed * float(k.theta_err_rad) / cfg.endgame_align_s, cfg.max_accel_m_s2)
-                    a = perp / n * mag
+        a = self._endgame_accel(v, float(k.theta_err_rad)) if endgame else k.accel_cmd.copy()
         cmd = AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=a)
         status = BpngStatus(t_s=t_s, t_go_s=float(k.t_go_s), range_m=float(k.range_m),
                             los_rate_rad_s=k.los_rate_rad_s, theta_err_rad=float(k.theta_err_rad),

@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 import scipy.special
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from controllers.camera_model import PinholeCamera
 
@@ -82,6 +82,13 @@ class ShapeHeadingConfig(BaseModel):
                     "favours whichever heading predicts the smaller boxes, cannot pass for evidence. "
                     "(0, 0): none")
     size_bias_steps: int = Field(13, ge=1, le=101, description="grid points over size_bias_range")
+
+    @field_validator("size_bias_range")
+    @classmethod
+    def _bias_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not (-1.0 < v[0] <= v[1]):
+            raise ValueError(f"must be (low, high) with -1 < low <= high, got {tuple(v)}")
+        return v
     max_effective_updates: float = Field(
         60.0, gt=0, le=10000,
         description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
@@ -239,7 +246,9 @@ class ShapeHeading:
     of sight, so a loiter round the ship, which sees it from many bearings, tells its heading (often up to
     bow or stern: where the two differ in the model's box sizes, the fit picks the right one). Each used
     detection adds, for every candidate heading, the robust (Cauchy) log-likelihood of its box sides against
-    :func:`predicted_boxes_px` for that heading; the posterior is tempered so that it never counts more than
+    :func:`predicted_boxes_px` for that heading, for each of a grid of size biases (the detected widths, and
+    apart the heights, off the model's by one unknown fraction, ``size_bias_range``), which each heading's
+    likelihood is marginalised over; the posterior is tempered so that it never counts more than
     ``max_effective_updates`` detections. A detection whose box touches the image border says nothing of the
     size and is not used; nor is one taken less than ``1 / rate_hz`` after the last used one.
 

@@ -359,3 +359,12 @@ def test_a_known_course_and_the_shapes_sharpen_each_other():
             update={"fuse_with_course": False})})})
     courses, weights = plain._headings(vel, 0.9)
     assert len(courses) == 1 and math.isclose(float(courses[0]), off)
+
+
+def test_size_bias_range_must_be_ordered_and_keep_boxes_positive():
+    from pydantic import ValidationError
+    for bad in ((0.1, -0.1), (-1.0, 0.0)):
+        with pytest.raises(ValidationError, match="size_bias_range"):
+            ShapeHeadingConfig(size_bias_range=bad)
+    assert len(ShapeHeading(ShapeHeadingConfig(size_bias_range=(0.0, 0.0)), ShipOutline(ShipModelConfig()),
+                            PinholeCamera.from_config(CAM_CFG)).size_biases) == 1
