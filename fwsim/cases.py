@@ -26,14 +26,15 @@ __all__ = ["terminal_case", "sweep_cases", "fly_case", "case_line", "CASE_KEYS"]
 
 
 def _orbit_heading_deg(bearing_rad: float, ship_heading_deg: float, ship_speed_m_s: float,
-                       airspeed_m_s: float) -> float:
+                       airspeed_m_s: float, wind_enu_m_s=(0.0, 0.0, 0.0)) -> float:
     """Heading (deg, clockwise from North) that moves the UAV clockwise around the moving ship, relative
     to it along the circle (no radial part): the steady loiter the NMPC would settle into. Without it a
     fast ship's loiter can settle into the other orbit, which goes the opposite way round relative to the
     ship (both keep the radius), and reaches the approach window a lap later."""
     t_hat = np.array([math.sin(bearing_rad - math.pi / 2), math.cos(bearing_rad - math.pi / 2)])  # ship on the right
     hs = math.radians(ship_heading_deg)
-    vs = ship_speed_m_s * np.array([math.sin(hs), math.cos(hs)])
+    # the air-relative motion: V_air = (V_ship - wind) + w t_hat, |V_air| = airspeed; the heading is V_air's
+    vs = ship_speed_m_s * np.array([math.sin(hs), math.cos(hs)]) - np.asarray(wind_enu_m_s, float)[:2]
     along = float(vs @ t_hat)
     w = -along + math.sqrt(max(along**2 - float(vs @ vs) + airspeed_m_s**2, 0.0))  # V_uav = V_ship + w t_hat
     v = vs + w * t_hat
@@ -42,12 +43,16 @@ def _orbit_heading_deg(bearing_rad: float, ship_heading_deg: float, ship_speed_m
 
 def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float, ship_speed_m_s: float,
                   seed: int = 1, arc_deg: float = 25.0, radius_m: float = 500.0, altitude_m: float = 500.0,
-                  duration_s: float = 90.0, airspeed_m_s: float = 22.0) -> dict:
-    """A scenario (as a dict, ready for ``yaml.safe_dump`` / ``parse_scenario``) for one terminal case."""
+                  duration_s: float = 90.0, airspeed_m_s: float = 22.0, wind_enu_m_s=None) -> dict:
+    """A scenario (as a dict, ready for ``yaml.safe_dump`` / ``parse_scenario``) for one terminal case.
+    ``wind_enu_m_s``: the world's wind, which the start heading then allows for (none: the scenario's)."""
     d = copy.deepcopy(yaml.safe_load((SCENARIO_DIR / "paper_mission.yaml").read_text()))
     b0 = math.radians(psi_f_deg - arc_deg)  # bearing UAV -> ship at the start; clockwise it grows to psi_f
     pos = np.array([-radius_m * math.sin(b0), -radius_m * math.cos(b0), altitude_m])
-    heading_deg = _orbit_heading_deg(b0, ship_heading_deg, ship_speed_m_s, airspeed_m_s)
+    if wind_enu_m_s is not None:
+        d.setdefault("world", {})["wind_enu_m_s"] = [float(x) for x in wind_enu_m_s]
+    wind = d.get("world", {}).get("wind_enu_m_s", [0.0, 0.0, 0.0])
+    heading_deg = _orbit_heading_deg(b0, ship_heading_deg, ship_speed_m_s, airspeed_m_s, wind)
     euler = np.array([0.0, 0.0, math.radians(heading_deg)])
     mount = np.array(d["camera"]["gimbal"]["mount_offset_frd_m"], dtype=float)
     R = dcm_enu_from_frd(euler)
@@ -96,8 +101,9 @@ def fly_case(case, out_dir, seed: int = 1, bounds=(3.0, 3.0), overrides: dict | 
     from fwsim.loop import run
     from fwsim.metrics import compute_metrics
     from fwsim.scenario import parse_scenario, set_path
-    d = terminal_case(*case, seed=seed)
-    for path, value in (overrides or {}).items():
+    overrides = dict(overrides or {})
+    d = terminal_case(*case, seed=seed, wind_enu_m_s=overrides.pop("world.wind_enu_m_s", None))
+    for path, value in overrides.items():
         set_path(d, path, value)
     text = yaml.safe_dump(d, sort_keys=False)
     sc = parse_scenario(text)

@@ -93,3 +93,28 @@ def test_parse_sets_reads_yaml_values_and_names_a_bad_item():
         {"seed": 3, "world.wind_enu_m_s": [5, -4, 0], "a.b": "x"}
     with pytest.raises(ScenarioError, match="--set seed3: expected PATH=VALUE"):
         parse_sets(["seed3"])
+
+
+def test_a_terminal_case_in_wind_starts_on_the_steady_orbit():
+    """fwsim.cases.terminal_case with a wind: the start heading is the air heading whose ground motion,
+    relative to the ship, runs along the loiter circle (no radial part), and the wind is the world's."""
+    import math
+
+    import numpy as np
+    import yaml
+
+    from fwsim.cases import terminal_case
+    from fwsim.scenario import parse_scenario
+    wind = [5.0, -4.0, 0.0]
+    for still_air in (True, False):
+        d = terminal_case(-30.0, 30.0, 75.0, 10.0, wind_enu_m_s=None if still_air else wind)
+        sc = parse_scenario(yaml.safe_dump(d))
+        w = np.zeros(2) if still_air else np.array(wind[:2])
+        assert np.allclose(sc.world.wind_enu_m_s[:2], w)
+        h = math.radians(d["initial"]["heading_deg"])
+        v_air = d["initial"]["airspeed_m_s"] * np.array([math.sin(h), math.cos(h)])
+        v_ship = 10.0 * np.array([math.sin(math.radians(75.0)), math.cos(math.radians(75.0))])
+        rel = v_air + w - v_ship
+        radial = -np.array(d["initial"]["pos_enu_m"][:2]) / np.linalg.norm(d["initial"]["pos_enu_m"][:2])
+        assert abs(rel @ radial) < 1e-6 * np.linalg.norm(rel)
+        assert rel[0] * radial[1] - rel[1] * radial[0] < 0  # the ship on the right: clockwise round it
