@@ -155,68 +155,14 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
+from controllers.config import BpngConfig
 from fwsim.frames import dcm_enu_from_frd
 from fwsim.messages import AccelCommand
 
 _MIN_RANGE_M = 1e-3  # below: LOS rate undefined, set to 0
 _MIN_SPEED_M_S = 1e-3  # below: velocity direction undefined, command 0
 _PARALLEL_EPS = 1e-9  # |V_hat x V_f_hat| below: V_p (anti-)parallel to V_f
-
-
-# --------------------------------------------------------------------------- config
-
-
-class BpngConfig(BaseModel):
-    """Tuning of the terminal guidance (paper section Phase 3)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    n_sigma: float = Field(6.0, gt=0, le=20, description="PN gain N_sigma on Omega x V_p (paper: 6, optimal)")
-    n_f: float = Field(2.0, ge=0, le=20, description="bias gain N_f on the impact-angle error (paper: 2, optimal)")
-    impact_flight_path_deg: float = Field(
-        -30.0, ge=-90, le=0,
-        description="wanted flight-path angle at impact theta_f, deg, negative when diving (paper: -30)")
-    impact_heading_deg: float = Field(
-        30.0, ge=-360, le=360, description="wanted heading at impact psi_f, deg clockwise from North (paper: 30)")
-    airspeed_m_s: float = Field(
-        22.0, gt=0, le=60,
-        description="airspeed commanded in the dive, m/s (the autopilot holds it with throttle only; "
-                    "at idle the UAV still gains speed diving)")
-    min_tgo_s: float = Field(0.5, gt=0, le=10, description="floor of t_go = |r| / |V_p|, s")
-    bias_angle_cap_deg: float | None = Field(
-        90.0, gt=0, le=180,
-        description="the bias term uses min(theta, this): the law is the small-angle optimum, and from a "
-                    "loiter round a fast ship the UAV can start more than 90 deg off V_f, where the bias "
-                    "(away from V_f) cancels the PN term and the UAV flies straight on, away from the ship; "
-                    "none: the paper's law as printed")
-    max_accel_m_s2: float = Field(
-        25.0, gt=0, le=200, description="cap on |u| (direction kept), m/s^2, gravity not included")
-    aim_at_contact: bool = Field(
-        True,
-        description="steer to where the approach along the impact direction first meets the ship's outline "
-                    "(controllers.target_model), not to the aim point inside it: the law's impact angle is "
-                    "reached where the path ends, and a dive meets the deck, side or superstructure up to "
-                    "~20 m before the aim point")
-    contact_standoff_m: float = Field(
-        2.0, ge=0, le=100,
-        description="the steering point lies this much farther out than the outline's surface (the last "
-                    "metres are flown in the endgame, along the impact direction through the aim point)")
-    endgame_tgo_s: float = Field(
-        0.4, ge=0, le=10,
-        description="below this time to go to the steering point the law's command is dropped (see "
-                    "endgame_align_s): there the LOS rate of a near hit grows without bound, and chasing it "
-                    "(saturated, the bank swinging) undid up to 5 deg of the impact angle in the last 0.3 s")
-    endgame_align_s: float | None = Field(
-        0.25, gt=0, le=10,
-        description="in the endgame, turn the velocity onto V_f with this time constant (a = |V| theta / "
-                    "this, toward V_f, perpendicular to V, capped): the law is still finishing its turn "
-                    "there; none: fly straight (gravity compensated)")
-    aim_height_m: float = Field(
-        0.0, ge=-50, le=100,
-        description="height of the aim point above the given target position (the ship's waterline "
-                    "point), m; 0 aims at the waterline")
 
 
 # --------------------------------------------------------------------------- geometry

@@ -30,7 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PinholeCamera", "feature_rates", "interaction_matrix", "depth_on_plane"]
+from fwsim.frames import camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
+from fwsim.messages import Measurements
+
+__all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "interaction_matrix",
+           "depth_on_plane"]
 
 #: rays whose downward component (-d_z / |d|) is below this are treated as not meeting the sea
 MIN_RAY_DOWN = 1e-6
@@ -159,3 +163,47 @@ def depth_on_plane(x1, x2, R_enu_from_cam, cam_z_m, plane_z_m: float = 0.0):
     with np.errstate(divide="ignore", invalid="ignore"):
         Z = np.where(ok, h / np.where(ok, -dz, 1.0), np.nan)
     return float(Z) if Z.ndim == 0 else Z
+
+
+@dataclass(frozen=True, slots=True)
+class CameraMotion:
+    """The camera's pose and motion as the flight software knows it at ``t_s``."""
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,) camera position r_c in the world
+    vel_enu_m_s: np.ndarray  # (3,) camera velocity V_c = V_p + R_enu_from_frd (omega_p x r_c/p)
+    R_enu_from_cam: np.ndarray  # (3, 3)
+    omega_cam_rad_s: np.ndarray  # (3,) camera angular velocity relative to the world, camera frame
+    height_m: float  # camera height above the sea (altimeter + lever arm), for the depth model
+
+    @classmethod
+    def from_measurements(cls, meas: Measurements, mount_offset_frd_m) -> "CameraMotion":
+        """Build from one ``Measurements`` and the known mount offset r_c/p (body FRD, m).
+
+        Pose from :func:`fwsim.frames.camera_pose_world` (attitude + encoders);
+        ``r_c`` is ``meas.cam_pos_enu_m`` when finite, else the pose's;
+        ``omega`` from :func:`fwsim.frames.camera_angular_velocity` (encoder
+        rates, NaN taken as 0, plus gyros); height from the altimeter (the
+        GNSS height of r_c if the altimeter is NaN). Raises ValueError without
+        gimbal encoders.
+        """
+        pan, tilt = float(meas.pan_rad), float(meas.tilt_rad)
+        if not (math.isfinite(pan) and math.isfinite(tilt)):
+            raise ValueError("CameraMotion needs the gimbal encoders (pan_rad, tilt_rad are NaN)")
+        m = np.asarray(mount_offset_frd_m, dtype=float)
+        cam_pos, R = camera_pose_world(meas.pos_enu_m, meas.euler_ned_rad, m, pan, tilt)
+        if np.all(np.isfinite(meas.cam_pos_enu_m)):
+            cam_pos = np.array(meas.cam_pos_enu_m, dtype=float)
+        R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
+        vel = np.asarray(meas.vel_enu_m_s, dtype=float) + R_ef @ cross3(meas.body_rates_frd_rad_s, m)
+        pan_rate = float(meas.pan_rate_rad_s) if math.isfinite(meas.pan_rate_rad_s) else 0.0
+        tilt_rate = float(meas.tilt_rate_rad_s) if math.isfinite(meas.tilt_rate_rad_s) else 0.0
+        omega = camera_angular_velocity(pan, tilt, pan_rate, tilt_rate, meas.body_rates_frd_rad_s)
+        h = float(meas.height_above_sea_m)
+        height = h + float(R_ef[2] @ m) if math.isfinite(h) else float(cam_pos[2])
+        return cls(float(meas.t_s), cam_pos, vel, R, omega, height)
+
+
+def camera_motion(meas: Measurements, mount_offset_frd_m) -> CameraMotion | None:
+    """:meth:`CameraMotion.from_measurements`, or None without gimbal encoders (pan or tilt NaN)."""
+    return CameraMotion.from_measurements(meas, mount_offset_frd_m) if math.isfinite(meas.pan_rad) else None

@@ -60,33 +60,17 @@ zero whenever the hard constraint is feasible).
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import casadi as ca
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+
+from controllers.config import CbfConfig
 
 __all__ = ["CbfConfig", "G", "cbf_terms", "cbf_rows", "h_sides", "h_value", "alpha_right", "lateral_offset",
            "body_z_component"]
 
 G = 9.80665
 _EPS2 = 1e-6  # m^2, keeps alpha finite when the target is level with the UAV and dead ahead
-
-
-class CbfConfig(BaseModel):
-    """The self-occlusion CBF of the NMPC."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    enabled: bool = Field(True, description="impose the CBF input constraints (eq. cbfright/cbfleft)")
-    beta: float = Field(1.0, gt=0.0, le=50.0, description="CBF class-K gain beta in h_dot >= -beta h, 1/s")
-    sides: Literal["both", "solve_time"] = Field(
-        "both", description="both: right and left rows at every stage (smooth); solve_time: the side of "
-                            "sign(R_p) at the current state for the whole horizon (the paper's switch)")
-    slack_weight_linear: float = Field(100.0, ge=0.0, le=1e9,
-                                       description="linear (exact) penalty on the CBF slack, per rad/s")
-    slack_weight_quadratic: float = Field(100.0, gt=0.0, le=1e9,
-                                          description="quadratic penalty on the CBF slack, per (rad/s)^2")
 
 
 # --------------------------------------------------------------------------- symbolic (casadi)

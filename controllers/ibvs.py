@@ -152,11 +152,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from controllers.config import IbvsConfig
 from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import GimbalCommand, Measurements
 
@@ -166,58 +165,6 @@ _FEATURE_CAP = 3.0  # |x1|, |x2| of a propagated feature (about 72 deg off axis)
 _SWING_FAR_RAD = 0.5 * _PI  # target azimuth this far from the pan: on the far side of the pan axis
 _SWING_EXIT_RAD = math.radians(30.0)  # a swing ends with the pan this close to the target's azimuth
 _SWING_DEADBAND_RAD = math.radians(5.0)  # an unwind needs the azimuth to go this far past a pan limit
-
-_PanAngle = Annotated[float, Field(ge=-2.0 * _PI, le=2.0 * _PI)]
-_TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
-
-
-# --------------------------------------------------------------------------- configuration
-
-
-class IbvsConfig(BaseModel):
-    """IBVS gimbal controller settings (flight software side; angles in rad)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    lambda_1_s: float = Field(1.5, gt=0.0, le=20.0,
-                              description="feedback gain lambda: the image error decays as exp(-lambda t), 1/s")
-    feedforward: bool = Field(True, description="cancel the feature motion caused by the UAV's rotation and by "
-                                                "the UAV's and the target's velocity (paper's L2 term)")
-    singularity_damping: float = Field(0.1, gt=0.0, le=1.0,
-                                       description="mu of the damped least-squares inverse: active when the "
-                                                   "smallest singular value of J drops below mu (target line of "
-                                                   "sight near the pan axis); bounds |joint rates| by |b|/mu")
-    pan_limits_rad: list[_PanAngle] = Field(default_factory=lambda: [-_PI, _PI], min_length=2, max_length=2,
-                                            description="[min, max] pan angle the gimbal allows, rad")
-    tilt_limits_rad: list[_TiltAngle] = Field(default_factory=lambda: [-_HALF_PI, _HALF_PI], min_length=2,
-                                              max_length=2, description="[min, max] tilt angle, rad (up positive)")
-    max_pan_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="pan rate limit, rad/s")
-    max_tilt_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="tilt rate limit, rad/s")
-    hold_timeout_s: float = Field(1.0, ge=0.0, le=60.0,
-                                  description="after the track is lost, keep feeding forward (coast) this long, "
-                                              "then hold the joints, s")
-    max_detection_age_s: float = Field(0.2, gt=0.0, le=10.0,
-                                       description="a valid detection older than this (since its exposure) no "
-                                                   "longer counts as tracking, s")
-    keyhole_swing: bool = Field(True, description="near the pan axis, swing the pan round (full rate, tilt by least "
-                                                  "squares) when the target is on the far side of the axis or its "
-                                                  "azimuth is about to cross a pan limit (module docstring)")
-    keyhole_fov_fraction: float = Field(1.0, gt=0.0, le=1.0,
-                                        description="the keyhole: target within this fraction of the smallest half "
-                                                    "field of view (principal point to the nearer image edge) of the "
-                                                    "pan axis, less what the tilt limit falls short of the axis")
-    propagate_feature: bool = Field(True, description="predict the feature from the detection's exposure to now "
-                                                      "and between detections with the feature kinematics")
-    nominal_dt_s: float = Field(1.0 / 30.0, gt=0.0, le=1.0,
-                                description="controller period assumed on the first call (joint-limit "
-                                            "look-ahead and feature propagation), s")
-
-    @model_validator(mode="after")
-    def _ordered(self):
-        for name, lim in (("pan", self.pan_limits_rad), ("tilt", self.tilt_limits_rad)):
-            if not lim[0] < lim[1]:
-                raise ValueError(f"{name}_limits_rad must be ordered [min, max] with min < max (got {lim})")
-        return self
 
 
 # --------------------------------------------------------------------------- feature kinematics (own copy)
@@ -535,8 +482,27 @@ class Ibvs:
         w_p = np.asarray(meas.body_rates_frd_rad_s, dtype=float)
         if not np.all(np.isfinite(w_p)):
             w_p = np.zeros(3)
+        v_rel, z = self._relative_velocity(meas, target_vel_enu_m_s, depth_m, mount_offset_frd_m, R_cf, w_p)
 
-        # translational term T(s): needs the depth, attitude and UAV velocity
+        def T_fn(s):
+            return None if v_rel is None else translational_feature_rates(s[0], s[1], z, v_rel)
+
+        valid = self._update_feature(meas, t, dt, prev_t, tilt, R_cf, w_p, T_fn)
+        age = t - self._fix_t if math.isfinite(self._fix_t) else math.nan
+        mode = self._mode(t, valid, age)
+        if mode == "hold":
+            return self._hold(t, age=age)
+        pan_rate, tilt_rate, scale, sigma_min, swing = self._law(t, dt, pan, tilt, mode, R_fc, R_cf, w_p, v_rel,
+                                                                 z, T_fn)
+        self._last_cmd = (pan_rate, tilt_rate)
+        s = self._s
+        status = IbvsStatus(t, mode, s.copy(), np.array([float(s[0]) * self.fx, float(s[1]) * self.fy]), pan_rate,
+                            tilt_rate, age, sigma_min, scale, swing)
+        return GimbalCommand(t, pan_rate, tilt_rate), status
+
+    def _relative_velocity(self, meas: Measurements, target_vel_enu_m_s, depth_m, mount_offset_frd_m, R_cf, w_p):
+        """(target velocity relative to the camera in the camera frame, depth Z) for the translational term
+        T(s); (None, NaN) without a depth, the attitude or the UAV's velocity."""
         v_rel = None
         if depth_m is not None and math.isfinite(float(depth_m)) and float(depth_m) > 0.0:
             vel = np.asarray(meas.vel_enu_m_s, dtype=float)
@@ -547,17 +513,16 @@ class Ibvs:
                 v_q = np.zeros(3) if target_vel_enu_m_s is None else np.asarray(target_vel_enu_m_s, dtype=float)
                 if np.all(np.isfinite(v_q)):
                     v_rel = R_cf @ (R_ef.T @ (v_q - v_c))
-        z = float(depth_m) if v_rel is not None else math.nan
+        return v_rel, (float(depth_m) if v_rel is not None else math.nan)
 
-        def T_fn(s):
-            return None if v_rel is None else translational_feature_rates(s[0], s[1], z, v_rel)
-
+    def _update_feature(self, meas: Measurements, t, dt, prev_t, tilt, R_cf, w_p, T_fn) -> bool:
+        """Take a new detection as the feature (propagated from its exposure to now), or propagate the
+        feature between detections with the measured joint rates; True when the newest detection is valid."""
+        cfg = self.cfg
         # measured joint rates for the propagation (encoders; else the last command)
         pr_m, tr_m = float(meas.pan_rate_rad_s), float(meas.tilt_rate_rad_s)
         if not _finite(pr_m, tr_m):
             pr_m, tr_m = self._last_cmd
-
-        # ---- feature estimate
         u, v = float(meas.det_u_px), float(meas.det_v_px)
         valid = bool(meas.det_valid) and _finite(u, v)
         key = (float(meas.det_exposure_t_s), u, v)
@@ -574,23 +539,26 @@ class Ibvs:
             self._s = self._s + dt * self._sdot(self._s, tilt, R_cf, w_p, pr_m, tr_m, T_fn)
         if self._s is not None:
             np.clip(self._s, -_FEATURE_CAP, _FEATURE_CAP, out=self._s)
-        age = t - self._fix_t if math.isfinite(self._fix_t) else math.nan
+        return valid
 
-        # ---- mode
-        if self._s is not None and valid and age <= cfg.max_detection_age_s:
-            mode = "track"
+    def _mode(self, t: float, valid: bool, age: float) -> str:
+        """``track``, ``coast`` or ``hold`` (the module text); forgets the feature after the coast."""
+        if self._s is not None and valid and age <= self.cfg.max_detection_age_s:
             self._lost_t = None
-        elif self._s is not None:
-            if self._lost_t is None:
-                self._lost_t = t
-            if t - self._lost_t > cfg.hold_timeout_s:
-                self._s = None  # forget the target: hold until the next valid detection
-                return self._hold(t, age=age)
-            mode = "coast"
-        else:
-            return self._hold(t, age=age)
+            return "track"
+        if self._s is None:
+            return "hold"
+        if self._lost_t is None:
+            self._lost_t = t
+        if t - self._lost_t > self.cfg.hold_timeout_s:
+            self._s = None  # forget the target: hold until the next valid detection
+            return "hold"
+        return "coast"
 
-        # ---- law: J [tilt_dot, pan_dot] = b
+    def _law(self, t, dt, pan, tilt, mode, R_fc, R_cf, w_p, v_rel, z, T_fn):
+        """The joint rates: J [tilt_dot, pan_dot] = b (damped), or a keyhole swing; then the limits.
+        Returns (pan_rate, tilt_rate, rate scale, sigma_min of J, swing direction)."""
+        cfg = self.cfg
         s = self._s
         x1, x2 = float(s[0]), float(s[1])
         b = np.zeros(2)
@@ -616,7 +584,4 @@ class Ibvs:
             tilt_rate, scale = limit_joint_rates(pan, tilt, 0.0, tilt_rate, cfg, dt)[1:]
         else:
             pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, float(q[1]), float(q[0]), cfg, dt)
-        self._last_cmd = (pan_rate, tilt_rate)
-        status = IbvsStatus(t, mode, s.copy(), np.array([x1 * self.fx, x2 * self.fy]), pan_rate, tilt_rate,
-                            age, sigma_min, scale, swing)
-        return GimbalCommand(t, pan_rate, tilt_rate), status
+        return pan_rate, tilt_rate, scale, sigma_min, swing

@@ -43,8 +43,8 @@ import dataclasses
 import math
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
+from controllers.config import NavigationConfig
 from fwsim.frames import dcm_enu_from_frd
 from fwsim.messages import Measurements
 
@@ -52,27 +52,6 @@ __all__ = ["NavigationConfig", "Navigation"]
 
 _LEVEL_PITCH_RAD = math.radians(15.0)  # the wind is estimated only below this pitch
 _LEVEL_BANK_RAD = math.radians(45.0)  # and this bank
-
-
-class NavigationConfig(BaseModel):
-    """How the flight software turns GNSS fixes into its position."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    propagate: bool = Field(True, description="propagate the position with the fix velocity between fixes "
-                                              "(false: use the held fix as it is)")
-    fix_gain: float = Field(0.1, gt=0, le=1,
-                            description="K: weight of a new fix against the propagated position "
-                                        "(1: take each fix as it is; smaller smooths its noise)")
-    turn_velocity: bool = Field(
-        True, description="turn the fix velocity with the gyros between fixes (dV/dt = omega x V: the flight "
-                          "path turns with the airframe); false: hold it")
-    wind_gain: float = Field(
-        0.02, ge=0, le=1,
-        description="weight of each fix's wind (fix velocity minus airspeed along the nose, horizontal; taken in "
-                    "near-level flight only) in the running wind estimate; the velocity turns with the gyros "
-                    "relative to the air, V - wind; 0: no wind estimate")
-    max_gap_s: float = Field(1.0, gt=0, le=60,
-                             description="a fix older than this when the next arrives: restart from the fix")
 
 
 class Navigation:

@@ -51,8 +51,8 @@ Solvers (``NmpcConfig.solver``):
     (psi_dot ~ tan(phi)/V times large multipliers on big radius errors) and its real-time
     iteration then oscillates period-2 in u_p during the approach. ``rti_iterations`` QPs per call
     (default 1); a cold start (first call, after a reset) iterates up to ``cold_start_iterations``
-    (with ``budget: wall_clock``, also within 90 % of ``max_solve_ms``). A call at the same t_s as the previous one does not shift, so
-    repeated calls keep iterating toward the optimum.
+    (with ``budget: wall_clock``, also within 90 % of ``max_solve_ms``). A call at the same t_s as the
+    previous one does not shift, so repeated calls keep iterating toward the optimum.
   * ``rti_qrqp``: the same with CasADi's sparse active-set qrqp (far slower here and unreliable on
     this QP: kept for comparison only).
   * ``fatrop``: the full NLP with the structure-exploiting interior point Fatrop (exact Hessian).
@@ -69,17 +69,17 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Literal
 
 import casadi as ca
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
-from controllers.cbf import G, CbfConfig, cbf_rows, cbf_terms
+from controllers.cbf import G, cbf_rows, cbf_terms
+from controllers.config import NmpcConfig
 from fwsim.frames import wrap_pi
 from fwsim.messages import Measurements, RateCommand
 
-__all__ = ["NmpcConfig", "NmpcResult", "Nmpc", "continuous_dynamics", "NX", "KinematicRun", "kinematic_closed_loop"]
+__all__ = ["NmpcConfig", "NmpcResult", "NmpcStatus", "Nmpc", "continuous_dynamics", "NX", "KinematicRun",
+           "kinematic_closed_loop"]
 
 NX = 6  # [x, y, z, phi, theta, psi]
 _TWO_PI = 2.0 * math.pi
@@ -87,65 +87,6 @@ _DIST_EPS2 = 1.0  # m^2 inside the planar-distance sqrt (smooth at the target)
 _HESS_REG = 1e-8  # diagonal added to the QP Hessian
 _FUNNEL = 0.5  # fraction of the rate limit used to widen a violated attitude bound per second
 _CBF_ACTIVE_TOL = 1e-3  # rad/s: a CBF row closer than this to its bound counts as active
-
-
-class NmpcConfig(BaseModel):
-    """Tuning of the Phase 2 NMPC (paper eq. NMPC, limits) and its solver."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    horizon_steps: int = Field(50, ge=2, le=400, description="N, prediction = control horizon (steps)")
-    step_s: float = Field(0.1, gt=0.0, le=2.0, description="T_s, the NMPC step and the model's Euler step, s")
-    radius_m: float = Field(500.0, gt=20.0, le=5000.0, description="R, loiter radius around the target, m")
-    altitude_m: float = Field(500.0, gt=10.0, le=5000.0, description="H, loiter altitude (world z), m")
-    w1_radius: float = Field(1e-4, ge=0.0, le=1e6, description="w1, per m^2 of radius error, per stage")
-    w2_altitude: float = Field(1e-4, ge=0.0, le=1e6, description="w2, per m^2 of altitude error, per stage")
-    w3_attitude: tuple[float, float, float] = Field(
-        (30.0, 30.0, 1.0), description="W3 diagonal: per rad^2 of change of [phi, theta, psi] per step")
-    w4_continuity: float = Field(0.1, ge=0.0, le=1e6,
-                                 description="w4, per (rad/s)^2 of [u_p, u_q] change from the previous input")
-    w_airspeed: float = Field(1e-4, ge=0.0, le=1e6,
-                              description="input regularisation, per (m/s)^2 of V_U - airspeed_ref, per stage")
-    w_rates: float = Field(1e-4, ge=0.0, le=1e6,
-                           description="input regularisation, per (rad/s)^2 of u_p and u_q, per stage")
-    airspeed_ref_m_s: float = Field(22.0, gt=0.0, le=80.0, description="V_ref of the airspeed regularisation")
-    roll_max_deg: float = Field(35.0, gt=0.0, lt=80.0, description="|phi| bound")
-    pitch_max_deg: float = Field(15.0, gt=0.0, lt=60.0, description="|theta| bound")
-    airspeed_min_m_s: float = Field(18.0, gt=0.0, le=80.0, description="V_U lower bound")
-    airspeed_max_m_s: float = Field(28.0, gt=0.0, le=80.0, description="V_U upper bound")
-    roll_rate_max_rad_s: float = Field(0.8, gt=0.0, le=10.0, description="|u_p| bound, rad/s")
-    pitch_rate_max_rad_s: float = Field(0.3, gt=0.0, le=10.0, description="|u_q| bound, rad/s")
-    cbf: CbfConfig = Field(default_factory=CbfConfig)
-    integrator: Literal["euler", "rk4"] = Field("euler", description="discretisation of the model")
-    solver: Literal["rti_hpipm", "rti_qrqp", "fatrop", "ipopt"] = Field(
-        "rti_hpipm", description="rti_*: SQP real-time iterations with that QP solver (hpipm: structured "
-                                 "interior point; qrqp: comparison only); fatrop/ipopt: the full NLP to convergence")
-    hessian: Literal["exact", "gauss_newton"] = Field(
-        "exact", description="rti_*: QP Hessian. exact: Hessian of the Lagrangian (gap multipliers from the adjoint "
-                             "recursion), eigenvalues clipped per stage block; gauss_newton: 2 J_r^T J_r (oscillates "
-                             "on large radius errors, kept for comparison)")
-    hessian_min_eig: float = Field(1e-6, gt=0.0, le=1.0,
-                                   description="exact Hessian: eigenvalue floor of each stage block")
-    rti_iterations: int = Field(1, ge=1, le=50, description="SQP iterations per call once warm")
-    cold_start_iterations: int = Field(50, ge=1, le=500,
-                                       description="SQP iterations at most on the first call or after a reset; "
-                                                   "they also stop when 90 % of max_solve_ms is used")
-    cold_start_tol: float = Field(1e-5, gt=0.0, le=1.0,
-                                  description="cold start stops when the largest input step is below this")
-    ipopt_tol: float = Field(1e-8, gt=0.0, le=1e-2, description="IPOPT convergence tolerance")
-    max_solve_ms: float = Field(50.0, ge=0.0, le=1e5,
-                                description="time budget of one solve (budget: wall_clock): a later result is "
-                                            "not applied, and a cold start stops at 90 % of it")
-    budget: Literal["iterations", "wall_clock"] = Field(
-        "iterations",
-        description="iterations: a solve is bounded by its iteration counts only, so a run is the same on any "
-                    "machine and load (same seed, same log); wall_clock: also by max_solve_ms of the wall "
-                    "clock, as on a real-time mission computer (results then depend on the machine)")
-    reset_after_failures: int = Field(3, ge=1, le=1000,
-                                      description="consecutive failed solves before the warm start is rebuilt")
-    pitch_from: Literal["attitude", "flight_path"] = Field(
-        "attitude", description="theta of the model from the AHRS pitch (paper) or the flight-path angle of "
-                                "the velocity (the kinematics' z_dot = V sin(theta) then has no alpha bias)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,6 +102,29 @@ class NmpcResult:
     cbf_active: bool  # a CBF row is (nearly) binding somewhere on the horizon
     min_h: float  # min over the predicted states of controllers.cbf.h_value (rad)
     inputs: np.ndarray  # (N, 3) the plan's inputs [V_U, u_p, u_q] (on a late solve: the new, unapplied plan)
+
+
+@dataclass(frozen=True, slots=True)
+class NmpcStatus:
+    """One NMPC solve, for the log (``/fsw/nmpc``; the horizon's positions decimated to every 5th step)."""
+
+    t_s: float
+    status: str
+    solve_ms: float
+    iterations: int
+    fallback: bool
+    cost: float
+    cbf_active: bool
+    min_h_rad: float
+    u0: np.ndarray  # (3,) V_U, u_p, u_q applied
+    predicted_xyz_m: np.ndarray  # flattened (k, 3) predicted positions
+    fallback_count: int = 0  # fallbacks since the start (this one included)
+
+    @classmethod
+    def from_result(cls, res: "NmpcResult", fallback_count: int) -> "NmpcStatus":
+        return cls(res.t_s, res.status, res.solve_ms, res.iterations, res.fallback, res.cost, res.cbf_active,
+                   res.min_h, np.asarray(res.u0, float), np.asarray(res.predicted[::5, :3], float).ravel(),
+                   int(fallback_count))
 
 
 def continuous_dynamics(x, u):
@@ -187,7 +151,7 @@ class _Problem:
 
     def __init__(self, cfg: NmpcConfig):
         self.cfg = cfg
-        N, dt = cfg.horizon_steps, cfg.step_s
+        N = cfg.horizon_steps
         self.N = N
         self.use_cbf = cfg.cbf.enabled
         self.nu = 4 if self.use_cbf else 3
@@ -201,9 +165,23 @@ class _Problem:
         self.np_ = 9
         w = ca.SX.sym("w", self.nw)
         p = ca.SX.sym("p", self.np_)
-        rq, vq, uprev, f4_on = p[0:3], p[3:6], p[6:8], p[8]
         X = [w[self.ix[k]] for k in range(N + 1)]
         U = [w[self.iu[k]] for k in range(N)]
+        r, c, lin, steps = self._stages(X, U, p)
+        J = ca.sumsqr(r) + lin
+        self.w, self.p, self.J, self.c = w, p, J, c
+        self.nc = c.shape[0]
+        self._constraint_bounds()
+        self.eval_fun = self._outputs(X, U, p)
+        self.r, self.lin_grad = r, ca.gradient(lin, w) if self.use_cbf else ca.DM.zeros(self.nw)
+        self.steps, self.X = steps, X
+        # Hessian blocks: stage k owns [x_k, u_k] (contiguous in w), the last block is x_N
+        self.blocks = [np.concatenate([self.ix[k], self.iu[k]]) for k in range(N)] + [self.ix[N]]
+
+    def _stages(self, X, U, p):
+        """(residuals r with J = |r|^2 + lin, constraints c, the linear slack cost lin, the steps F(x_k, u_k))."""
+        cfg, N, dt = self.cfg, self.N, self.cfg.step_s
+        rq, vq, uprev, f4_on = p[0:3], p[3:6], p[6:8], p[8]
         sw1, sw2 = math.sqrt(cfg.w1_radius), math.sqrt(cfg.w2_altitude)
         sw3 = ca.DM([math.sqrt(v) for v in cfg.w3_attitude])
         sw4, swV, swr = math.sqrt(cfg.w4_continuity), math.sqrt(cfg.w_airspeed), math.sqrt(cfg.w_rates)
@@ -233,12 +211,11 @@ class _Problem:
                 lin = lin + cfg.cbf.slack_weight_linear * u[3]
                 cons.append(cbf_rows(x, u, rq + vq * (k * dt), vq, cfg.cbf.beta, u[3]))
         res += track(X[N], N)
-        r = ca.vertcat(*res)
-        c = ca.vertcat(*cons)
-        J = ca.sumsqr(r) + lin
-        self.w, self.p, self.J, self.c = w, p, J, c
-        self.nc = c.shape[0]
-        # constraint bounds (the CBF rows' upper bounds are set per solve for sides = solve_time)
+        return ca.vertcat(*res), ca.vertcat(*cons), lin, steps
+
+    def _constraint_bounds(self) -> None:
+        """Bounds of the constraints (the CBF rows' upper bounds are set per solve for sides = solve_time)."""
+        N = self.N
         self.lbc = np.zeros(self.nc)
         self.ubc = np.zeros(self.nc)
         self.icbf = np.zeros((N, 2), dtype=int)
@@ -247,7 +224,11 @@ class _Problem:
             for k in range(N):
                 self.icbf[k] = k * per + NX + np.arange(2)
             self.lbc[self.icbf.ravel()] = -np.inf
-        # outputs for results: cost, CBF rows without slack, h per stage
+
+    def _outputs(self, X, U, p) -> ca.Function:
+        """(w, p) -> (cost, CBF rows without slack, h per stage), for the results."""
+        cfg, N, dt = self.cfg, self.N, self.cfg.step_s
+        rq, vq = p[0:3], p[3:6]
         rows, hmin = [], []
         for k in range(N + 1):
             tq = rq + vq * (k * dt)
@@ -257,11 +238,7 @@ class _Problem:
             if k < N and self.use_cbf:
                 rows.append(cbf_rows(X[k], uk, tq, vq, cfg.cbf.beta, 0.0))
         rows = ca.vertcat(*rows) if rows else ca.DM.zeros(0, 1)
-        self.eval_fun = ca.Function("nmpc_eval", [w, p], [J, rows, ca.vertcat(*hmin)])
-        self.r, self.lin_grad = r, ca.gradient(lin, w) if self.use_cbf else ca.DM.zeros(self.nw)
-        self.steps, self.X = steps, X
-        # Hessian blocks: stage k owns [x_k, u_k] (contiguous in w), the last block is x_N
-        self.blocks = [np.concatenate([self.ix[k], self.iu[k]]) for k in range(N)] + [self.ix[N]]
+        return ca.Function("nmpc_eval", [self.w, p], [self.J, rows, ca.vertcat(*hmin)])
 
     def qp_function(self) -> ca.Function:
         """(w, p) -> (stage Hessian blocks (ns x ns N), terminal block (6 x 6), g, A, c) at w.
@@ -398,6 +375,15 @@ class Nmpc:
             raise ValueError("airspeed_min_m_s must be below airspeed_max_m_s")
         self._is_rti = cfg.solver.startswith("rti_")
         self.problem = pb = _Problem(cfg)
+        self._build_solver()
+        self._init_bounds()
+        self._eval = _Buffered(pb.eval_fun)
+        self.fallback_count = 0
+        self.reset()
+
+    def _build_solver(self) -> None:
+        """The QP solver of the real-time iterations, or the NLP solver."""
+        cfg, pb = self.cfg, self.problem
         N = pb.N
         if self._is_rti:
             qp_fun = pb.qp_function()
@@ -428,7 +414,10 @@ class Nmpc:
                         "structure_detection": "auto", "equality": [bool(e) for e in pb.lbc == pb.ubc],
                         "fatrop": {"print_level": 0, "tol": 1e-6, "max_iter": 200}}
             self._nlp = ca.nlpsol("nmpc_nlp", cfg.solver, nlp, opts)
-        # bounds of w (x0 filled per solve) and of the constraints
+
+    def _init_bounds(self) -> None:
+        """Bounds of w (x0 filled per solve) and of the inputs."""
+        cfg, pb = self.cfg, self.problem
         self._lbw = np.full(pb.nw, -np.inf)
         self._ubw = np.full(pb.nw, np.inf)
         ulo = [cfg.airspeed_min_m_s, -cfg.roll_rate_max_rad_s, -cfg.pitch_rate_max_rad_s]
@@ -436,15 +425,12 @@ class Nmpc:
         if pb.use_cbf:
             ulo.append(0.0)
             uhi.append(np.inf)
-        for k in range(N):
+        for k in range(pb.N):
             self._lbw[pb.iu[k]] = ulo
             self._ubw[pb.iu[k]] = uhi
         self._phi_max = math.radians(cfg.roll_max_deg)
         self._theta_max = math.radians(cfg.pitch_max_deg)
         self._u_lo, self._u_hi = np.array(ulo), np.array(uhi)
-        self._eval = _Buffered(pb.eval_fun)
-        self.fallback_count = 0
-        self.reset()
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -597,19 +583,56 @@ class Nmpc:
         """
         t_start = time.perf_counter()
         cfg, pb = self.cfg, self.problem
-        N, dt = pb.N, cfg.step_s
         x0_in = np.asarray(x0, dtype=float).reshape(NX)
         q = np.asarray(target_pos_enu, dtype=float).reshape(3)
         v = np.asarray(target_vel_enu, dtype=float).reshape(3)
-        # warm start: shift the previous plan to this time
+        w0, x0, psi_offset, cold = self._warm_start(t_s, x0_in)
+        p = self._parameters(q, v, u_prev)
+        lbw, ubw = self._bounds(x0)
+        lbc, ubc = self._cbf_bounds(x0, q)
+        try:
+            if self._is_rti:
+                # iterate within 90 % of the budget (always at least one QP)
+                deadline = t_start + 0.9e-3 * cfg.max_solve_ms if cfg.budget == "wall_clock" else math.inf
+                n_it = cfg.cold_start_iterations if cold else cfg.rti_iterations
+                w, iters, ok, why = self._rti(w0, p, lbw, ubw, lbc, ubc, n_it, cold, deadline)
+            else:
+                w, iters, ok, why = self._nlp_solve(w0, p, lbw, ubw, lbc, ubc)
+        except Exception as exc:  # noqa: BLE001 - a solver must never take the flight software down
+            w, iters, ok, why = w0, 0, False, f"exception:{type(exc).__name__}"
+        cost, min_h, cbf_active = self._keep(t_s, w, w0, p, ubc, ok)
+        solve_ms = (time.perf_counter() - t_start) * 1e3
+        late = cfg.budget == "wall_clock" and solve_ms > cfg.max_solve_ms
+        X, U = w[pb.ix], w[pb.iu]
+        if ok and not late:
+            u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
+            self._plan = (t_s, U[:, :3].copy())
+            status, fallback = "ok", False
+        else:
+            status = "fallback:late" if ok else f"fallback:failed:{why}"
+            fallback = True
+            self.fallback_count += 1
+            u0 = self._fallback_input(t_s)
+            if not ok:
+                U = np.tile(u0, (pb.N, 1))
+                X = pb.rollout(x0, U)
+        self._u_applied = u0[1:3].copy()
+        predicted = X.copy()
+        predicted[:, 5] += psi_offset
+        return NmpcResult(t_s, u0, status, solve_ms, iters, fallback, cost, predicted, cbf_active, min_h,
+                          U[:, :3].copy())
+
+    def _warm_start(self, t_s: float, x0_in: np.ndarray):
+        """(w0, x0, psi offset, cold): the previous plan shifted to this time (else the initial guess), and x0
+        with psi on the warm start's 2 pi branch (the internal frame kept near [-pi, pi])."""
+        pb = self.problem
         cold = True
         w0 = None
         if self._w is not None and self._t_prev is not None:
-            m = int(round((t_s - self._t_prev) / dt))
-            if 0 <= m < N:
+            m = int(round((t_s - self._t_prev) / self.cfg.step_s))
+            if 0 <= m < pb.N:
                 w0 = self._shifted(self._w, m)
                 cold = False
-        # psi: the same 2 pi branch as the warm start (internal frame kept near [-pi, pi])
         x0 = x0_in.copy()
         if w0 is not None:
             x0[5] = w0[pb.ix[0, 5]] + wrap_pi(x0[5] - w0[pb.ix[0, 5]])
@@ -623,62 +646,36 @@ class Nmpc:
         psi_offset = x0_in[5] - x0[5]
         if w0 is None:
             w0 = self._initial_guess(x0)
+        return w0, x0, psi_offset, cold
+
+    def _parameters(self, q: np.ndarray, v: np.ndarray, u_prev) -> np.ndarray:
+        """p = [target position, velocity, f4's previous input, f4 on/off]."""
         if u_prev is not None:
             up, f4_on = np.asarray(u_prev, dtype=float).reshape(2), 1.0
         elif self._u_applied is not None:
             up, f4_on = self._u_applied, 1.0
         else:
             up, f4_on = np.zeros(2), 0.0
-        p = np.concatenate([q, v, up, [f4_on]])
-        lbw, ubw = self._bounds(x0)
-        lbc, ubc = self._cbf_bounds(x0, q)
-        try:
-            if self._is_rti:
-                # iterate within 90 % of the budget (always at least one QP)
-                deadline = t_start + 0.9e-3 * cfg.max_solve_ms if cfg.budget == "wall_clock" else math.inf
-                n_it = cfg.cold_start_iterations if cold else cfg.rti_iterations
-                w, iters, ok, why = self._rti(w0, p, lbw, ubw, lbc, ubc, n_it, cold, deadline)
-            else:
-                w, iters, ok, why = self._nlp_solve(w0, p, lbw, ubw, lbc, ubc)
-        except Exception as exc:  # noqa: BLE001 - a solver must never take the flight software down
-            w, iters, ok, why = w0, 0, False, f"exception:{type(exc).__name__}"
-        X, U = w[pb.ix], w[pb.iu]
-        if ok:
-            J, rows, hmin = self._eval(w, p)
-            rows = rows.copy()
-            if pb.use_cbf and cfg.cbf.sides == "solve_time":
-                rows = np.where(np.isfinite(ubc[pb.icbf.ravel()]), rows, -np.inf)
-            cost = float(J[0])
-            min_h = float(np.min(np.asarray(hmin)))
-            cbf_active = bool(rows.size and np.max(rows) > -_CBF_ACTIVE_TOL)
-            self._w, self._t_prev = w, t_s
-            self._failures = 0
-        else:
+        return np.concatenate([q, v, up, [f4_on]])
+
+    def _keep(self, t_s: float, w, w0, p, ubc, ok: bool) -> tuple[float, float, bool]:
+        """Keep a solved plan as the next warm start (a failed one: the shifted plan, or none after
+        reset_after_failures); (cost, min h, CBF active) of the plan, NaN/False when it failed."""
+        cfg, pb = self.cfg, self.problem
+        if not ok:
             self._failures += 1
             if self._failures >= cfg.reset_after_failures:
                 self._w, self._t_prev = None, None  # next call rebuilds the warm start (cold)
             else:
                 self._w, self._t_prev = w0, t_s  # keep the shifted plan as the warm start
-        solve_ms = (time.perf_counter() - t_start) * 1e3
-        late = cfg.budget == "wall_clock" and solve_ms > cfg.max_solve_ms
-        if ok and not late:
-            u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
-            self._plan = (t_s, U[:, :3].copy())
-            status, fallback = "ok", False
-        else:
-            status = "fallback:late" if ok else f"fallback:failed:{why}"
-            fallback = True
-            self.fallback_count += 1
-            u0 = self._fallback_input(t_s)
-            if not ok:
-                cost, cbf_active, min_h = math.nan, False, math.nan
-                U = np.tile(u0, (N, 1))
-                X = pb.rollout(x0, U)
-        self._u_applied = u0[1:3].copy()
-        predicted = X.copy()
-        predicted[:, 5] += psi_offset
-        return NmpcResult(t_s, u0, status, solve_ms, iters, fallback, cost, predicted, cbf_active, min_h,
-                          U[:, :3].copy())
+            return math.nan, math.nan, False
+        J, rows, hmin = self._eval(w, p)
+        rows = rows.copy()
+        if pb.use_cbf and cfg.cbf.sides == "solve_time":
+            rows = np.where(np.isfinite(ubc[pb.icbf.ravel()]), rows, -np.inf)
+        self._w, self._t_prev = w, t_s
+        self._failures = 0
+        return float(J[0]), float(np.min(np.asarray(hmin))), bool(rows.size and np.max(rows) > -_CBF_ACTIVE_TOL)
 
     def plan_cost(self, x0, target_pos_enu, target_vel_enu, inputs, u_prev=None) -> float:
         """The NLP cost of an input sequence (N, >=3) flown from x0 on the model (the dynamics then hold exactly).

@@ -11,8 +11,16 @@ import math
 import numpy as np
 
 from fwsim.frames import cross3
+from fwsim.messages import (
+    AccelCommand,
+    AutopilotCommand,
+    FlightSoftwareStatus,
+    GimbalCommand,
+    Measurements,
+    RateCommand,
+)
 
-from fwsim.messages import AccelCommand, AutopilotCommand, Measurements, RateCommand
+GIMBAL_ANGLE_GAIN_1_S = 3.0  # scripted gimbal angles: joint rate per rad of encoder error
 
 
 def perpendicular_axes(vel_enu_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -50,3 +58,14 @@ class ScriptedCommands:
                                math.radians(s.rates.pitch_rate_deg_s))
         up, right = perpendicular_axes(meas.vel_enu_m_s)
         return AccelCommand(meas.t_s, s.accel.airspeed_m_s, s.accel.right_m_s2 * right + s.accel.up_m_s2 * up)
+
+    def gimbal(self, meas: Measurements) -> GimbalCommand:
+        """Joint rates toward the scripted gimbal angles (hold: NaN, before any or without encoders)."""
+        sp = self.gimbal_setpoint_rad(meas.t_s)
+        if sp is None or math.isnan(meas.pan_rad):
+            return GimbalCommand(meas.t_s, math.nan, math.nan)
+        return GimbalCommand(meas.t_s, GIMBAL_ANGLE_GAIN_1_S * (sp[0] - meas.pan_rad),
+                             GIMBAL_ANGLE_GAIN_1_S * (sp[1] - meas.tilt_rad))
+
+    def status(self, meas: Measurements, cmd: AutopilotCommand) -> FlightSoftwareStatus:
+        return FlightSoftwareStatus(meas.t_s, 0, "script", cmd.mode)

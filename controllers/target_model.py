@@ -45,93 +45,21 @@ here reads the simulated ship (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.special
-from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from controllers.camera_model import PinholeCamera
+from controllers.config import ShapeHeadingConfig, ShipModelConfig
+from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
-__all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipOutline", "box_centre_offset_px",
+__all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus",
+           "ShipOutline", "box_centre_offset_px",
            "predicted_box_px", "predicted_boxes_px"]
 
 #: points closer than this in front of the camera make the projection meaningless: no correction
 _MIN_DEPTH_M = 0.5
-
-
-class ShapeHeadingConfig(BaseModel):
-    """The ship's heading from the shapes of its detected boxes, for when its course is unknown (a ship
-    that lies still or moves too slowly for the estimated velocity to tell): :class:`ShapeHeading`."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    enabled: bool = Field(True, description="false: an unknown course stays unknown (the offset is averaged "
-                                            "over headings_when_unknown headings)")
-    headings: int = Field(72, ge=4, le=720, description="candidate headings all round")
-    rate_hz: float = Field(3.0, gt=0, le=240, description="detections used per second at most (consecutive "
-                                                          "frames carry nearly the same information)")
-    sigma_fraction: float = Field(0.05, ge=0, le=1, description="std. dev. of a box side against the model's, "
-                                                                "as a fraction of the predicted side")
-    sigma_px: float = Field(3.0, gt=0, le=100, description="std. dev. of a box side against the model's, px "
-                                                           "(detector noise, model's coarseness)")
-    size_bias_range: tuple[float, float] = Field(
-        (-0.15, 0.05),
-        description="the detected boxes' widths (and, apart, heights) may all be off the model's by one "
-                    "unknown fraction in this range (a detector shrinks boxes and misses thin parts such as a "
-                    "mast): each heading's likelihood is marginalised over it, so that such a bias, which "
-                    "favours whichever heading predicts the smaller boxes, cannot pass for evidence. "
-                    "(0, 0): none")
-    size_bias_steps: int = Field(13, ge=1, le=101, description="grid points over size_bias_range")
-
-    @field_validator("size_bias_range")
-    @classmethod
-    def _bias_range(cls, v: tuple[float, float]) -> tuple[float, float]:
-        if not (-1.0 < v[0] <= v[1]):
-            raise ValueError(f"must be (low, high) with -1 < low <= high, got {tuple(v)}")
-        return v
-    max_effective_updates: float = Field(
-        60.0, gt=0, le=10000,
-        description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
-                    "misfit repeats from frame to frame and must not make the heading look surer than it is")
-    min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
-    min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
-                                                            "times the largest are dropped")
-    tell_bow_from_stern: bool = Field(
-        True, description="trust the box shapes to tell the bow from the stern (the superstructure stands aft, "
-                          "which shows in the box heights, most of all as the view steepens in the dive); "
-                          "false: a heading and its opposite count alike (the fore-aft part of the offset is "
-                          "then not removed)")
-    fuse_with_course: bool = Field(
-        True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
-                          "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
-    fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
-                                                                         "least this, deg")
-    max_course_off_axis_deg: float = Field(
-        25.0, gt=0, le=90,
-        description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
-                    "course: a ship moves along its axis, so such a velocity is the estimate's error")
-
-
-class ShipModelConfig(BaseModel):
-    """The flight software's outline of the ship class (ship frame: x bow, y port, z up, origin at the
-    waterline centre)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    enabled: bool = Field(True, description="correct each detection's box centre for the ship's shape "
-                                            "before the UKF update")
-    length_m: float = Field(55.0, gt=0, le=500, description="length of the ship class, m (paper: 55)")
-    width_m: float = Field(25.0, gt=0, le=200, description="beam of the ship class, m (paper: 25)")
-    height_m: float = Field(25.0, gt=0, le=200, description="height above the waterline to the mast top, m "
-                                                            "(paper: 25)")
-    min_speed_for_course_m_s: float = Field(
-        1.5, ge=0, le=50, description="below this estimated speed the ship's course is taken as unknown")
-    max_vel_std_for_course_m_s: float = Field(
-        1.0, gt=0, le=50, description="above this standard deviation of the estimated velocity the course is "
-                                      "taken as unknown")
-    headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
-                                                                   "when the course is unknown")
-    heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
 
 
 class ShipOutline:
@@ -376,3 +304,100 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
     return np.average(np.array(offsets), axis=0, weights=weights)
+
+
+@dataclass(frozen=True, slots=True)
+class ShipHeadingStatus:
+    """The ship's heading as the box shapes tell it (:class:`ShapeHeading`), for the log."""
+
+    t_s: float
+    best_heading_deg: float  # the most likely heading, clockwise from North (the scenario's convention)
+    best_weight: float  # its posterior weight (of all candidate headings)
+    reverse_weight: float  # the weight of the opposite heading (bow and stern swapped)
+    updates: int  # detections used so far
+    in_use: bool  # it alone gives the heading (course unknown, shapes ready); with a course the two are fused
+    course_deg: float  # the course from the estimated velocity when known (clockwise from North), else NaN
+
+
+class ShipModel:
+    """What the flight software knows of the ship: the class outline (a priori) and its heading (learnt).
+
+    The heading comes from the estimated velocity (a ship's bow points along its course) and from the
+    shapes of its boxes (:class:`ShapeHeading`). The perception feeds it each detection
+    (:meth:`observe_box`) and asks it for the possible headings (:meth:`headings`) for the box-centre
+    correction and the box-size gate; the terminal guidance asks it where an approach meets the hull
+    (:meth:`entry_depth_m`).
+    """
+
+    def __init__(self, cfg: ShipModelConfig, camera: PinholeCamera, edge_px: float = 6.0):
+        self.cfg = cfg
+        self.outline = ShipOutline(cfg)
+        self.shape = ShapeHeading(cfg.heading_from_shape, self.outline, camera, edge_px)
+
+    def course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
+        """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
+        when it is unknown: slower than ``min_speed_for_course_m_s`` or less sure than
+        ``max_vel_std_for_course_m_s``, or off the ship's axis as the box shapes tell it (a ship moves along
+        its axis: such a velocity is the estimate's error)."""
+        cfg = self.cfg
+        if math.hypot(float(vel_enu[0]), float(vel_enu[1])) < cfg.min_speed_for_course_m_s \
+                or vel_std_m_s > cfg.max_vel_std_for_course_m_s:
+            return None
+        course = math.atan2(float(vel_enu[1]), float(vel_enu[0]))
+        if self.shape.ready and \
+                self.shape.off_axis_rad(course) > math.radians(cfg.heading_from_shape.max_course_off_axis_deg):
+            return None
+        return course
+
+    def headings(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """The ship's possible headings (bow direction, counter-clockwise from East) and their weights, from
+        its estimated velocity (std ``vel_std_m_s``) and the box shapes:
+
+        * course known (:meth:`course`) and shapes ready: the shapes' posterior times the course's
+          likelihood (a ship's bow points along its course; the course's std is the velocity's over the
+          speed, at least ``fuse_min_course_std_deg``), so each sharpens the other;
+        * course known, shapes not ready: the course alone;
+        * course unknown: the headings the shapes allow, else ``headings_when_unknown`` equal ones.
+        """
+        course = self.course(vel_enu, vel_std_m_s)
+        sh = self.cfg.heading_from_shape
+        if course is not None:
+            if not (self.shape.ready and sh.fuse_with_course):
+                return np.array([course]), np.ones(1)
+            speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
+            sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
+            d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
+            w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
+            if not np.sum(w) > 0.0:
+                return np.array([course]), np.ones(1)
+            keep = w >= sh.min_weight * np.max(w)
+            return self.shape.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+        shaped = self.shape.headings()
+        if shaped is not None:
+            return shaped
+        n = self.cfg.headings_when_unknown
+        return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n)
+
+    def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
+                    vel_std_m_s: float) -> ShipHeadingStatus | None:
+        """Feed one detected box to the heading-from-shapes posterior (``ref_enu_m``: the estimated waterline
+        centre); its state for the log when it took the box, else None."""
+        sh = self.shape
+        if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px):
+            return None
+        w = sh.weights()
+        k = int(np.argmax(w))
+        course = self.course(vel_enu, vel_std_m_s)
+        return ShipHeadingStatus(t_s, heading_deg_from_course_enu(float(sh.courses_enu_rad[k])), float(w[k]),
+                                 float(w[(k + len(w) // 2) % len(w)]), sh.updates, bool(course is None and sh.ready),
+                                 math.nan if course is None else heading_deg_from_course_enu(course))
+
+    def entry_depth_m(self, point_enu_m, ship_enu_m, dir_enu, vel_enu) -> float:
+        """How far before ``point_enu_m`` a straight path along ``dir_enu`` (unit) first meets the outline of
+        the ship at ``ship_enu_m`` (its waterline centre), the deepest over the headings it may have
+        (:meth:`headings` of ``vel_enu``); 0 when nothing is in the way."""
+        depth = 0.0
+        for c in self.headings(vel_enu)[0]:
+            R_se = dcm_ship_from_enu(float(c))
+            depth = max(depth, self.outline.entry_depth_m(R_se @ (point_enu_m - ship_enu_m), R_se @ dir_enu))
+        return depth

@@ -26,9 +26,13 @@ Measurement (paper eq. 9), on every new valid detection:
   r_c rows carry GNSS noise plus the attitude and altimeter errors projected
   over the range.
 
-Interfaces: :class:`TargetEstimator` (Protocol) is what the mission uses, so a
-second filter can be swapped in and compared on the same logs;
-:class:`TargetEstimate` is the message to log; :class:`UnscentedCore` is the
+Interfaces: :class:`UkfTargetEstimator` implements the flight software's
+estimator Protocol (``controllers.blocks.TargetEstimator``), so a second filter
+can be swapped in from the scenario and compared on the same logs; it takes the
+perception's :class:`~controllers.messages.DetectionFix` (the box centre
+corrected for the ship's shape) and answers each update with a
+:class:`~controllers.messages.FusionResult` (used, or why not, with the
+innovation and its test ratio); :class:`UnscentedCore` is the
 generic unscented machinery (filterpy + batched process model + covariance
 hygiene), reusable with any ``fx``/``hx`` (the tests run it on a linear case
 against a linear Kalman filter).
@@ -42,110 +46,24 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-from pydantic import BaseModel, ConfigDict, Field
 
-from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates
-from fwsim.frames import camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
+from controllers.camera_model import CameraMotion, PinholeCamera, depth_on_plane, feature_rates
+from controllers.config import UkfConfig
+from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult, TargetEstimate
 from fwsim.messages import Measurements
 
-__all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "TargetEstimator", "UnscentedCore",
-           "UkfTargetEstimator"]
+__all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "UnscentedCore", "UkfTargetEstimator",
+           "fix_from_measurements"]
 
 MIN_DEPTH_M = 1.0  # process model: camera-frame depth of a sigma point is floored here
 _MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floored here (|d_w| >= 1)
 _VAR_FLOOR = 1e-12  # numerical reset: smallest variance kept on the diagonal
 _INIT_VERTICAL_POS_STD_M = 1.0
 _INIT_VERTICAL_VEL_STD_M_S = 0.5
-
-
-class UkfConfig(BaseModel):
-    """Tuning of the target UKF (all noise values are 1-sigma)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    pixel_noise_px: float = Field(2.0, gt=0, le=100, description="detector box-centre noise (u, v), px")
-    cam_pos_noise_m: float = Field(0.5, gt=0, le=100, description="camera position r_c (GNSS/INS), per axis, m")
-    attitude_noise_rad: float = Field(
-        0.002, ge=0, le=0.2,
-        description="attitude + encoder error; adds (range * this) to the r_c measurement noise, rad")
-    height_noise_m: float = Field(
-        0.5, ge=0, le=100,
-        description="altimeter error in the flat-sea depth; adds (range / height * this) to the r_c noise, m")
-    target_accel_noise_m_s2: float = Field(
-        0.05, gt=0, le=50,
-        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2; small: "
-                    "a ship holds its velocity for tens of seconds, and a larger value lets the dive's "
-                    "geometry-dependent box-centre errors pass into the velocity, which the last seconds coast on")
-    target_vertical_accel_noise_m_s2: float = Field(
-        0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
-    feature_process_noise: float = Field(
-        0.01, gt=0, le=10,
-        description="random walk of x1, x2 (gyro/encoder-rate errors), normalised units per sqrt(s)")
-    target_plane_height_m: float = Field(
-        0.0, ge=-100, le=200,
-        description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
-    innovation_gate: float = Field(
-        13.8, ge=0, le=1000,
-        description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "
-                    "above this (13.8: 0.1 % of good detections); 0: never")
-    innovation_gate_max_rejects: int = Field(
-        15, ge=1, le=100000, description="after this many rejections in a row the next detection is used anyway "
-                                         "(the estimate, not the detections, may be wrong)")
-    init_pos_std_frac: float = Field(
-        0.05, gt=0, le=1, description="initial horizontal position std as a fraction of the slant range")
-    init_vel_std_m_s: float = Field(10.0, gt=0, le=100, description="initial horizontal velocity std, m/s")
-    max_substep_s: float = Field(0.05, gt=0, le=1, description="largest RK4 step of the process model, s")
-    sigma_alpha: float = Field(1.0, gt=0, le=1, description="Merwe sigma-point spread alpha")
-    sigma_beta: float = Field(2.0, ge=0, le=10, description="Merwe beta (2 is optimal for Gaussians)")
-    sigma_kappa: float = Field(0.0, ge=-7, le=10, description="Merwe kappa (n + kappa must stay > 0)")
-
-
-# --------------------------------------------------------------------------- camera motion
-
-
-@dataclass(frozen=True, slots=True)
-class CameraMotion:
-    """The camera's pose and motion as the flight software knows it at ``t_s``."""
-
-    t_s: float
-    pos_enu_m: np.ndarray  # (3,) camera position r_c in the world
-    vel_enu_m_s: np.ndarray  # (3,) camera velocity V_c = V_p + R_enu_from_frd (omega_p x r_c/p)
-    R_enu_from_cam: np.ndarray  # (3, 3)
-    omega_cam_rad_s: np.ndarray  # (3,) camera angular velocity relative to the world, camera frame
-    height_m: float  # camera height above the sea (altimeter + lever arm), for the depth model
-
-    @classmethod
-    def from_measurements(cls, meas: Measurements, mount_offset_frd_m) -> "CameraMotion":
-        """Build from one ``Measurements`` and the known mount offset r_c/p (body FRD, m).
-
-        Pose from :func:`fwsim.frames.camera_pose_world` (attitude + encoders);
-        ``r_c`` is ``meas.cam_pos_enu_m`` when finite, else the pose's;
-        ``omega`` from :func:`fwsim.frames.camera_angular_velocity` (encoder
-        rates, NaN taken as 0, plus gyros); height from the altimeter (the
-        GNSS height of r_c if the altimeter is NaN). Raises ValueError without
-        gimbal encoders.
-        """
-        pan, tilt = float(meas.pan_rad), float(meas.tilt_rad)
-        if not (math.isfinite(pan) and math.isfinite(tilt)):
-            raise ValueError("CameraMotion needs the gimbal encoders (pan_rad, tilt_rad are NaN)")
-        m = np.asarray(mount_offset_frd_m, dtype=float)
-        cam_pos, R = camera_pose_world(meas.pos_enu_m, meas.euler_ned_rad, m, pan, tilt)
-        if np.all(np.isfinite(meas.cam_pos_enu_m)):
-            cam_pos = np.array(meas.cam_pos_enu_m, dtype=float)
-        R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
-        vel = np.asarray(meas.vel_enu_m_s, dtype=float) + R_ef @ cross3(meas.body_rates_frd_rad_s, m)
-        pan_rate = float(meas.pan_rate_rad_s) if math.isfinite(meas.pan_rate_rad_s) else 0.0
-        tilt_rate = float(meas.tilt_rate_rad_s) if math.isfinite(meas.tilt_rate_rad_s) else 0.0
-        omega = camera_angular_velocity(pan, tilt, pan_rate, tilt_rate, meas.body_rates_frd_rad_s)
-        h = float(meas.height_above_sea_m)
-        height = h + float(R_ef[2] @ m) if math.isfinite(h) else float(cam_pos[2])
-        return cls(float(meas.t_s), cam_pos, vel, R, omega, height)
 
 
 def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
@@ -157,53 +75,6 @@ def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
         return np.eye(3) + K + 0.5 * (K @ K)
     th = math.sqrt(th2)
     return np.eye(3) + (math.sin(th) / th) * K + ((1.0 - math.cos(th)) / th2) * (K @ K)
-
-
-# --------------------------------------------------------------------------- messages and interface
-
-
-@dataclass(frozen=True, slots=True)
-class TargetEstimate:
-    """A target estimator's output at ``t_s``, for the log and the controllers."""
-
-    t_s: float
-    pos_enu_m: np.ndarray  # (3,) r_q
-    vel_enu_m_s: np.ndarray  # (3,) V_q
-    pos_std_m: np.ndarray  # (3,) sqrt of the diagonal of the r_q covariance
-    vel_std_m_s: np.ndarray  # (3,)
-    x1: float  # normalised image features (NaN if the estimator has none)
-    x2: float
-    innovation_px: np.ndarray  # (2,) pixel innovation of an update at t_s; NaN when no update at t_s
-
-
-@runtime_checkable
-class TargetEstimator(Protocol):
-    """What the mission needs of a target filter (so filters can be swapped and compared on logs)."""
-
-    @property
-    def initialised(self) -> bool: ...
-
-    @property
-    def t_s(self) -> float: ...
-
-    @property
-    def pos_enu_m(self) -> np.ndarray: ...
-
-    @property
-    def vel_enu_m_s(self) -> np.ndarray: ...
-
-    @property
-    def pos_vel_cov(self) -> np.ndarray:
-        """(6, 6) covariance of [r_q, V_q]."""
-        ...
-
-    def initialise(self, meas: Measurements, motion: CameraMotion) -> None: ...
-
-    def predict(self, t_s: float, motion: CameraMotion) -> None: ...
-
-    def update(self, meas: Measurements, motion: CameraMotion) -> None: ...
-
-    def estimate(self) -> TargetEstimate: ...
 
 
 # --------------------------------------------------------------------------- generic unscented machinery
@@ -249,6 +120,7 @@ class UnscentedCore:
         points = MerweScaledSigmaPoints(dim_x, alpha=alpha, beta=beta, kappa=kappa, sqrt_method=_safe_cholesky)
         self._kf = _BatchUKF(dim_x=dim_x, dim_z=dim_z, dt=1.0, hx=None, fx=None, points=points)
         self.numerical_resets = 0
+        self.last_nis = math.nan  # normalised innovation squared of the last update over its gate rows
 
     @property
     def x(self) -> np.ndarray:
@@ -276,8 +148,8 @@ class UnscentedCore:
 
     def update(self, z, hx, R, gate: tuple[float, list[int]] | None = None, **hx_args) -> np.ndarray | None:
         """Unscented update (filterpy's equations). ``gate = (threshold, rows)``: if the normalised innovation
-        squared over ``rows`` (``y' S^-1 y``) exceeds the threshold, the update is not applied and None is
-        returned; otherwise the innovation."""
+        squared over ``rows`` (``y' S^-1 y``, kept in ``last_nis``) exceeds the threshold (``inf``: never),
+        the update is not applied and None is returned; otherwise the innovation."""
         self._guard()
         kf = self._kf
         kf.sigmas_f = kf.points_fn.sigma_points(kf.x, kf.P)
@@ -287,10 +159,12 @@ class UnscentedCore:
         dz = sig_h - zp
         S = dz.T @ (kf.Wc[:, None] * dz) + np.asarray(R, dtype=float)
         y = z - zp
+        self.last_nis = math.nan
         if gate is not None:
             rows = gate[1]
             Sg = S[np.ix_(rows, rows)]
-            if float(y[rows] @ np.linalg.solve(Sg, y[rows])) > gate[0]:
+            self.last_nis = float(y[rows] @ np.linalg.solve(Sg, y[rows]))
+            if self.last_nis > gate[0]:
                 return None
         Pxz = (kf.sigmas_f - kf.x).T @ (kf.Wc[:, None] * dz)
         K = np.linalg.solve(S.T, Pxz.T).T  # Pxz S^-1 (S symmetric)
@@ -383,18 +257,27 @@ def _hx(x: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_ec: np.
     return out
 
 
-class UkfTargetEstimator:
-    """The paper's 8-state UKF (implements :class:`TargetEstimator`).
+def fix_from_measurements(meas: Measurements) -> DetectionFix:
+    """The newest detection of ``meas`` as a :class:`DetectionFix`, uncorrected (the box centre as detected)."""
+    new = bool(meas.det_new and meas.det_valid)
+    return DetectionFix(meas.t_s, new, meas.det_exposure_t_s, meas.det_u_px, meas.det_v_px, meas.det_bbox_px,
+                        meas.det_u_px, meas.det_v_px, np.full(4, np.nan), new, "", "", False, False, math.nan,
+                        meas.t_s if new else math.nan)
 
-    Use per tick::
+
+class UkfTargetEstimator:
+    """The paper's 8-state UKF: the flight software's built-in estimator (``controllers.estimator: ukf``).
+
+    It implements ``controllers.blocks.TargetEstimator``. Use per tick::
 
         motion = CameraMotion.from_measurements(meas, mount_offset_frd_m)
         est = ukf.step(meas, motion)        # None until the first valid detection
 
-    or call ``initialise`` / ``predict`` / ``update`` yourself.
+    or call ``initialise`` / ``predict`` / ``update`` with the perception's :class:`DetectionFix`.
     """
 
     name = "ukf"
+    label = "UKF"  # its name in the flight software's events
 
     def __init__(self, camera: PinholeCamera, config: UkfConfig | None = None):
         self.cfg = config if config is not None else UkfConfig()
@@ -411,6 +294,7 @@ class UkfTargetEstimator:
         self.gated_updates = 0  # detections rejected by the innovation gate
         self._rejects_in_a_row = 0
         self.updates = 0
+        self.initialisations = 0
 
     # ------------------------------------------------------------ properties
     @property
@@ -420,6 +304,11 @@ class UkfTargetEstimator:
     @property
     def t_s(self) -> float:
         return self._t
+
+    @property
+    def tracked_height_m(self) -> float:
+        """Height above the ship's waterline of the point it tracks (``target_plane_height_m``)."""
+        return self.cfg.target_plane_height_m
 
     @property
     def x(self) -> np.ndarray:
@@ -465,15 +354,16 @@ class UkfTargetEstimator:
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
 
-    def initialise(self, meas: Measurements, motion: CameraMotion) -> None:
-        """Start from one valid detection: r_q on the plane along its ray, V_q = 0 with a large variance.
+    def initialise(self, fix: DetectionFix, motion: CameraMotion) -> None:
+        """Start from one detection (its box centre ``u_px, v_px``): r_q on the plane along its ray, V_q = 0
+        with a large variance.
 
-        Raises ValueError if the detection is not valid or its ray does not meet the plane.
+        Raises ValueError if there is no detection or its ray does not meet the plane.
         """
         c, cam = self.cfg, self.camera
-        if not (meas.det_valid and math.isfinite(meas.det_u_px) and math.isfinite(meas.det_v_px)):
+        if not (fix.new and math.isfinite(fix.u_px) and math.isfinite(fix.v_px)):
             raise ValueError("initialise needs a valid detection")
-        x1, x2 = (float(a) for a in cam.normalised(meas.det_u_px, meas.det_v_px))
+        x1, x2 = (float(a) for a in cam.normalised(fix.u_px, fix.v_px))
         Z = depth_on_plane(x1, x2, motion.R_enu_from_cam, motion.height_m, c.target_plane_height_m)
         if not math.isfinite(Z):
             raise ValueError("the detection's ray does not meet the target plane")
@@ -486,7 +376,8 @@ class UkfTargetEstimator:
         P = np.diag([(c.pixel_noise_px / cam.fx) ** 2, (c.pixel_noise_px / cam.fy) ** 2, sp * sp, sp * sp,
                      _INIT_VERTICAL_POS_STD_M ** 2, sv * sv, sv * sv, _INIT_VERTICAL_VEL_STD_M_S ** 2])
         self._core.set_state(np.concatenate([[x1, x2], r_q, np.zeros(3)]), P)
-        self._t = float(meas.t_s)
+        self.initialisations += 1
+        self._t = float(fix.t_s)
         self._motion = motion
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
@@ -518,33 +409,34 @@ class UkfTargetEstimator:
         self._t = float(t_s)
         self._motion = motion
 
-    def update(self, meas: Measurements, motion: CameraMotion) -> bool:
-        """Use the detection in ``meas`` if it is new and valid (predicts to meas.t_s first). True if used."""
-        if not (self._initialised and meas.det_new and meas.det_valid):
-            return False
-        if float(meas.t_s) > self._t:
-            self.predict(meas.t_s, motion)
+    def update(self, fix: DetectionFix, motion: CameraMotion) -> FusionResult:
+        """Fuse the detection's (corrected) box centre ``u_px, v_px`` (predicts to fix.t_s first)."""
+        if not (self._initialised and fix.new):
+            return FusionResult(False, FusionReason.NOT_INITIALISED if fix.new else FusionReason.REJECTED)
+        if float(fix.t_s) > self._t:
+            self.predict(fix.t_s, motion)
             if not self._initialised:
-                return False
+                return FusionResult(False, FusionReason.ESTIMATOR_RESET)
         c, cam = self.cfg, self.camera
-        u, v = float(meas.det_u_px), float(meas.det_v_px)
+        u, v = float(fix.u_px), float(fix.v_px)
         if not (math.isfinite(u) and math.isfinite(v)):
             self.rejected_updates += 1
-            return False
+            return FusionResult(False, FusionReason.REJECTED)
         x1m, x2m = cam.normalised(u, v)
         if not math.isfinite(depth_on_plane(x1m, x2m, motion.R_enu_from_cam, motion.height_m,
                                             c.target_plane_height_m)):
             self.rejected_updates += 1
-            return False
+            return FusionResult(False, FusionReason.REJECTED)
         x = self._core.x
         rng = float(np.linalg.norm(x[2:5] - motion.pos_enu_m))
         h = max(motion.height_m - c.target_plane_height_m, 1.0)
         s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
         R = np.diag([c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2])
         z = np.concatenate([[u, v], motion.pos_enu_m])
-        gate = None
-        if c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects:
-            gate = (c.innovation_gate, [0, 1])
+        # the chi-square test on the pixel rows is always computed (for the log); it rejects only while
+        # the gate is on and has not rejected innovation_gate_max_rejects detections in a row
+        gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
+        gate = (c.innovation_gate if gating else math.inf, [0, 1])
         try:
             y = self._core.update(z, _hx, R, gate=gate, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
                                   R_ec=motion.R_enu_from_cam, cam_h=motion.height_m,
@@ -552,35 +444,41 @@ class UkfTargetEstimator:
         except FloatingPointError:
             self.divergence_resets += 1
             self.reset()
-            return False
+            return FusionResult(False, FusionReason.ESTIMATOR_RESET)
+        ratio = self._core.last_nis / c.innovation_gate if c.innovation_gate > 0.0 else math.nan
         if y is None:
             self.gated_updates += 1
             self._rejects_in_a_row += 1
-            return False
+            return FusionResult(False, FusionReason.INNOVATION_GATE, np.full(2, np.nan), ratio)
         self._rejects_in_a_row = 0
         self._innov = y[:2].copy()
         self._innov_t = self._t
         self._motion = motion
         self.updates += 1
-        return True
+        return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
+
+    def status(self, t_s: float) -> EstimatorStatus:
+        """The counters since the start, as the log's ``/fsw/estimator_status``."""
+        return EstimatorStatus(t_s, self.updates, self.gated_updates, self.rejected_updates, self.divergence_resets,
+                               self.numerical_resets, self.initialisations)
 
     def step(self, meas: Measurements, motion: CameraMotion) -> TargetEstimate | None:
-        """One tick: initialise on the first valid detection, else predict to meas.t_s and update if one arrived.
-
-        Returns the estimate, or None while not initialised.
+        """One tick on raw measurements (no shape correction): initialise on the first valid detection, else
+        predict to meas.t_s and update if one arrived. Returns the estimate, or None while not initialised.
         """
+        fix = fix_from_measurements(meas)
         if not self._initialised:
-            if not (meas.det_new and meas.det_valid):
+            if not fix.new:
                 return None
             try:
-                self.initialise(meas, motion)
+                self.initialise(fix, motion)
             except ValueError:
                 self.rejected_updates += 1
                 return None
             return self.estimate()
         self.predict(meas.t_s, motion)
-        if meas.det_new and meas.det_valid:
-            self.update(meas, motion)
+        if fix.new:
+            self.update(fix, motion)
         return self.estimate() if self._initialised else None
 
     def estimate(self) -> TargetEstimate:

@@ -43,8 +43,7 @@ from pydantic import BaseModel, ConfigDict
 
 from fwsim import AIRCRAFT_DIR
 from fwsim.frames import cross3, dcm_enu_from_frd, wrap_pi
-from fwsim.messages import (AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand,
-                            AutopilotStatus, RateCommand)
+from fwsim.messages import AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand, AutopilotStatus, RateCommand
 
 G_M_S2 = 9.80665
 _NAN3 = np.full(3, np.nan)

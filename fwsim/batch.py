@@ -11,10 +11,17 @@ A batch spec (YAML) lists scenario files and what to sweep::
           initial.airspeed_m_s: [20, 24]
           initial.heading_deg: [0, 90]
         set: {duration_s: 20}            # fixed overrides for every run of this entry
+      - generator: fwsim.cases:terminal_case   # or a generated scenario: a function -> scenario dict
+        cases:                           # one run per case: the function's keyword arguments
+          - {theta_f_deg: -30, psi_f_deg: 30, ship_heading_deg: 0, ship_speed_m_s: 5}
+        args: {duration_s: 90}           # keyword arguments for every case
+        seeds: [1]
 
 Every run gets a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
 is the first 8 hex digits of the SHA-256 of its overrides (``set`` + one grid
-point, canonical JSON), and writes its log to ``OUT/logs/<id>.mcap``. Each run
+point, canonical JSON; for a generated scenario its arguments too), and writes
+its log to ``OUT/logs/<id>.mcap``. A generated run's arguments are columns
+``case.<name>`` of the summary. Each run
 becomes one summary row (:data:`BASE_COLUMNS`, one ``set.<path>`` column per
 override, then every metric of :func:`fwsim.metrics.compute_metrics`); a run
 that raises is a failed row with its error, never a lost batch. The summary is
@@ -45,11 +52,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable
 
-
-from fwsim.yamlfile import load_yaml_file
-
 import fwsim
 from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.yamlfile import load_yaml_file
 
 #: Columns every summary row has, in this order; ``set.<path>`` override
 #: columns follow, then the metrics.
@@ -58,7 +63,7 @@ BASE_COLUMNS = ("id", "scenario", "seed", "overrides", "status", "reason", "erro
 #: Statuses of a finished log that ``--resume`` keeps.
 FINISHED_STATUSES = ("completed", "failed")
 _SPEC_KEYS = {"name", "runs"}
-_RUN_KEYS = {"scenario", "seeds", "grid", "set"}
+_RUN_KEYS = {"scenario", "generator", "cases", "args", "seeds", "grid", "set"}
 
 
 class BatchSpecError(ScenarioError):
@@ -71,13 +76,36 @@ class RunJob:
 
     id: str
     scenario: str  # scenario name (after overrides)
-    scenario_file: str  # absolute path
+    scenario_file: str  # absolute path ("" for a generated scenario)
     seed: int
     overrides: dict[str, Any]  # every override except the seed
     log_path: str  # absolute path of its MCAP log
+    generator: str = ""  # "module:function" making the scenario (a dict) from the case's arguments
+    case: dict[str, Any] = field(default_factory=dict)  # those arguments
 
     def all_overrides(self) -> dict[str, Any]:
         return {**self.overrides, "seed": self.seed}
+
+    def scenario_text(self) -> str:
+        """The scenario's YAML as the run reads it (before the overrides)."""
+        return _load(self.scenario_file, self.generator, self.case, self.all_overrides())[1]
+
+    def load(self):
+        """(scenario, text) of this run, the overrides applied."""
+        return _load(self.scenario_file, self.generator, self.case, self.all_overrides())
+
+
+def _generator(path: str) -> Callable[..., dict]:
+    """The scenario generator at ``module:function``; BatchSpecError if there is none."""
+    import importlib
+    module, _, name = path.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), name, None)
+    except ImportError as exc:
+        raise BatchSpecError(f"generator {path!r}: cannot import {module!r}: {exc}") from None
+    if not callable(fn):
+        raise BatchSpecError(f"generator {path!r}: {module!r} has no function {name!r}")
+    return fn
 
 
 @dataclass
@@ -145,38 +173,7 @@ def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]
     logs = Path(out_dir).resolve() / "logs"
     jobs: list[RunJob] = []
     for i, entry in enumerate(data["runs"]):
-        where = f"{path}: runs.{i}"
-        if not isinstance(entry, dict) or "scenario" not in entry:
-            raise BatchSpecError(f"{where}: expected a mapping with a 'scenario:' file")
-        unknown = set(entry) - _RUN_KEYS
-        if unknown:
-            raise BatchSpecError(f"{where}.{sorted(unknown)[0]}: unknown key (allowed: {sorted(_RUN_KEYS)})")
-        scenario_file = (path.parent / str(entry["scenario"])).resolve()
-        if not scenario_file.is_file():
-            raise BatchSpecError(f"{where}.scenario: no such scenario file {scenario_file}")
-        fixed = entry.get("set") or {}
-        grid = entry.get("grid") or {}
-        if not isinstance(fixed, dict) or not isinstance(grid, dict):
-            raise BatchSpecError(f"{where}: 'set' and 'grid' must map field paths to values")
-        for key, values in grid.items():
-            if not isinstance(values, list) or not values:
-                raise BatchSpecError(f"{where}.grid.{key}: expected a non-empty list of values (got {values!r})")
-        seeds = _seeds(entry.get("seeds"), where)
-        if seeds is not None and ("seed" in fixed or "seed" in grid):
-            raise BatchSpecError(f"{where}: give the seed in 'seeds' or in 'set'/'grid', not both")
-        keys = list(grid)
-        for point in itertools.product(*(grid[k] for k in keys)):
-            overrides = {**fixed, **dict(zip(keys, point))}
-            base_seed = overrides.pop("seed", None)
-            for seed in seeds if seeds is not None else [base_seed]:
-                ov = dict(overrides) if seed is None else {**overrides, "seed": seed}
-                try:
-                    scenario, _ = load_scenario(scenario_file, ov)
-                except ScenarioError as exc:
-                    raise BatchSpecError(f"{where} ({_canonical(ov)}): {exc}") from None
-                rid = run_id(scenario.name, scenario.seed, overrides)
-                jobs.append(RunJob(rid, scenario.name, str(scenario_file), scenario.seed, overrides,
-                                   str(logs / f"{rid}.mcap")))
+        jobs += _entry_jobs(path, i, entry, logs)
     seen: dict[str, int] = {}
     for j in jobs:
         seen[j.id] = seen.get(j.id, 0) + 1
@@ -185,6 +182,74 @@ def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]
         raise BatchSpecError(f"{path}: {len(dup)} run id(s) appear more than once (same scenario name, seed and "
                              f"overrides), e.g. {dup[0]}")
     return name, jobs
+
+
+def _cases(entry: dict, where: str) -> list[dict[str, Any]]:
+    """The generator's keyword arguments of each case (``cases``, each with ``args``); [{}] for a file."""
+    if "generator" not in entry:
+        if "cases" in entry or "args" in entry:
+            raise BatchSpecError(f"{where}: 'cases' and 'args' go with a 'generator'")
+        return [{}]
+    cases, args = entry.get("cases") or [{}], entry.get("args") or {}
+    if not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases) or not isinstance(args, dict):
+        raise BatchSpecError(f"{where}: 'cases' must be a list of argument mappings and 'args' a mapping")
+    return [{**args, **c} for c in cases]
+
+
+def _entry_jobs(path: Path, i: int, entry: Any, logs: Path) -> list[RunJob]:
+    """The runs of one entry of a spec: cases x grid points x seeds (each validated)."""
+    where = f"{path}: runs.{i}"
+    if not isinstance(entry, dict) or ("scenario" in entry) == ("generator" in entry):
+        raise BatchSpecError(f"{where}: expected a mapping with a 'scenario:' file or a 'generator:'")
+    unknown = set(entry) - _RUN_KEYS
+    if unknown:
+        raise BatchSpecError(f"{where}.{sorted(unknown)[0]}: unknown key (allowed: {sorted(_RUN_KEYS)})")
+    scenario_file, generator = "", str(entry.get("generator", ""))
+    if generator:
+        _generator(generator)
+    else:
+        scenario_file = str((path.parent / str(entry["scenario"])).resolve())
+        if not Path(scenario_file).is_file():
+            raise BatchSpecError(f"{where}.scenario: no such scenario file {scenario_file}")
+    fixed = entry.get("set") or {}
+    grid = entry.get("grid") or {}
+    if not isinstance(fixed, dict) or not isinstance(grid, dict):
+        raise BatchSpecError(f"{where}: 'set' and 'grid' must map field paths to values")
+    for key, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise BatchSpecError(f"{where}.grid.{key}: expected a non-empty list of values (got {values!r})")
+    seeds = _seeds(entry.get("seeds"), where)
+    if seeds is not None and ("seed" in fixed or "seed" in grid):
+        raise BatchSpecError(f"{where}: give the seed in 'seeds' or in 'set'/'grid', not both")
+    keys = list(grid)
+    jobs = []
+    for case, point in itertools.product(_cases(entry, where), list(itertools.product(*(grid[k] for k in keys)))):
+        overrides = {**fixed, **dict(zip(keys, point))}
+        base_seed = overrides.pop("seed", None)
+        for seed in seeds if seeds is not None else [base_seed]:
+            ov = dict(overrides) if seed is None else {**overrides, "seed": seed}
+            try:
+                scenario, _ = _load(scenario_file, generator, case, ov)
+            except ScenarioError as exc:
+                raise BatchSpecError(f"{where} ({_canonical({**case, **ov})}): {exc}") from None
+            except Exception as exc:  # noqa: BLE001 - a generator that raises on these arguments
+                raise BatchSpecError(f"{where} ({_canonical(case)}): {generator}: {type(exc).__name__}: "
+                                     f"{exc}") from None
+            rid = run_id(scenario.name, scenario.seed, {**overrides, **({"case": case} if generator else {})})
+            jobs.append(RunJob(rid, scenario.name, scenario_file, scenario.seed, overrides,
+                               str(logs / f"{rid}.mcap"), generator, case))
+    return jobs
+
+
+def _load(scenario_file: str, generator: str, case: dict, overrides: dict):
+    """(scenario, text): a scenario file, or a generator's scenario for ``case``, with the overrides."""
+    if generator:
+        import yaml
+
+        from fwsim.scenario import parse_scenario
+        text = yaml.safe_dump(_generator(generator)(**case), sort_keys=False)
+        return parse_scenario(text, f"{generator}({_canonical(case)})", overrides), text
+    return load_scenario(scenario_file, overrides)
 
 
 # -- one run (runs in a worker process or a Ray task) -------------------------
@@ -201,6 +266,7 @@ def _base_row(job: RunJob, wall_time_s: float, error: str) -> dict[str, Any]:
         "log": str(Path("logs") / Path(job.log_path).name), "resumed": False,
     }
     row.update({f"set.{k}": v for k, v in job.overrides.items()})
+    row.update({f"case.{k}": v for k, v in job.case.items()})
     return row
 
 
@@ -210,8 +276,8 @@ def row_from_log(job: RunJob, wall_time_s: float = math.nan, error: str = "") ->
     ``error`` is the exception the run raised ("" if none): such a run is
     failed whatever its log says.
     """
+    from fwsim import topics
     from fwsim.log import read_log
-    from fwsim.log.writer import STATE_TOPIC
     from fwsim.metrics import compute_metrics
 
     row = _base_row(job, wall_time_s, error)
@@ -226,7 +292,7 @@ def row_from_log(job: RunJob, wall_time_s: float = math.nan, error: str = "") ->
         return row
     row["status"] = "failed" if error else log.status
     row["reason"] = log.reason or error
-    if not log.topics.get(STATE_TOPIC):  # failed before the first state (e.g. the trim): no metrics
+    if not log.topics.get(topics.UAV_STATE):  # failed before the first state (e.g. the trim): no metrics
         return row
     try:
         metrics = compute_metrics(log)
@@ -282,7 +348,7 @@ def run_one(job: RunJob) -> dict[str, Any]:
     log_path.parent.mkdir(parents=True, exist_ok=True)
     with _console_to(log_path.with_suffix(".console.txt")):
         try:
-            scenario, text = load_scenario(job.scenario_file, job.all_overrides())
+            scenario, text = job.load()
             run(scenario, text, log_path)
         except KeyboardInterrupt:  # the log already says 'interrupted'
             interrupted = True
@@ -410,7 +476,7 @@ def resumable(job: RunJob) -> bool:
         return False
     if log.status not in FINISHED_STATUSES:
         return False
-    return log.scenario_text == Path(job.scenario_file).read_text()
+    return log.scenario_text == job.scenario_text()
 
 
 def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
@@ -479,7 +545,8 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
 # -- summary files ----------------------------------------------------------
 
 def columns_of(rows: list[dict[str, Any]]) -> list[str]:
-    """Base columns, then ``set.*`` override columns, then metric columns (first-seen order)."""
+    """Base columns, then ``set.*`` override and ``case.*`` argument columns, then metric columns (first-seen
+    order)."""
     seen: dict[str, None] = dict.fromkeys(BASE_COLUMNS)
     sets: dict[str, None] = {}
     rest: dict[str, None] = {}
@@ -487,7 +554,7 @@ def columns_of(rows: list[dict[str, Any]]) -> list[str]:
         for k in r:
             if k in seen:
                 continue
-            (sets if k.startswith("set.") else rest).setdefault(k, None)
+            (sets if k.startswith(("set.", "case.")) else rest).setdefault(k, None)
     return [*seen, *sets, *rest]
 
 

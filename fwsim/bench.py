@@ -12,7 +12,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from fwsim import SCENARIO_DIR
+from fwsim import SCENARIO_DIR, topics
 
 
 def _best_of(fn, repeats: int) -> float:
@@ -118,7 +118,7 @@ def log_writer_us(n: int = 3000) -> tuple[float, float]:
                 log.write_state(st)
             t1 = time.perf_counter()
             for _ in range(n):
-                log.write("/actuators", act)
+                log.write(topics.ACTUATORS, act)
             t2 = time.perf_counter()
     return (t1 - t0) / n * 1e6, (t2 - t1) / n * 1e6
 

@@ -21,10 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
-from embreex import rtcore_scene as rtcs
-from embreex.mesh_construction import TriangleMesh
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from fwsim.gimbal import GimbalConfig
@@ -129,7 +126,11 @@ class Detection:
     bbox_px: np.ndarray  # (4,) u_min, v_min, u_max, v_max (NaN when not detected)
 
 
-def _scene(mesh) -> rtcs.EmbreeScene:
+def _scene(mesh):
+    """An Embree scene of the mesh's triangles (embreex is imported here: reading a scenario needs none)."""
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
     sc = rtcs.EmbreeScene()
     TriangleMesh(sc, np.ascontiguousarray(mesh.triangles, dtype=np.float32))
     return sc
@@ -165,8 +166,8 @@ class RayCaster:
 
     uav_mesh: object
     ship_mesh: object
-    _uav: rtcs.EmbreeScene = field(init=False)
-    _ship: rtcs.EmbreeScene = field(init=False)
+    _uav: object = field(init=False)  # embreex scenes
+    _ship: object = field(init=False)
     ship_corners: np.ndarray = field(init=False)
 
     def __post_init__(self):
@@ -320,6 +321,8 @@ class Camera:
         if bbox_px is not None and np.all(np.isfinite(bbox_px)):
             s = np.array([rc.width_px / self.cfg.width_px, rc.height_px / self.cfg.height_px] * 2)
             b = np.round(bbox_px * s).astype(int)
+            import cv2
+
             cv2.rectangle(out, (b[0], b[1]), (b[2], b[3]), (0, 255, 0), 1)
         return out
 
@@ -332,6 +335,8 @@ class Camera:
         return ng / np.maximum(np.linalg.norm(ng, axis=1), 1e-12)[:, None]
 
     def encode_jpeg(self, img: np.ndarray) -> bytes:
+        import cv2  # OpenCV only where an image is made
+
         ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, self.cfg.render.jpeg_quality])
         if not ok:
             raise RuntimeError("JPEG encoding failed")

@@ -13,8 +13,8 @@ flight instead of ~140 s.
 from __future__ import annotations
 
 import copy
-import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -22,7 +22,7 @@ import yaml
 from fwsim import SCENARIO_DIR
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
 
-__all__ = ["terminal_case", "sweep_cases", "fly_case", "case_line", "CASE_KEYS"]
+__all__ = ["terminal_case", "sweep_cases", "sweep_spec", "sweep_rows", "case_line", "CASE_KEYS", "SWEEP_SPEC"]
 
 
 def _orbit_heading_deg(bearing_rad: float, ship_heading_deg: float, ship_speed_m_s: float,
@@ -76,47 +76,54 @@ def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float,
 #: metrics of a terminal case that the sweep reports
 CASE_KEYS = ["hit", "miss_distance_m", "impact_fpa_error_deg", "impact_heading_error_deg", "switch_time_s",
              "impact_time_s", "ukf_pos_err_max_after_convergence_m", "target_in_fov_fraction_after_lock"]
+#: the sweep's batch spec (its cases are the terminal_case arguments)
+SWEEP_SPEC = SCENARIO_DIR / "batches" / "terminal_sweep.yaml"
+_ARGS = ("theta_f_deg", "psi_f_deg", "ship_heading_deg", "ship_speed_m_s")
 
 
 def sweep_cases(quick: bool = False) -> list[tuple[float, float, float, float]]:
-    """(theta_f, psi_f, ship heading, ship speed) of the terminal sweep: impact flight-path angles -20..-60 deg
-    x six impact headings all round, the ship's course and speed cycling through 0/5/10 m/s and six courses
-    relative to psi_f; then the paper's angles against ship courses all round at 0, 5 and 10 m/s (42 cases;
-    ``quick``: every fifth)."""
-    speeds, rel = [0.0, 5.0, 10.0], [0.0, 90.0, 180.0, 270.0, 45.0, 135.0]
-    out = []
-    for i, (tf, pf) in enumerate(itertools.product([-20.0, -30.0, -40.0, -50.0, -60.0], range(0, 360, 60))):
-        out.append((tf, float(pf), (pf + rel[i % 6]) % 360.0, speeds[i % 3]))
-    out += [(-30.0, 30.0, float(sh), v) for sh in (0, 90, 180, 270) for v in speeds]
+    """(theta_f, psi_f, ship heading, ship speed) of the terminal sweep (:data:`SWEEP_SPEC`; ``quick``: every
+    fifth)."""
+    cases = yaml.safe_load(SWEEP_SPEC.read_text())["runs"][0]["cases"]
+    out = [tuple(float(c[k]) for k in _ARGS) for c in cases]
     return out[::5] if quick else out
 
 
-def fly_case(case, out_dir, seed: int = 1, bounds=(3.0, 3.0), overrides: dict | None = None) -> dict:
-    """Fly one sweep case to a log in ``out_dir``; its row: the case, wall time, how the run ended, the
-    :data:`CASE_KEYS` metrics and ``ok`` (hit, miss and both impact-angle errors within ``bounds``:
-    metres, degrees). ``overrides``: scenario fields set on the case (``{"world.wind_enu_m_s": [5, -4, 0]}``)."""
-    import time
-    from pathlib import Path
-
-    from fwsim.loop import run
-    from fwsim.metrics import compute_metrics
-    from fwsim.scenario import parse_scenario, set_path
+def sweep_spec(out_dir, seed: int = 1, quick: bool = False, overrides: dict | None = None) -> Path:
+    """The sweep's batch spec for this seed (``quick``: every fifth case), with ``overrides`` set on every case,
+    written into ``out_dir``; its path. A wind override goes to :func:`terminal_case` (its start heading allows
+    for the wind)."""
+    spec = yaml.safe_load(SWEEP_SPEC.read_text())
+    entry = spec["runs"][0]
     overrides = dict(overrides or {})
-    d = terminal_case(*case, seed=seed, wind_enu_m_s=overrides.pop("world.wind_enu_m_s", None))
-    for path, value in overrides.items():
-        set_path(d, path, value)
-    text = yaml.safe_dump(d, sort_keys=False)
-    sc = parse_scenario(text)
-    t0 = time.perf_counter()
-    res = run(sc, text, Path(out_dir) / f"{sc.name}.mcap")
-    m = compute_metrics(res.log_path)
-    row = {"theta_f_deg": case[0], "psi_f_deg": case[1], "ship_heading_deg": case[2], "ship_speed_m_s": case[3],
-           "wall_s": round(time.perf_counter() - t0, 2), "end": res.reason}
-    row.update({k: m.get(k, math.nan) for k in CASE_KEYS})
-    row["ok"] = bool(row["hit"] == 1.0 and row["miss_distance_m"] <= bounds[0]
-                     and abs(row["impact_fpa_error_deg"]) <= bounds[1]
-                     and abs(row["impact_heading_error_deg"]) <= bounds[1])
-    return row
+    wind = overrides.pop("world.wind_enu_m_s", None)
+    if quick:
+        entry["cases"] = entry["cases"][::5]
+    if wind is not None:
+        entry["args"] = {**entry.get("args", {}), "wind_enu_m_s": wind}
+    entry["seeds"] = [int(seed)]
+    if overrides:
+        entry["set"] = overrides
+    spec["name"] = f"terminal_sweep_seed{seed}" + ("_quick" if quick else "")
+    path = Path(out_dir) / f"{spec['name']}.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def sweep_rows(batch_rows: list[dict], bounds=(3.0, 3.0)) -> list[dict]:
+    """The sweep's rows from the batch summary rows: the case, how the run ended, the :data:`CASE_KEYS`
+    metrics and ``ok`` (hit, miss and both impact-angle errors within ``bounds``: metres, degrees)."""
+    rows = []
+    for r in batch_rows:
+        row = {k: r.get(f"case.{k}") for k in _ARGS}
+        row.update(wall_s=r.get("wall_time_s"), end=r.get("reason"), log=r.get("log"))
+        row.update({k: float(r.get(k, math.nan)) for k in CASE_KEYS})
+        row["ok"] = bool(r.get("status") == "completed" and row["hit"] == 1.0 and row["miss_distance_m"] <= bounds[0]
+                         and abs(row["impact_fpa_error_deg"]) <= bounds[1]
+                         and abs(row["impact_heading_error_deg"]) <= bounds[1])
+        rows.append(row)
+    return rows
 
 
 def case_line(row: dict) -> str:

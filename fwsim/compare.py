@@ -49,9 +49,8 @@ from typing import Any
 
 import yaml
 
-from fwsim.yamlfile import load_yaml_file
-
 from fwsim.scenario import ScenarioError
+from fwsim.yamlfile import load_yaml_file
 
 TOLERANCE_KEYS = ("abs", "rel", "min", "max", "ignore")
 DEFAULT_KEY = "default"

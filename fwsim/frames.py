@@ -48,6 +48,23 @@ def heading_ned_from_course_enu(course_enu: float) -> float:
     return wrap_pi(0.5 * math.pi - course_enu)
 
 
+def heading_deg_from_course_enu(course_enu_rad: float) -> float:
+    """Compass heading in degrees, [0, 360) clockwise from North (the scenario's convention), from an ENU
+    course in radians (counter-clockwise from East)."""
+    return (90.0 - math.degrees(course_enu_rad)) % 360.0
+
+
+def bearing_deg(from_enu, to_enu) -> float:
+    """Compass bearing (degrees clockwise from North, (-180, 180]) from one point to another (ENU)."""
+    return math.degrees(math.atan2(to_enu[0] - from_enu[0], to_enu[1] - from_enu[1]))
+
+
+def dcm_ship_from_enu(course_enu_rad: float) -> np.ndarray:
+    """R_ship_from_enu for a ship whose bow points along ``course_enu_rad`` (ship frame: x bow, y port, z up)."""
+    cs, sn = math.cos(course_enu_rad), math.sin(course_enu_rad)
+    return np.array([[cs, sn, 0.0], [-sn, cs, 0.0], [0.0, 0.0, 1.0]])
+
+
 # --------------------------------------------------------------------------- ENU / NED
 
 #: R_ned_from_enu: [e, n, u] -> [n, e, -u]. A proper rotation, its own inverse.

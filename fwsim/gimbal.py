@@ -35,15 +35,18 @@ import math
 from dataclasses import dataclass
 from typing import Annotated
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 # The pan-tilt kinematics live in fwsim.frames (the flight software needs them too);
 # re-exported here for the harness.
-from fwsim.frames import (R_frd_from_cam, camera_angular_velocity, camera_pose_world,  # noqa: F401
-                          joint_rates_from_camera_rates, pan_tilt_pointing_at)
-
-from fwsim.frames import dcm_enu_from_frd
+from fwsim.frames import (  # noqa: F401
+    R_frd_from_cam,
+    camera_angular_velocity,
+    camera_pose_world,
+    dcm_enu_from_frd,
+    joint_rates_from_camera_rates,
+    pan_tilt_pointing_at,
+)
 
 _PI = math.pi
 _HALF_PI = 0.5 * math.pi

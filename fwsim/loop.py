@@ -27,11 +27,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable
 
-import numpy as np
 import yaml
 
 import fwsim
-from controllers.mission import FlightSoftware
+from controllers.mission import flight_software
+from fwsim import topics
 from fwsim.airframe import aircraft_file, aircraft_hash
 from fwsim.autopilot import Autopilot, load_autopilot_params
 from fwsim.camera import Detector
@@ -41,21 +41,6 @@ from fwsim.log.writer import Listener
 from fwsim.scenario import Scenario
 from fwsim.sensors import Sensors, rng_for
 from fwsim.world import World
-
-#: Topics written by the loop (besides LogWriter.write_state's /uav/state, /tf, /uav/pose).
-COMMAND_TOPIC = "/autopilot/command"
-AUTOPILOT_TOPIC = "/autopilot/status"
-ACTUATOR_TOPIC = "/actuators"
-FSW_TOPIC = "/fsw/status"
-GIMBAL_CMD_TOPIC = "/fsw/gimbal_command"
-TARGET_TOPIC = "/target/state"
-GIMBAL_TOPIC = "/gimbal/state"
-FRAME_TOPIC = "/camera/frame"
-DETECTION_TOPIC = "/camera/detection"
-IMAGE_TOPIC = "/camera/image"
-CALIBRATION_TOPIC = "/camera/calibration"
-CAMERA_FRAME_ID = "camera"
-SHIP_FRAME_ID = "ship"
 
 
 @dataclass(frozen=True)
@@ -129,12 +114,12 @@ def _log_truth(log: LogWriter, truth) -> None:
     """Truth at one tick: UAV state and pose, ship, gimbal, and the camera and ship frames."""
     t = truth.uav.t_s
     log.write_state(truth.uav)
-    log.write(TARGET_TOPIC, truth.target)
-    log.write(GIMBAL_TOPIC, truth.gimbal)
-    log.write_transform(t, CAMERA_FRAME_ID, truth.cam_pos_enu_m, quat_from_dcm(truth.R_enu_from_cam))
+    log.write(topics.TARGET_STATE, truth.target)
+    log.write(topics.GIMBAL_STATE, truth.gimbal)
+    log.write_transform(t, topics.CAMERA_FRAME_ID, truth.cam_pos_enu_m, quat_from_dcm(truth.R_enu_from_cam))
     h = truth.target.heading_ned_rad
     half = 0.5 * (math.pi / 2 - h)  # ship frame (bow, port, up) is the ENU frame turned by the course
-    log.write_transform(t, SHIP_FRAME_ID, truth.target.pos_enu_m, (math.cos(half), 0.0, 0.0, math.sin(half)))
+    log.write_transform(t, topics.SHIP_FRAME_ID, truth.target.pos_enu_m, (math.cos(half), 0.0, 0.0, math.sin(half)))
 
 
 def run(scenario: Scenario, scenario_text: str, log_path: Path,
@@ -183,8 +168,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             sensors = Sensors(scenario.sensors, scenario.seed)
             cam = scenario.camera
             detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
-            flight_software = FlightSoftware(scenario.controllers, scenario.initial, scenario.camera)
-            log.write_calibration(CALIBRATION_TOPIC, 0.0, CAMERA_FRAME_ID, cam.width_px, cam.height_px,
+            fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
+            log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
             _log_truth(log, truth)
             last_det = None
@@ -196,30 +181,30 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     new_det = detector.arrived(t_now)
                     last_det = new_det or last_det
                     meas = sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, last_det)
-                    out = flight_software.step(meas)
-                    log.write(COMMAND_TOPIC, out.command)
-                    log.write(GIMBAL_CMD_TOPIC, out.gimbal)
-                    log.write(FSW_TOPIC, out.status)
-                    for topic, msg in out.logs.items():
+                    out = fsw.step(meas)
+                    log.write(topics.AUTOPILOT_COMMAND, out.command)
+                    log.write(topics.FSW_GIMBAL_COMMAND, out.gimbal)
+                    log.write(topics.FSW_STATUS, out.status)
+                    for topic, msg in out.logs:
                         log.write(topic, msg)
                     for text in out.events:
                         log.write_event(t_now, text)
                     if new_det is not None:
-                        log.write(DETECTION_TOPIC, new_det)
+                        log.write(topics.CAMERA_DETECTION, new_det)
                 act, ap_status = autopilot.step(out.command, truth.uav)
                 truth = world.step(act, out.gimbal)
                 sim_t = truth.uav.t_s
                 if (tick + 1) % cam_every == 0:
                     frame = world.look()
                     detector.observe(frame)
-                    log.write(FRAME_TOPIC, frame)
+                    log.write(topics.CAMERA_FRAME, frame)
                 if (tick + 1) % log_every == 0:
                     _log_truth(log, truth)
-                    log.write(AUTOPILOT_TOPIC, ap_status)
-                    log.write(ACTUATOR_TOPIC, act)
+                    log.write(topics.AUTOPILOT_STATUS, ap_status)
+                    log.write(topics.ACTUATORS, act)
                 if render_every and (tick + 1) % render_every == 0:
                     img = world.render(frame.bbox_px if frame is not None else None)
-                    log.write_image(IMAGE_TOPIC, sim_t, CAMERA_FRAME_ID, world.camera.encode_jpeg(img))
+                    log.write_image(topics.CAMERA_IMAGE, sim_t, topics.CAMERA_FRAME_ID, world.camera.encode_jpeg(img))
                 if world.uav_inside_ship():
                     _log_truth(log, truth)
                     status, reason = "completed", f"hit the ship at t = {sim_t:.2f} s"

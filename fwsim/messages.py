@@ -158,7 +158,9 @@ class FlightSoftwareStatus:
     cross_track_m: float = math.nan  # initial path: signed distance right of the path
     locked: bool = False  # the target is locked (acquisition done)
     lock_t_s: float = math.nan  # when it was locked
-    radial_err_m: float = math.nan  # orbit: distance to the estimated target minus the radius
+    radial_err_m: float = math.nan  # Phase 2 and 3: distance to the estimated target minus the loiter radius
+    loiter_radius_m: float = math.nan  # Phase 2 and 3: the loiter ring's radius R round the target
+    loiter_altitude_m: float = math.nan  # Phase 2 and 3: the loiter ring's altitude H
 
 
 def as_dict(msg) -> dict:

@@ -26,8 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fwsim import topics
 from fwsim.log import RunLog, read_log
-
+from fwsim.log.truth import interp_at
 
 CONVERGED_STD_M = 5.0
 MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
@@ -43,7 +44,7 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
     """Metrics of one run as a flat dict (numbers, plus status and reason)."""
     if not isinstance(log, RunLog):
         log = read_log(log)
-    st = log.table("/uav/state")
+    st = log.table(topics.UAV_STATE)
     m: dict[str, float | str] = {"status": log.status, "end_reason": log.reason}
     t = st["t_s"]
     m["flight_time_s"] = float(t[-1] - t[0]) if t.size else 0.0
@@ -52,8 +53,8 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
     m["bank_abs_max_deg"] = float(np.degrees(np.max(np.abs(st["euler_ned_rad"][:, 0]))))
     m["sideslip_abs_max_deg"] = float(np.degrees(np.max(np.abs(st["beta_rad"]))))
     m["height_min_m"] = float(np.min(st["height_above_sea_m"]))
-    if "/autopilot/status" in log.topics:
-        ap = log.table("/autopilot/status")
+    if topics.AUTOPILOT_STATUS in log.topics:
+        ap = log.table(topics.AUTOPILOT_STATUS)
         m["airspeed_err_rms_m_s"] = _rms(ap["airspeed_sp_m_s"] - ap["airspeed_m_s"])
         err = np.degrees(ap["body_rates_sp_frd_rad_s"] - ap["body_rates_frd_rad_s"])
         m["roll_rate_err_rms_deg_s"] = _rms(err[:, 0])
@@ -62,8 +63,8 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
         if np.any(accel):
             a_err = np.linalg.norm(ap["accel_sp_enu_m_s2"][accel] - ap["accel_enu_m_s2"][accel], axis=1)
             m["accel_err_rms_m_s2"] = _rms(a_err)
-    if "/camera/frame" in log.topics:
-        fr = log.table("/camera/frame")
+    if topics.CAMERA_FRAME in log.topics:
+        fr = log.table(topics.CAMERA_FRAME)
         in_fov = fr["in_fov"].astype(bool)
         visible = fr["visible_px"] > 0
         m["camera_frames"] = float(len(in_fov))
@@ -71,13 +72,30 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
         m["target_visible_fraction"] = float(np.mean(visible)) if len(visible) else math.nan
         m["occluded_frames"] = float(np.sum(in_fov & ~visible))  # in view but hidden by the UAV
         m["partly_occluded_frames"] = float(np.sum(visible & (fr["occluded_fraction"] > 0)))
-    if "/camera/detection" in log.topics:
-        det = log.table("/camera/detection")
+    if topics.CAMERA_DETECTION in log.topics:
+        det = log.table(topics.CAMERA_DETECTION)
         m["detections"] = float(np.sum(det["detected"].astype(bool)))
     _acquisition_metrics(log, m)
+    _fusion_metrics(log, m)
     _loiter_metrics(log, m)
     _impact_metrics(log, m)
     return m
+
+
+def _fusion_metrics(log: RunLog, m: dict) -> None:
+    """What became of the detections the flight software received (``/fsw/detection_fusion``): one count per
+    reason (``fusion_<reason>``, every reason listed), and the estimator's counters at the end of the run."""
+    from controllers.messages import FusionReason
+
+    if topics.FSW_DETECTION_FUSION in log.topics:
+        reasons = log.table(topics.FSW_DETECTION_FUSION)["reason"] if log.topics[topics.FSW_DETECTION_FUSION] else []
+        m["fusion_detections"] = float(len(reasons))
+        for r in FusionReason:
+            m[f"fusion_{r.value}"] = float(sum(1 for x in reasons if x == r.value))
+    if log.topics.get(topics.FSW_ESTIMATOR_STATUS):
+        last = log.rows(topics.FSW_ESTIMATOR_STATUS)[-1]
+        for k in ("updates", "innovation_rejected", "rejected", "resets", "numerical_resets", "initialisations"):
+            m[f"estimator_{k}"] = float(last[k])
 
 
 LOITER_SETTLE_S = 60.0  # loiter errors are scored from Phase 2 start + this
@@ -85,45 +103,48 @@ LOITER_SETTLE_S = 60.0  # loiter errors are scored from Phase 2 start + this
 
 def _loiter_metrics(log: RunLog, m: dict) -> None:
     """Phase 2: radius and altitude errors against the true ship, the tilt joint, the NMPC's solves."""
-    if "/gimbal/state" in log.topics:
-        g = log.table("/gimbal/state")
+    if topics.GIMBAL_STATE in log.topics:
+        g = log.table(topics.GIMBAL_STATE)
         dt = np.diff(g["t_s"], append=g["t_s"][-1])
         m["tilt_positive_s"] = float(np.sum(dt[g["tilt_rad"] > 0.0]))
-    if "/fsw/nmpc" in log.topics:
-        n = log.table("/fsw/nmpc")
+    if topics.FSW_NMPC in log.topics:
+        n = log.table(topics.FSW_NMPC)
         m["nmpc_solves"] = float(len(n["t_s"]))
         m["nmpc_solve_ms_median"] = float(np.median(n["solve_ms"]))
         m["nmpc_solve_ms_p99"] = float(np.percentile(n["solve_ms"], 99))
         m["nmpc_fallbacks"] = float(np.sum(n["fallback"].astype(bool)))
         m["nmpc_cbf_active_fraction"] = float(np.mean(n["cbf_active"].astype(bool)))
-    if "/fsw/status" not in log.topics or "/target/state" not in log.topics:
+    if topics.FSW_STATUS not in log.topics or topics.TARGET_STATE not in log.topics:
         return
-    fs = log.table("/fsw/status")
+    fs = log.table(topics.FSW_STATUS)
     p2 = np.flatnonzero(fs["phase"] == 2)
     if not p2.size:
         return
     t2 = float(fs["t_s"][p2[0]])
     p3 = np.flatnonzero(fs["phase"] == 3)
     t_end = float(fs["t_s"][p3[0]]) if p3.size else float(fs["t_s"][-1])
-    from fwsim.scenario import parse_scenario
-    try:
-        sc = parse_scenario(log.effective_scenario_text or log.scenario_text).controllers
-    except Exception:
-        return
-    R, H = (sc.nmpc.radius_m, sc.nmpc.altitude_m) if sc.after_lock == "nmpc" else (sc.orbit.radius_m,
-                                                                                    sc.orbit.altitude_m)
-    if "/camera/frame" in log.topics:
-        fr = log.table("/camera/frame")
+    if "loiter_radius_m" in fs:  # the ring the loiter flew (whichever block flew it)
+        R, H = float(fs["loiter_radius_m"][p2[0]]), float(fs["loiter_altitude_m"][p2[0]])
+    else:  # a log from before the ring was logged: from its scenario
+        from fwsim.scenario import parse_scenario
+        try:
+            sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False).controllers
+        except Exception:
+            return
+        loiter = sc.nmpc if sc.after_lock.use == "nmpc" else sc.orbit
+        R, H = loiter.radius_m, loiter.altitude_m
+    if topics.CAMERA_FRAME in log.topics:
+        fr = log.table(topics.CAMERA_FRAME)
         wf = (fr["t_s"] >= t2) & (fr["t_s"] <= t_end)
         m["occluded_frames_phase2"] = float(np.sum(fr["in_fov"][wf].astype(bool) & (fr["visible_px"][wf] <= 0)))
-    st, tg = log.table("/uav/state"), log.table("/target/state")
+    st, tg = log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
     w = (st["t_s"] >= t2 + LOITER_SETTLE_S) & (st["t_s"] <= t_end)
     m["loiter_settle_s"] = LOITER_SETTLE_S
     if not w.any():
         m["loiter_radius_rmse_m"] = m["loiter_alt_rmse_m"] = math.nan
         return
     t = st["t_s"][w]
-    q = np.stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, i]) for i in range(2)], axis=1)
+    q = interp_at(t, tg["t_s"], tg["pos_enu_m"][:, :2])
     radius = np.linalg.norm(st["pos_enu_m"][w, :2] - q, axis=1)
     m["loiter_radius_rmse_m"] = _rms(radius - R)
     m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
@@ -143,16 +164,16 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     """Terminal phase: switch time, impact time, miss distance to the aim point, hit, impact angles."""
     from fwsim.scenario import parse_scenario
     from fwsim.target import HullVolume, Ship
-    if "/fsw/status" in log.topics:
-        fs = log.table("/fsw/status")
+    if topics.FSW_STATUS in log.topics:
+        fs = log.table(topics.FSW_STATUS)
         p3 = np.flatnonzero(fs["phase"] == 3)
         m["switch_time_s"] = float(fs["t_s"][p3[0]]) if p3.size else math.nan
     reason = str(log.reason)
     ended = reason.startswith("hit the ship") or reason.startswith("sea contact")
-    st = log.table("/uav/state")
+    st = log.table(topics.UAV_STATE)
     m["impact_time_s"] = float(st["t_s"][-1]) if ended else math.nan
     try:
-        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text)
+        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
     except Exception:  # a log written by another version: no geometry to score against
         return
     ship = Ship(scenario.target)
@@ -185,8 +206,8 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
 
 def _acquisition_metrics(log: RunLog, m: dict) -> None:
     lock_t = math.nan
-    if "/fsw/status" in log.topics:
-        fs = log.table("/fsw/status")
+    if topics.FSW_STATUS in log.topics:
+        fs = log.table(topics.FSW_STATUS)
         if "locked" in fs:
             locked = fs["locked"].astype(bool)
             if locked.any():
@@ -195,15 +216,15 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
     if math.isnan(lock_t):
         return
     meta = log.metadata.get("fwsim", {})
-    if "/camera/frame" in log.topics:
-        fr = log.table("/camera/frame")
+    if topics.CAMERA_FRAME in log.topics:
+        fr = log.table(topics.CAMERA_FRAME)
         after = fr["t_s"] >= lock_t
         if after.any():
             m["target_in_fov_fraction_after_lock"] = float(np.mean(fr["in_fov"][after].astype(bool)))
             m["occluded_frames_after_lock"] = float(np.sum(fr["in_fov"][after].astype(bool)
                                                            & (fr["visible_px"][after] <= 0)))
-    if "/camera/detection" in log.topics and "camera_width_px" in meta:
-        det = log.table("/camera/detection")
+    if topics.CAMERA_DETECTION in log.topics and "camera_width_px" in meta:
+        det = log.table(topics.CAMERA_DETECTION)
         cx, cy = float(meta["camera_width_px"]) / 2, float(meta["camera_height_px"]) / 2
         err = np.hypot(det["u_px"] - cx, det["v_px"] - cy)
         detected = det["detected"].astype(bool)
@@ -215,17 +236,17 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         after = detected & (det["exposure_t_s"] >= lock_t)
         big = np.flatnonzero(after & (err > 20.0))
         m["ibvs_recentre_time_s"] = float(det["exposure_t_s"][big[-1]] - lock_t) if big.size else 0.0
-    if "/fsw/estimate" in log.topics and "/target/state" in log.topics:
-        est = log.table("/fsw/estimate")
-        tru = log.table("/target/state")
+    if topics.FSW_ESTIMATE in log.topics and topics.TARGET_STATE in log.topics:
+        est = log.table(topics.FSW_ESTIMATE)
+        tru = log.table(topics.TARGET_STATE)
         t = est["t_s"]
         valid = np.all(np.isfinite(est["pos_enu_m"][:, :2]), axis=1)
         if not valid.any():
             return
         t, pos, vel = t[valid], est["pos_enu_m"][valid, :2], est["vel_enu_m_s"][valid, :2]
         std = np.max(est["pos_std_m"][valid, :2], axis=1)
-        tp = np.stack([np.interp(t, tru["t_s"], tru["pos_enu_m"][:, i]) for i in range(2)], axis=1)
-        tv = np.stack([np.interp(t, tru["t_s"], tru["vel_enu_m_s"][:, i]) for i in range(2)], axis=1)
+        tp = interp_at(t, tru["t_s"], tru["pos_enu_m"][:, :2])
+        tv = interp_at(t, tru["t_s"], tru["vel_enu_m_s"][:, :2])
         pe = np.linalg.norm(pos - tp, axis=1)
         ve = np.linalg.norm(vel - tv, axis=1)
         m["ukf_pos_rmse_m"] = _rms(pe)

@@ -6,7 +6,7 @@ reports the others as skipped with the reason. A figure can also skip itself
 on the data (``raise SkipFigure("no accel-mode ticks")``). To add one of the
 paper's figures::
 
-    @figure("tilt_angle", needs=(GIMBAL_TOPIC,), title="Camera tilt angle")
+    @figure("tilt_angle", needs=(topics.GIMBAL_STATE,), title="Camera tilt angle")
     def _tilt_angle(log: RunLog) -> Figure:
         fig, axes = _figure(1)
         ...
@@ -25,17 +25,9 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from fwsim import topics
 from fwsim.log import RunLog, read_log
-
-STATE_TOPIC = "/uav/state"
-AUTOPILOT_TOPIC = "/autopilot/status"
-FSW_TOPIC = "/fsw/status"
-TARGET_TOPIC = "/target/state"
-GIMBAL_TOPIC = "/gimbal/state"
-DETECTION_TOPIC = "/camera/detection"
-CALIBRATION_TOPIC = "/camera/calibration"
-ESTIMATE_TOPIC = "/fsw/estimate"  # the flight software's target estimate (UKF)
-IBVS_TOPIC = "/fsw/ibvs"  # the gimbal controller's own pixel error
+from fwsim.log.truth import interp_at
 
 PHASE_COLOURS = ("tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:brown", "tab:pink",
                  "tab:gray", "tab:olive")
@@ -134,10 +126,6 @@ def _at(t_src: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
     return values[np.clip(i, 0, len(values) - 1)]
 
 
-def _interp3(t: np.ndarray, t_src: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.column_stack([np.interp(t, t_src, v[:, k]) for k in range(v.shape[1])])
-
-
 def _phases(log: RunLog, t: np.ndarray) -> tuple[np.ndarray, dict[int, str]] | None:
     """A phase index at each time ``t`` and ``{index: label}``, if /fsw/status is logged.
 
@@ -145,9 +133,9 @@ def _phases(log: RunLog, t: np.ndarray) -> tuple[np.ndarray, dict[int, str]] | N
     appearance, so sub-phases (``acquisition:search``, ``acquisition:orbit``)
     get their own colours.
     """
-    if not log.topics.get(FSW_TOPIC):
+    if not log.topics.get(topics.FSW_STATUS):
         return None
-    fsw = log.table(FSW_TOPIC)
+    fsw = log.table(topics.FSW_STATUS)
     if "phase" not in fsw:
         return None
     phase = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
@@ -175,17 +163,17 @@ def _coloured_path(ax, x: np.ndarray, y: np.ndarray, phase: tuple | None, label:
 
 
 def _target_track(log: RunLog, ax, axis: int) -> None:
-    if log.topics.get(TARGET_TOPIC):
-        p = log.table(TARGET_TOPIC)["pos_enu_m"]
+    if log.topics.get(topics.TARGET_STATE):
+        p = log.table(topics.TARGET_STATE)["pos_enu_m"]
         ax.plot(p[:, 0], p[:, axis], color="tab:cyan", lw=2.0, label="target")
         ax.plot(p[-1:, 0], p[-1:, axis], "s", color="tab:cyan", ms=5)
 
 
 # -- figures from the state and the inner loops ---------------------------------
 
-@figure("trajectory_xy", needs=(STATE_TOPIC,), title="Trajectory, top view (x East, y North)")
+@figure("trajectory_xy", needs=(topics.UAV_STATE,), title="Trajectory, top view (x East, y North)")
 def _trajectory_xy(log: RunLog) -> Figure:
-    st = log.table(STATE_TOPIC)
+    st = log.table(topics.UAV_STATE)
     pos = st["pos_enu_m"]
     fig, (ax,) = _figure(1, height=5.5)
     _coloured_path(ax, pos[:, 0], pos[:, 1], _phases(log, st["t_s"]))
@@ -197,9 +185,9 @@ def _trajectory_xy(log: RunLog) -> Figure:
     return fig
 
 
-@figure("trajectory_xz", needs=(STATE_TOPIC,), title="Trajectory, side view (x East, z Up)")
+@figure("trajectory_xz", needs=(topics.UAV_STATE,), title="Trajectory, side view (x East, z Up)")
 def _trajectory_xz(log: RunLog) -> Figure:
-    st = log.table(STATE_TOPIC)
+    st = log.table(topics.UAV_STATE)
     pos = st["pos_enu_m"]
     fig, (ax,) = _figure(1, height=4.0)
     _coloured_path(ax, pos[:, 0], pos[:, 2], _phases(log, st["t_s"]))
@@ -210,16 +198,16 @@ def _trajectory_xz(log: RunLog) -> Figure:
     return fig
 
 
-@figure("altitude_airspeed", needs=(STATE_TOPIC,), title="Altitude and airspeed")
+@figure("altitude_airspeed", needs=(topics.UAV_STATE,), title="Altitude and airspeed")
 def _altitude_airspeed(log: RunLog) -> Figure:
-    st = log.table(STATE_TOPIC)
+    st = log.table(topics.UAV_STATE)
     t = st["t_s"]
     fig, (a1, a2) = _figure(2)
     a1.plot(t, st["height_above_sea_m"], label="height above sea")
     a1.set_ylabel("height [m]")
     a2.plot(t, st["airspeed_m_s"], label="airspeed (truth)")
-    if log.topics.get(AUTOPILOT_TOPIC):
-        ap = log.table(AUTOPILOT_TOPIC)
+    if log.topics.get(topics.AUTOPILOT_STATUS):
+        ap = log.table(topics.AUTOPILOT_STATUS)
         a2.plot(ap["t_s"], ap["airspeed_sp_m_s"], "--", label="set-point")
     a2.set_ylabel("airspeed [m/s]")
     a2.set_xlabel("sim time [s]")
@@ -227,9 +215,9 @@ def _altitude_airspeed(log: RunLog) -> Figure:
     return fig
 
 
-@figure("attitude", needs=(STATE_TOPIC,), title="Attitude (roll, pitch, yaw; NED Euler angles)")
+@figure("attitude", needs=(topics.UAV_STATE,), title="Attitude (roll, pitch, yaw; NED Euler angles)")
 def _attitude(log: RunLog) -> Figure:
-    st = log.table(STATE_TOPIC)
+    st = log.table(topics.UAV_STATE)
     t, eul = st["t_s"], np.degrees(st["euler_ned_rad"])
     fig, axes = _figure(3)
     for ax, k, name in zip(axes, range(3), ("roll φ", "pitch θ", "yaw ψ")):
@@ -239,9 +227,9 @@ def _attitude(log: RunLog) -> Figure:
     return fig
 
 
-@figure("inner_loops", needs=(AUTOPILOT_TOPIC,), title="Inner loops: set-points vs actual")
+@figure("inner_loops", needs=(topics.AUTOPILOT_STATUS,), title="Inner loops: set-points vs actual")
 def _inner_loops(log: RunLog) -> Figure:
-    ap = log.table(AUTOPILOT_TOPIC)
+    ap = log.table(topics.AUTOPILOT_STATUS)
     t = ap["t_s"]
     sp, act = np.degrees(ap["body_rates_sp_frd_rad_s"]), np.degrees(ap["body_rates_frd_rad_s"])
     fig, axes = _figure(3)
@@ -257,9 +245,9 @@ def _inner_loops(log: RunLog) -> Figure:
     return fig
 
 
-@figure("accel_tracking", needs=(AUTOPILOT_TOPIC,), title="Acceleration mode: commanded vs achieved (ENU)")
+@figure("accel_tracking", needs=(topics.AUTOPILOT_STATUS,), title="Acceleration mode: commanded vs achieved (ENU)")
 def _accel_tracking(log: RunLog) -> Figure:
-    ap = log.table(AUTOPILOT_TOPIC)
+    ap = log.table(topics.AUTOPILOT_STATUS)
     mode = ap.get("mode")
     accel = np.array([m == "accel" for m in mode]) if mode is not None else np.zeros(0, bool)
     if not accel.any():
@@ -277,10 +265,10 @@ def _accel_tracking(log: RunLog) -> Figure:
     return fig
 
 
-@figure("velocity_direction", needs=(STATE_TOPIC,),
+@figure("velocity_direction", needs=(topics.UAV_STATE,),
         title="Velocity direction: flight-path angle and course (NED Euler angles of the velocity)")
 def _velocity_direction(log: RunLog) -> Figure:
-    st = log.table(STATE_TOPIC)
+    st = log.table(topics.UAV_STATE)
     t, v = st["t_s"], st["vel_enu_m_s"]
     gamma = np.degrees(np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1])))  # positive climbing
     course = np.degrees(np.arctan2(v[:, 0], v[:, 1]))  # clockwise from North
@@ -295,11 +283,12 @@ def _velocity_direction(log: RunLog) -> Figure:
 
 # -- figures of the paper that need the target, gimbal, camera, estimator --------
 
-@figure("distance_to_target", needs=(STATE_TOPIC, TARGET_TOPIC), title="Distance from the UAV to the target")
+@figure("distance_to_target", needs=(topics.UAV_STATE, topics.TARGET_STATE),
+        title="Distance from the UAV to the target")
 def _distance_to_target(log: RunLog) -> Figure:
-    st, tg = log.table(STATE_TOPIC), log.table(TARGET_TOPIC)
+    st, tg = log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
     t = st["t_s"]
-    rel = st["pos_enu_m"] - _interp3(t, tg["t_s"], tg["pos_enu_m"])
+    rel = st["pos_enu_m"] - interp_at(t, tg["t_s"], tg["pos_enu_m"])
     fig, (a1, a2) = _figure(2)
     a1.plot(t, np.linalg.norm(rel, axis=1), label="range")
     a1.plot(t, np.hypot(rel[:, 0], rel[:, 1]), "--", label="horizontal")
@@ -311,9 +300,9 @@ def _distance_to_target(log: RunLog) -> Figure:
     return fig
 
 
-@figure("gimbal_angles", needs=(GIMBAL_TOPIC,), title="Gimbal pan and tilt angles")
+@figure("gimbal_angles", needs=(topics.GIMBAL_STATE,), title="Gimbal pan and tilt angles")
 def _gimbal_angles(log: RunLog) -> Figure:
-    g = log.table(GIMBAL_TOPIC)
+    g = log.table(topics.GIMBAL_STATE)
     t = g["t_s"]
     fig, (a1, a2) = _figure(2)
     a1.plot(t, np.degrees(g["pan_rad"]))
@@ -325,19 +314,19 @@ def _gimbal_angles(log: RunLog) -> Figure:
 
 
 def _principal_point(log: RunLog) -> tuple[float, float] | None:
-    if not log.topics.get(CALIBRATION_TOPIC):
+    if not log.topics.get(topics.CAMERA_CALIBRATION):
         return None
     from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
-    cal = CameraCalibration.FromString(log.raw(CALIBRATION_TOPIC)[0][1])
+    cal = CameraCalibration.FromString(log.raw(topics.CAMERA_CALIBRATION)[0][1])
     return float(cal.K[2]), float(cal.K[5])
 
 
-@figure("pixel_errors", needs=(DETECTION_TOPIC,), title="Target pixel error from the image centre")
+@figure("pixel_errors", needs=(topics.CAMERA_DETECTION,), title="Target pixel error from the image centre")
 def _pixel_errors(log: RunLog) -> Figure:
-    det = log.table(DETECTION_TOPIC)
+    det = log.table(topics.CAMERA_DETECTION)
     centre = _principal_point(log)
     if centre is None:
-        raise SkipFigure(f"no {CALIBRATION_TOPIC} (principal point) in this log")
+        raise SkipFigure(f"no {topics.CAMERA_CALIBRATION} (principal point) in this log")
     found = det["detected"].astype(bool) if "detected" in det else np.isfinite(det["u_px"])
     if not found.any():
         raise SkipFigure("the detector never found the target")
@@ -349,9 +338,9 @@ def _pixel_errors(log: RunLog) -> Figure:
     a1.set_ylabel("u - cx [px]")
     a2.plot(t, ev, ".", ms=2)
     a2.set_ylabel("v - cy [px]")
-    if log.topics.get(IBVS_TOPIC) and "pixel_err_px" in log.table(IBVS_TOPIC):
-        ib = log.table(IBVS_TOPIC)
-        a1.plot(ib["t_s"], ib["pixel_err_px"][:, 0], lw=1.0, label=f"{IBVS_TOPIC} pixel_err_px")
+    if log.topics.get(topics.FSW_IBVS) and "pixel_err_px" in log.table(topics.FSW_IBVS):
+        ib = log.table(topics.FSW_IBVS)
+        a1.plot(ib["t_s"], ib["pixel_err_px"][:, 0], lw=1.0, label=f"{topics.FSW_IBVS} pixel_err_px")
         a2.plot(ib["t_s"], ib["pixel_err_px"][:, 1], lw=1.0)
     a1.legend(fontsize=8)
     a2.set_xlabel("sim time [s]")
@@ -360,11 +349,11 @@ def _pixel_errors(log: RunLog) -> Figure:
     return fig
 
 
-@figure("target_estimate", needs=(ESTIMATE_TOPIC, TARGET_TOPIC), title="Target estimate vs truth, ±2σ")
+@figure("target_estimate", needs=(topics.FSW_ESTIMATE, topics.TARGET_STATE), title="Target estimate vs truth, ±2σ")
 def _target_estimate(log: RunLog) -> Figure:
-    est, tg = log.table(ESTIMATE_TOPIC), log.table(TARGET_TOPIC)
+    est, tg = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
     if "pos_enu_m" not in est:
-        raise SkipFigure(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+        raise SkipFigure(f"{topics.FSW_ESTIMATE} has no pos_enu_m")
     t = est["t_s"]
     fig, axes = _figure(2, 2, height=2.6)
     for col, (fld, std_fld, what, unit) in enumerate((("pos_enu_m", "pos_std_m", "position", "m"),
@@ -374,7 +363,7 @@ def _target_estimate(log: RunLog) -> Figure:
         std = est.get(std_fld)
         for row, axis in enumerate(("East", "North")):
             ax = axes[row, col]
-            ax.plot(t, np.interp(t, tg["t_s"], tg[fld][:, row]), "k--", lw=1.0, label="truth")
+            ax.plot(t, interp_at(t, tg["t_s"], tg[fld][:, row]), "k--", lw=1.0, label="truth")
             ax.plot(t, est[fld][:, row], lw=1.2, label="estimate")
             if std is not None:
                 lo, hi = est[fld][:, row] - 2 * std[:, row], est[fld][:, row] + 2 * std[:, row]
@@ -386,17 +375,17 @@ def _target_estimate(log: RunLog) -> Figure:
     return fig
 
 
-@figure("target_estimate_error", needs=(ESTIMATE_TOPIC, TARGET_TOPIC),
+@figure("target_estimate_error", needs=(topics.FSW_ESTIMATE, topics.TARGET_STATE),
         title="Target estimate error, horizontal (estimate - truth)")
 def _target_estimate_error(log: RunLog) -> Figure:
     """Horizontal (x, y) errors, as fwsim.metrics scores them: the filter estimates a point
     at its configured plane height, the truth is the waterline centre."""
-    est, tg = log.table(ESTIMATE_TOPIC), log.table(TARGET_TOPIC)
+    est, tg = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
     if "pos_enu_m" not in est:
-        raise SkipFigure(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+        raise SkipFigure(f"{topics.FSW_ESTIMATE} has no pos_enu_m")
     t = est["t_s"]
     fig, (a1, a2) = _figure(2)
-    err = (est["pos_enu_m"] - _interp3(t, tg["t_s"], tg["pos_enu_m"]))[:, :2]
+    err = (est["pos_enu_m"] - interp_at(t, tg["t_s"], tg["pos_enu_m"]))[:, :2]
     a1.plot(t, err[:, 0], label="x (East)")
     a1.plot(t, err[:, 1], label="y (North)")
     a1.plot(t, np.linalg.norm(err, axis=1), "k", lw=0.8, label="|horizontal error|")
@@ -405,7 +394,7 @@ def _target_estimate_error(log: RunLog) -> Figure:
     a1.set_ylabel("position error [m]")
     a1.legend(fontsize=8)
     if "vel_enu_m_s" in est:
-        verr = (est["vel_enu_m_s"] - _interp3(t, tg["t_s"], tg["vel_enu_m_s"]))[:, :2]
+        verr = (est["vel_enu_m_s"] - interp_at(t, tg["t_s"], tg["vel_enu_m_s"]))[:, :2]
         a2.plot(t, verr[:, 0], label="x (East)")
         a2.plot(t, verr[:, 1], label="y (North)")
         a2.legend(fontsize=8)

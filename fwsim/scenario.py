@@ -13,19 +13,12 @@ from __future__ import annotations
 
 import copy
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from controllers.bpng import BpngConfig
-from controllers.ibvs import IbvsConfig
-from controllers.mission import DetectionGateConfig, ReacquireConfig, SwitchConfig
-from controllers.nav import NavigationConfig
-from controllers.nmpc import NmpcConfig
-from controllers.search import AcquisitionConfig
-from controllers.target_model import ShipModelConfig
-from controllers.ukf import UkfConfig
+from controllers.config import Controllers
 from fwsim.camera import CameraConfig
 from fwsim.sensors import SensorsConfig
 from fwsim.target import TargetConfig
@@ -77,77 +70,6 @@ class Initial(_Strict):
         return self
 
 
-class RatesStep(_Strict):
-    airspeed_m_s: float = Field(gt=0, le=60)
-    roll_rate_deg_s: float = Field(0.0, ge=-200, le=200)
-    pitch_rate_deg_s: float = Field(0.0, ge=-200, le=200)
-
-
-class AccelStep(_Strict):
-    airspeed_m_s: float = Field(gt=0, le=60)
-    right_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, to the right")
-    up_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, upward")
-
-
-class ScriptStep(_Strict):
-    t_s: float = Field(ge=0, description="time from which this command holds")
-    rates: RatesStep | None = None
-    accel: AccelStep | None = None
-    gimbal_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
-        None, description="pan, tilt the gimbal is driven to from this step on (none: keep the last)")
-
-    @model_validator(mode="after")
-    def _one_mode(self):
-        if (self.rates is None) == (self.accel is None):
-            raise ValueError("give exactly one of 'rates' or 'accel'")
-        return self
-
-
-class InitialPath(_Strict):
-    airspeed_m_s: float = Field(22.0, gt=0, le=60)
-    waypoints_enu_m: list[Vec3] = Field(default_factory=list,
-                                        description="empty: hold the initial heading and altitude")
-    max_bank_deg: float = Field(35.0, gt=0, le=60)
-
-
-class Orbit(_Strict):
-    """Circle around the estimated target after lock (a stand-in until the NMPC loiter)."""
-
-    airspeed_m_s: float = Field(22.0, gt=0, le=60)
-    radius_m: float = Field(500.0, gt=20, le=5000, description="the paper's R")
-    altitude_m: float = Field(500.0, gt=20, le=5000, description="the paper's H")
-    clockwise: bool = Field(False, description="seen from above")
-
-
-class Controllers(_Strict):
-    kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
-    navigation: NavigationConfig = Field(default_factory=NavigationConfig)
-    script: list[ScriptStep] = Field(default_factory=list)
-    initial_path: InitialPath = Field(default_factory=InitialPath)
-    acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
-    after_lock: Literal["path", "orbit", "nmpc"] = Field(
-        "path", description="after the lock: keep the path, or loiter (Phase 2) with a circle follower or the NMPC")
-    orbit: Orbit = Field(default_factory=Orbit)
-    nmpc: NmpcConfig = Field(default_factory=NmpcConfig)
-    switch: SwitchConfig = Field(default_factory=lambda: SwitchConfig(enabled=False))
-    reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
-    bpng: BpngConfig = Field(default_factory=BpngConfig)
-    ukf: UkfConfig = Field(default_factory=UkfConfig)
-    target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
-    detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
-    ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
-
-    @model_validator(mode="after")
-    def _script(self):
-        if self.kind == "script":
-            if not self.script:
-                raise ValueError("kind 'script' needs a non-empty 'script' list")
-            times = [s.t_s for s in self.script]
-            if times != sorted(times):
-                raise ValueError("script steps must be in increasing t_s")
-        return self
-
-
 class Stop(_Strict):
     min_height_m: float = Field(0.0, ge=0, description="end the run below this height above the sea")
     max_airspeed_m_s: float = Field(80.0, gt=0, description="end the run (failed) above this airspeed")
@@ -169,6 +91,24 @@ class Scenario(_Strict):
     controllers: Controllers = Field(default_factory=Controllers)
 
     @model_validator(mode="after")
+    def _gimbal_limits_agree(self):
+        """The flight software's idea of the gimbal (controllers.ibvs) must not exceed the gimbal
+        (camera.gimbal): a law that plans with a wider range or faster rates than the joints have fails in
+        flight. Tighter limits (soft stops) are allowed."""
+        fsw, hw = self.controllers.ibvs, self.camera.gimbal
+        for name in ("pan_limits_rad", "tilt_limits_rad"):
+            a, b = getattr(fsw, name), getattr(hw, name)
+            if a[0] < b[0] - 1e-9 or a[1] > b[1] + 1e-9:
+                raise ValueError(f"controllers.ibvs.{name}: {_short(a)} reaches beyond the gimbal's "
+                                 f"camera.gimbal.{name} {_short(b)}")
+        for name in ("max_pan_rate_rad_s", "max_tilt_rate_rad_s"):
+            a, b = getattr(fsw, name), getattr(hw, name)
+            if a > b + 1e-9:
+                raise ValueError(f"controllers.ibvs.{name}: {a:g} is faster than the gimbal's "
+                                 f"camera.gimbal.{name} {b:g}")
+        return self
+
+    @model_validator(mode="after")
     def _camera_rates(self):
         for name, hz in (("camera.rate_hz", self.camera.rate_hz), ("camera.render.rate_hz",
                                                                    self.camera.render.rate_hz)):
@@ -177,6 +117,10 @@ class Scenario(_Strict):
                 if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
                     raise ValueError(f"{name} must divide rates.sim_hz evenly (sim_hz / rate = {ratio:g})")
         return self
+
+
+def _short(values) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
 class ScenarioError(ValueError):
@@ -193,7 +137,7 @@ def _format_errors(source: str, exc: ValidationError) -> str:
             got = f" (got {err['input']!r})"
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
-        lines.append(f"{source}: {loc or '<top>'}: {msg}{got}")
+        lines.append(f"{source}: {loc}: {msg}{got}" if loc else f"{source}: {msg}{got}")
     return "\n".join(lines)
 
 
@@ -224,8 +168,13 @@ def set_path(data: dict, path: str, value: Any) -> None:
         node[last] = value
 
 
-def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, Any] | None = None) -> Scenario:
-    """Validate scenario YAML text; raises ScenarioError with one line per problem."""
+def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, Any] | None = None,
+                   check_plugins: bool = True) -> Scenario:
+    """Validate scenario YAML text; raises ScenarioError with one line per problem.
+
+    A user's block class named in ``controllers`` (``controllers.blocks``) is imported and checked, from the
+    Python path, else the folder of ``source`` (when it is a file) or the current folder; ``check_plugins``
+    false skips that (a log's scenario read back for scoring, where the user's module may be missing)."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -239,8 +188,10 @@ def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, A
         data = copy.deepcopy(data)
         for path, value in overrides.items():
             set_path(data, path, value)
+    dirs = [Path(source).resolve().parent] if Path(source).is_file() else []
+    context = {"check_plugins": check_plugins, "search_dirs": dirs + [Path.cwd()]}
     try:
-        return Scenario.model_validate(data)
+        return Scenario.model_validate(data, context=context)
     except ValidationError as exc:
         raise ScenarioError(_format_errors(source, exc)) from None
 

@@ -4,10 +4,10 @@ import os
 
 import numpy as np
 import pytest
+from flight import Flight, flight_path_rad
 
 from fwsim.airframe import Airframe, AirframeError, aircraft_hash
 from fwsim.messages import ActuatorCommand, RateCommand
-from flight import Flight, flight_path_rad
 
 
 def test_loads_from_any_working_directory(tmp_path):

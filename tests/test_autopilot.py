@@ -3,11 +3,11 @@ import math
 
 import numpy as np
 import pytest
+from flight import Flight, flight_path_rad
 
 from controllers.script import perpendicular_axes
 from fwsim.autopilot import bank_from_specific_force, load_autopilot_params
 from fwsim.messages import AccelCommand, RateCommand
-from flight import Flight, flight_path_rad
 
 DEG = math.pi / 180.0
 

@@ -213,3 +213,46 @@ runs:
         assert row["status"] == "completed"
         assert_same_row(row, pool_rows[row["id"]], skip=("wall_time_s",))  # same overrides, same id
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["batch"]["executor"] == "ray (auto)"
+
+
+GENERATED = """
+name: gen
+runs:
+  - generator: fwsim.cases:terminal_case
+    args: {duration_s: 2}
+    cases:
+      - {theta_f_deg: -30, psi_f_deg: 30, ship_heading_deg: 0, ship_speed_m_s: 5}
+      - {theta_f_deg: -40, psi_f_deg: 90, ship_heading_deg: 90, ship_speed_m_s: 0}
+    seeds: [1, 2]
+"""
+
+
+def test_a_generated_scenario_entry_flies_each_case_and_resumes(tmp_path):
+    """A generator entry: one run per case and seed, the case's arguments as columns, ids stable and
+    distinct, and --resume keeps the finished runs (the generated text is what the log stores)."""
+    spec = write_spec(tmp_path, GENERATED)
+    name, jobs = load_spec(spec, tmp_path / "out")
+    assert name == "gen" and len(jobs) == 4 and len({j.id for j in jobs}) == 4
+    assert [j.case["theta_f_deg"] for j in jobs] == [-30, -30, -40, -40] and [j.seed for j in jobs] == [1, 2, 1, 2]
+    assert load_spec(spec, tmp_path / "out")[1] == jobs
+    res = run_batch(spec, tmp_path / "out", workers=2)
+    assert [r["status"] for r in res.rows] == ["completed"] * 4, [r["reason"] for r in res.rows]
+    assert [r["case.psi_f_deg"] for r in res.rows] == [30, 30, 90, 90]
+    header = next(csv.reader(open(tmp_path / "out" / "summary.csv")))
+    assert "case.theta_f_deg" in header and header.index("case.theta_f_deg") < header.index("flight_time_s")
+    again = run_batch(spec, tmp_path / "out", workers=2, resume=True)
+    assert again.resumed == 4 and all(r["resumed"] for r in again.rows)
+
+
+@pytest.mark.parametrize("body, message", [
+    ("runs: [{generator: fwsim.cases:no_such}]", "has no function 'no_such'"),
+    ("runs: [{generator: no_module_x:f}]", "cannot import 'no_module_x'"),
+    ("runs: [{generator: fwsim.cases:terminal_case, cases: [{theta_f_deg: -30}]}]", "TypeError"),
+    ("runs: [{scenario: SC, cases: [{a: 1}]}]", "'cases' and 'args' go with a 'generator'"),
+    ("runs: [{scenario: SC, generator: fwsim.cases:terminal_case}]", "a 'scenario:' file or a 'generator:'"),
+])
+def test_generator_errors_are_one_line(tmp_path, body, message):
+    spec = write_spec(tmp_path, body.replace("SC", str(SCENARIO_DIR / "autopilot_checkout.yaml")))
+    with pytest.raises(BatchSpecError) as exc:
+        load_spec(spec, tmp_path / "out")
+    assert message in str(exc.value) and "\n" not in str(exc.value), str(exc.value)

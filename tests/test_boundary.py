@@ -7,13 +7,16 @@ import numpy as np
 import pytest
 
 import controllers
+from controllers.config import SwitchConfig
+from controllers.messages import TargetState
 from controllers.mission import FlightSoftware
+from controllers.phases import PhaseState, Ring, next_phase
 from fwsim.messages import Measurements, RateCommand
 from fwsim.scenario import parse_scenario
 
 TRUTH_MODULES = {"jsbsim", "fwsim.airframe", "fwsim.autopilot", "fwsim.loop", "fwsim.sensors", "fwsim.target",
                  "fwsim.camera", "fwsim.gimbal", "fwsim.world", "fwsim.log", "fwsim.metrics", "fwsim.cli"}
-ALLOWED_FWSIM = {"fwsim.messages", "fwsim.frames", "fwsim.scenario", "fwsim"}
+ALLOWED_FWSIM = {"fwsim.messages", "fwsim.frames", "fwsim.topics", "fwsim"}
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -79,9 +82,11 @@ camera: {gimbal: {initial_tilt_rad: 0.5}}
                             det_bbox_px=np.array([600.0, 340.0, 680.0, 380.0]))
     out = fsw.step(meas(0.0, 0.5))  # tilted 29 deg up: the ray through the image centre never meets the sea
     assert any("not initialised" in e for e in out.events), out.events
-    assert not fsw._ukf.initialised
+    assert not fsw.estimation.filter.initialised
+    assert [m.reason for topic, m in out.logs if topic == "/fsw/detection_fusion"] == ["not_initialised"]
     out = fsw.step(meas(1 / 30, -0.8))  # looking down: the next detection starts it
-    assert fsw._ukf.initialised and any("re-initialised" in e for e in out.events), out.events
+    assert fsw.estimation.filter.initialised and any("re-initialised" in e for e in out.events), out.events
+    assert [m.reason for topic, m in out.logs if topic == "/fsw/detection_fusion"] == ["initialised"]
 
 
 def test_the_switch_dwell_runs_alongside_the_minimum_loiter():
@@ -89,23 +94,34 @@ def test_the_switch_dwell_runs_alongside_the_minimum_loiter():
     run side by side, so a UAV on the ring from the start may switch at min_loiter_s (the approach window
     is often only a few seconds wide, and counting the dwell only after the minimum loiter used to miss it);
     leaving the tolerance restarts the dwell."""
-    s = parse_scenario("""
-name: b
-duration_s: 10
-initial: {pos_enu_m: [0, -500, 500], airspeed_m_s: 22, heading_deg: 90}
-controllers: {switch: {dwell_s: 5, min_loiter_s: 5, approach_window_deg: null}}
-""")
-    fsw = FlightSoftware(s.controllers, s.initial, s.camera)
-    fsw._target = lambda t_s: (np.zeros(3), np.zeros(3))
-    fsw._phase2_t = 0.0
+    sw = SwitchConfig(dwell_s=5, min_loiter_s=5, approach_window_deg=None)
+    ship = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
+    ring = Ring(500.0, 500.0)
 
-    def meas(t, radius=500.0):
-        return Measurements(t, np.array([0.0, -radius, 500.0]), np.array([22.0, 0.0, 0.0]), np.zeros(3),
-                            np.zeros(3), 22.0, 500.0)
-    times = np.round(np.arange(0.0, 10.0, 0.1), 6)
-    first = next(t for t in times if fsw._switch_reason(meas(t)))
-    assert first == pytest.approx(5.0)
-    fsw._phase2_t, fsw._in_tol_since = 0.0, math.nan
+    def first_switch(off_ring_at=None):
+        state = PhaseState()  # locked at t = 0 (Phase 1 -> 2 at once)
+        for t in np.round(np.arange(0.0, 10.0, 0.1), 6):
+            radius = 600.0 if t == off_ring_at else 500.0
+            state, events = next_phase(state, t, np.array([0.0, -radius, 500.0]), np.array([22.0, 0.0, 0.0]), 500.0,
+                                       ship, True, ring, sw, 30.0)
+            if state.phase == 3:
+                assert any(e.startswith("phase 2 -> 3") for e in events)
+                return t
+    assert first_switch() == pytest.approx(5.0)
     off_ring_at = 3.0
-    first = next(t for t in times if fsw._switch_reason(meas(t, 600.0 if t == off_ring_at else 500.0)))
-    assert first == pytest.approx(off_ring_at + 0.1 + 5.0)
+    assert first_switch(off_ring_at) == pytest.approx(off_ring_at + 0.1 + 5.0)
+
+
+def test_the_phase_decision_is_a_pure_function_of_its_inputs():
+    """The same state and inputs give the same answer, the input state is left as it was; Phase 2 needs a lock,
+    a ring and a target estimate; without a ring (after_lock: path) the mission stays in Phase 1."""
+    ship = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
+    unknown = TargetState(0.0, "none", np.full(3, np.nan), np.full(3, np.nan), math.nan, 0.0)
+    args = (np.array([0.0, -500.0, 500.0]), np.array([22.0, 0.0, 0.0]), 500.0)
+    s0 = PhaseState()
+    a = next_phase(s0, 1.0, *args, ship, True, Ring(500.0, 500.0), SwitchConfig(), 30.0, "nmpc")
+    assert a == next_phase(s0, 1.0, *args, ship, True, Ring(500.0, 500.0), SwitchConfig(), 30.0, "nmpc")
+    assert s0 == PhaseState() and a[0].phase == 2 and a[0].phase2_t_s == 1.0 and "loiter (nmpc)" in a[1][0]
+    assert next_phase(s0, 1.0, *args, ship, False, Ring(500.0, 500.0), SwitchConfig(), 30.0)[0].phase == 1
+    assert next_phase(s0, 1.0, *args, unknown, True, Ring(500.0, 500.0), SwitchConfig(), 30.0)[0].phase == 1
+    assert next_phase(s0, 1.0, *args, ship, True, None, SwitchConfig(), 30.0) == (s0, ())

@@ -4,6 +4,7 @@ import math
 import cv2
 import numpy as np
 import pytest
+from flight import Flight
 
 from fwsim.camera import Camera, CameraConfig, Detector, DetectorConfig, FrameGeometry, Pose
 from fwsim.frames import dcm_enu_from_frd
@@ -11,7 +12,6 @@ from fwsim.geometry import uav_mesh
 from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
 from fwsim.messages import RateCommand
 from fwsim.target import Ship, TargetConfig
-from flight import Flight
 
 MOUNT = np.array([0.0, 0.0, 0.10])
 SHIP = Ship(TargetConfig())

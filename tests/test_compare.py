@@ -5,15 +5,23 @@ import math
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import yaml
 
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
 from fwsim.compare import (
-    REFRESH_MARKER, CompareError, Tolerance, check_baseline, check_metric, compare_files, compare_metrics,
-    load_baseline, load_metrics, parse_tolerances, write_baseline_metrics,
+    REFRESH_MARKER,
+    CompareError,
+    Tolerance,
+    check_baseline,
+    check_metric,
+    compare_files,
+    compare_metrics,
+    load_baseline,
+    load_metrics,
+    parse_tolerances,
+    write_baseline_metrics,
 )
 from fwsim.loop import run
 from fwsim.scenario import load_scenario

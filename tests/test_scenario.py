@@ -118,3 +118,23 @@ def test_a_terminal_case_in_wind_starts_on_the_steady_orbit():
         radial = -np.array(d["initial"]["pos_enu_m"][:2]) / np.linalg.norm(d["initial"]["pos_enu_m"][:2])
         assert abs(rel @ radial) < 1e-6 * np.linalg.norm(rel)
         assert rel[0] * radial[1] - rel[1] * radial[0] < 0  # the ship on the right: clockwise round it
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ({"controllers.ibvs.pan_limits_rad": [-4.0, 3.0]},
+     "controllers.ibvs.pan_limits_rad: [-4, 3] reaches beyond the gimbal's camera.gimbal.pan_limits_rad"),
+    ({"camera.gimbal.tilt_limits_rad": [-1.0, 1.0]},
+     "controllers.ibvs.tilt_limits_rad: [-1.571, 1.571] reaches beyond the gimbal's camera.gimbal.tilt_limits_rad"),
+    ({"camera.gimbal.max_pan_rate_rad_s": 1.0},
+     "controllers.ibvs.max_pan_rate_rad_s: 2.0944 is faster than the gimbal's camera.gimbal.max_pan_rate_rad_s 1"),
+])
+def test_the_flight_softwares_gimbal_limits_must_lie_within_the_gimbals(overrides, message):
+    """The IBVS law's joint and rate limits (the flight software's idea of the gimbal) against the gimbal's own:
+    wider or faster is a one-line error; tighter (soft stops) is allowed."""
+    text = "name: g\nduration_s: 5\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n"
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "g.yaml", overrides)
+    assert str(exc.value).startswith("g.yaml: " + message) and "\n" not in str(exc.value), str(exc.value)
+    s = parse_scenario(text, "g.yaml", {"controllers.ibvs.tilt_limits_rad": [-1.2, 0.5],
+                                        "controllers.ibvs.max_pan_rate_rad_s": 1.0})
+    assert s.controllers.ibvs.tilt_limits_rad == [-1.2, 0.5]

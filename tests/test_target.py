@@ -273,6 +273,7 @@ def test_mesh_world_moves_with_the_ship():
 
 def test_hull_volume_agrees_with_trimesh_point_in_mesh():
     import numpy as np
+
     from fwsim.target import HullVolume, TargetConfig, ship_mesh_parts
     cfg = TargetConfig()
     hull = HullVolume(cfg)

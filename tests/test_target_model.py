@@ -6,16 +6,25 @@ import numpy as np
 import pytest
 
 from controllers.camera_model import PinholeCamera
-from controllers.mission import FlightSoftware
-from controllers.target_model import (ShapeHeading, ShapeHeadingConfig, ShipModelConfig, ShipOutline,
-                                      box_centre_offset_px, predicted_box_px, predicted_boxes_px)
+from controllers.config import AcquisitionConfig, DetectionGateConfig
+from controllers.messages import FusionReason, TargetState
+from controllers.perception import Perception
+from controllers.target_model import (
+    ShapeHeading,
+    ShapeHeadingConfig,
+    ShipModel,
+    ShipModelConfig,
+    ShipOutline,
+    box_centre_offset_px,
+    predicted_box_px,
+    predicted_boxes_px,
+)
 from controllers.ukf import UkfConfig, UnscentedCore
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import dcm_enu_from_frd
 from fwsim.geometry import uav_mesh
 from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
 from fwsim.messages import Measurements
-from fwsim.scenario import parse_scenario
 from fwsim.target import Ship, TargetConfig
 
 CAM_CFG = CameraConfig(hfov_deg=60.0)
@@ -261,45 +270,41 @@ def test_shape_heading_skips_border_boxes_and_keeps_its_rate():
     assert not sh.ready and sh.headings() is None  # min_updates not reached
 
 
-def _fresh_fsw() -> FlightSoftware:
-    s = parse_scenario("name: s\nduration_s: 10\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n")
-    return FlightSoftware(s.controllers, s.initial, s.camera)
-
-
-def _fsw_with_shape(ship_heading_deg: float, elevations_deg=(45.0,)) -> FlightSoftware:
-    fsw = _fresh_fsw()
+def _ship_with_shape(ship_heading_deg: float, elevations_deg=(45.0,), cfg: ShipModelConfig | None = None
+                     ) -> ShipModel:
+    """The flight software's ship model after seeing the ship from round loiter rings."""
+    ship = ShipModel(cfg or ShipModelConfig(), PinholeCamera.from_config(CAM_CFG))
     k = 0
     for el in elevations_deg:
         for cp, Rc, box in ring_views(ship_heading_deg, range(0, 360, 10), elevation_deg=el):
-            fsw._shape.update(float(k), cp, Rc, np.zeros(3), box)
+            ship.shape.update(float(k), cp, Rc, np.zeros(3), box)
             k += 1
-    return fsw
+    return ship
 
 
 def test_a_velocity_off_the_ship_axis_gives_no_course():
     """A ship moves along its axis: the flight software takes an estimated velocity across it for the
     estimate's error (a still ship's UKF can pick up a metre or two per second) and keeps the shape's heading."""
-    fsw = _fsw_with_shape(30.0)  # bow 30 deg clockwise from North: course 60 deg counter-clockwise from East
+    ship = _ship_with_shape(30.0)  # bow 30 deg clockwise from North: course 60 deg counter-clockwise from East
     along = 3.0 * np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
-    assert math.isclose(fsw._course(along), math.radians(60.0))
-    assert math.isclose(fsw._course(-along), math.radians(-120.0))  # astern is on the axis too
+    assert math.isclose(ship.course(along), math.radians(60.0))
+    assert math.isclose(ship.course(-along), math.radians(-120.0))  # astern is on the axis too
     across = 3.0 * np.array([math.cos(math.radians(150.0)), math.sin(math.radians(150.0)), 0.0])
-    assert fsw._course(across) is None
-    courses, weights = fsw._headings(np.zeros(3))
+    assert ship.course(across) is None
+    courses, weights = ship.headings(np.zeros(3))
     best = math.degrees(float(courses[int(np.argmax(weights))]))
     assert _deg_off(best, 60.0) <= 5.0
-    fresh = _fresh_fsw()
-    assert fresh._course(across) is not None  # before the shapes tell the axis, any direction is taken
-    assert len(fresh._headings(np.zeros(3))[0]) == fresh.cfg.target_model.headings_when_unknown
+    fresh = ShipModel(ShipModelConfig(), PinholeCamera.from_config(CAM_CFG))
+    assert fresh.course(across) is not None  # before the shapes tell the axis, any direction is taken
+    assert len(fresh.headings(np.zeros(3))[0]) == fresh.cfg.headings_when_unknown
 
 
-class _StillEstimate:
-    """Stands in for the UKF: the ship's point estimated exactly, no velocity."""
-
-    def __init__(self, h: float):
-        self.pos_enu_m = np.array([0.0, 0.0, h])
-        self.vel_enu_m_s = np.zeros(3)
-        self.pos_vel_cov = np.eye(6) * 0.01
+def _perception(ship: ShipModel) -> Perception:
+    """The perception with that ship model, locked (its gates and correction at work)."""
+    p = Perception(DetectionGateConfig(), AcquisitionConfig(lock_detections=1), ship,
+                   PinholeCamera.from_config(CAM_CFG))
+    p.lock.locked = True
+    return p
 
 
 def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one_corrected():
@@ -309,12 +314,12 @@ def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one
     import dataclasses
 
     from controllers.ukf import CameraMotion
-    fsw = _fsw_with_shape(0.0, (30.0, 45.0, 60.0))
-    blind = _fresh_fsw()
-    fsw._ukf = blind._ukf = _StillEstimate(fsw.cfg.ukf.target_plane_height_m)
+    shaped = _perception(_ship_with_shape(0.0, (30.0, 45.0, 60.0)))  # (boxes at t = 0 add nothing to it)
+    blind = _perception(ShipModel(ShipModelConfig(), PinholeCamera.from_config(CAM_CFG)))
+    h = UkfConfig().target_plane_height_m
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)  # the truth, no velocity
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
-    h = fsw.cfg.ukf.target_plane_height_m
     errs = []  # (shape, all headings, true heading), px
     for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=30.0, rng_m=400.0):
         motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
@@ -324,17 +329,18 @@ def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one
         p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
         truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
         row = []
-        for f in (fsw, blind):
-            used, why = f._debiased(meas, motion)
-            assert why == ""
-            row.append(float(np.hypot(used.det_u_px - truth[0], used.det_v_px - truth[1])))
+        for f in (shaped, blind):
+            fix = f.step(meas, motion, prior)
+            assert fix.use and fix.reason == "" and fix.overridden == ""
+            row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
         off = box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), math.radians(90.0), h)
         row.append(float(np.hypot(meas.det_u_px - off[0] - truth[0], meas.det_v_px - off[1] - truth[1])))
         errs.append(row)
         cut = box.copy()
         cut[2] = cut[0] + 0.5 * (box[2] - box[0])  # the right half hidden
-        assert fsw._debiased(dataclasses.replace(meas, det_bbox_px=cut), motion)[1] == "box width off the model's"
-        assert blind._debiased(dataclasses.replace(meas, det_bbox_px=cut), motion)[1] == ""  # nothing to compare
+        fix = shaped.step(dataclasses.replace(meas, det_bbox_px=cut), motion, prior)
+        assert not fix.use and fix.reason == FusionReason.SIZE_MISMATCH
+        assert blind.step(dataclasses.replace(meas, det_bbox_px=cut), motion, prior).use  # nothing to compare
     shape, every, true = np.mean(np.array(errs), axis=0)
     assert shape < true + 0.5, errs
     assert every > 3.0 * shape, errs
@@ -344,20 +350,17 @@ def test_a_known_course_and_the_shapes_sharpen_each_other():
     """A moving ship: the shapes' heading posterior times the course's likelihood. An uncertain course
     (velocity std 0.9 m/s at 5 m/s) 15 deg off the shapes' heading gives way to them; a sure one (std 0.05 m/s,
     floored at fuse_min_course_std_deg) pulls the result toward itself."""
-    fsw = _fsw_with_shape(30.0)  # course 60 deg counter-clockwise from East
+    ship = _ship_with_shape(30.0)  # course 60 deg counter-clockwise from East
     off = math.radians(75.0)
     vel = 5.0 * np.array([math.cos(off), math.sin(off), 0.0])
-    courses, weights = fsw._headings(vel, 0.9)
+    courses, weights = ship.headings(vel, 0.9)
     unsure = math.degrees(float(np.angle(np.sum(weights * np.exp(1j * courses)))))
     assert abs(unsure - 60.0) < 5.0, unsure
-    courses, weights = fsw._headings(vel, 0.05)
+    courses, weights = ship.headings(vel, 0.05)
     sure = math.degrees(float(np.angle(np.sum(weights * np.exp(1j * courses)))))
     assert unsure + 2.0 < sure <= 75.0, (unsure, sure)
-    plain = _fsw_with_shape(30.0)
-    plain.cfg = plain.cfg.model_copy(update={"target_model": plain.cfg.target_model.model_copy(
-        update={"heading_from_shape": plain.cfg.target_model.heading_from_shape.model_copy(
-            update={"fuse_with_course": False})})})
-    courses, weights = plain._headings(vel, 0.9)
+    plain = _ship_with_shape(30.0, cfg=ShipModelConfig(heading_from_shape=ShapeHeadingConfig(fuse_with_course=False)))
+    courses, weights = plain.headings(vel, 0.9)
     assert len(courses) == 1 and math.isclose(float(courses[0]), off)
 
 

@@ -15,9 +15,9 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from pydantic import ValidationError
 
+from controllers.blocks import TargetEstimator, resolve_class
 from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
-from controllers.ukf import (CameraMotion, TargetEstimate, TargetEstimator, UkfConfig, UkfTargetEstimator,
-                             UnscentedCore)
+from controllers.ukf import CameraMotion, TargetEstimate, UkfConfig, UkfTargetEstimator, UnscentedCore
 from fwsim import frames as F
 from fwsim.messages import Measurements
 
@@ -272,8 +272,9 @@ def settle_time(t, err, bar):
 def test_ukf_tracks_a_constant_velocity_ship_from_an_orbit_and_survives_a_dropout():
     ukf, r = run_orbit()
     t, pe, ve = r[:, 0], r[:, 1], r[:, 2]
-    assert isinstance(ukf, TargetEstimator)
-    before, gap, after = t < 45.0, (t >= 45.0) & (t < 48.0), t >= 48.0
+    assert isinstance(ukf, TargetEstimator)  # the estimator Protocol a user's filter implements too
+    assert resolve_class("controllers.ukf:UkfTargetEstimator", "estimator") is UkfTargetEstimator
+    before, gap = t < 45.0, (t >= 45.0) & (t < 48.0)
     # converged within 60 s: position < 8 m (the paper's bar), velocity < 1 m/s, and it stays there
     assert settle_time(t[before], pe[before], 8.0) < 60.0
     assert settle_time(t[before], ve[before], 1.0) < 60.0

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 
+from fwsim import topics
 from fwsim.log import read_log
 
 
@@ -18,7 +19,7 @@ def main(argv=None) -> int:
     ap.add_argument("log")
     ap.add_argument("--t", type=float, required=True, help="sim time, s")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--topic", default="/camera/image")
+    ap.add_argument("--topic", default=topics.CAMERA_IMAGE)
     args = ap.parse_args(argv)
     log = read_log(args.log)
     if args.topic not in log.topics:

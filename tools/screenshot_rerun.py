@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fwsim import topics
+
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
@@ -49,9 +51,9 @@ def _free_port() -> int:
 def _eye(log, t: float) -> tuple[list[float], list[float]] | None:
     """(eye position, look target) in ENU for the 3D view: the UAV and the ship at t, seen from the side."""
     tu, pu, _ = log.poses()
-    if not len(tu) or not log.topics.get("/target/state"):
+    if not len(tu) or not log.topics.get(topics.TARGET_STATE):
         return None
-    ship = log.table("/target/state")
+    ship = log.table(topics.TARGET_STATE)
     u = np.array([np.interp(t, tu, pu[:, k]) for k in range(3)])
     s = np.array([np.interp(t, ship["t_s"], ship["pos_enu_m"][:, k]) for k in range(3)])
     d = u - s

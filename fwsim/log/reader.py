@@ -18,7 +18,8 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Metadata, Schema
 from mcap.writer import MCAP0_MAGIC
 
-from fwsim.log.writer import EVENTS_TOPIC, POSE_TOPIC, SCENARIO_ATTACHMENT, STATUS_METADATA_NAME
+from fwsim import topics
+from fwsim.log.writer import SCENARIO_ATTACHMENT, STATUS_METADATA_NAME
 
 _LEVEL_NAMES = {value: name for name, value in Log.Level.items()}
 _MISSING = object()
@@ -127,10 +128,10 @@ class RunLog:
     # -- Foxglove topics --------------------------------------------------
     def events(self) -> list[tuple[float, str, str]]:
         """(t_s, level name, text) of every /events entry."""
-        if EVENTS_TOPIC not in self.topics:
+        if topics.EVENTS not in self.topics:
             return []
         out = []
-        for _, data, _ in self._messages[EVENTS_TOPIC]:
+        for _, data, _ in self._messages[topics.EVENTS]:
             m = Log.FromString(data)
             t_s = m.timestamp.seconds + m.timestamp.nanos * 1e-9
             out.append((t_s, _LEVEL_NAMES.get(m.level, str(m.level)), m.message))
@@ -138,7 +139,7 @@ class RunLog:
 
     def poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(t_s (n,), pos_enu_m (n, 3), quat_wxyz (n, 4)) from /uav/pose."""
-        msgs = self._messages.get(POSE_TOPIC, []) if POSE_TOPIC in self.topics else []
+        msgs = self._messages.get(topics.UAV_POSE, []) if topics.UAV_POSE in self.topics else []
         n = len(msgs)
         t = np.empty(n)
         pos = np.empty((n, 3))

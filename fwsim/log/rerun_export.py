@@ -36,22 +36,11 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from fwsim import topics
 from fwsim.log.reader import RunLog, read_log
+from fwsim.log.truth import truth_at
 
 TIMELINE = "sim_time"
-STATE_TOPIC = "/uav/state"
-POSE_TOPIC = "/uav/pose"
-AUTOPILOT_TOPIC = "/autopilot/status"
-FSW_TOPIC = "/fsw/status"
-TARGET_TOPIC = "/target/state"
-GIMBAL_TOPIC = "/gimbal/state"
-TF_TOPIC = "/tf"
-CALIBRATION_TOPIC = "/camera/calibration"
-IMAGE_TOPIC = "/camera/image"
-DETECTION_TOPIC = "/camera/detection"
-CAMERA_FRAME_TOPIC = "/camera/frame"
-EVENTS_TOPIC = "/events"
-ESTIMATE_TOPIC = "/fsw/estimate"
 
 #: The paper's UAV (fuselage 1 m, span 2.4 m) and ship (55 x 25 x 25 m).
 UAV_LENGTH_M, UAV_SPAN_M = 1.0, 2.4
@@ -223,11 +212,11 @@ def detection_box(rec: rr.RecordingStream, found: bool, box: np.ndarray, scale: 
 
 def _tf(log: RunLog, child: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(t_s, translation (n, 3), quaternion xyzw (n, 4)) of one child frame on /tf."""
-    if not log.topics.get(TF_TOPIC):
+    if not log.topics.get(topics.TF):
         return None
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     t, pos, quat = [], [], []
-    for _, data in log.raw(TF_TOPIC):
+    for _, data in log.raw(topics.TF):
         m = FrameTransform.FromString(data)
         if m.child_frame_id != child:
             continue
@@ -241,9 +230,9 @@ def _tf(log: RunLog, child: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | 
 
 def _phase_strips(log: RunLog, t: np.ndarray, pos: np.ndarray) -> tuple[list[np.ndarray], list, list[str]]:
     """The path cut into one strip per stretch of constant phase."""
-    if not log.topics.get(FSW_TOPIC) or "phase" not in log.table(FSW_TOPIC):
+    if not log.topics.get(topics.FSW_STATUS) or "phase" not in log.table(topics.FSW_STATUS):
         return [pos], [PHASE_COLOURS[1]], ["path"]
-    fsw = log.table(FSW_TOPIC)
+    fsw = log.table(topics.FSW_STATUS)
     phase = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
     names = {int(p): str(n) for p, n in zip(phase, fsw.get("phase_name", phase))}
     i = np.clip(np.searchsorted(fsw["t_s"], t + 1e-9, side="right") - 1, 0, len(phase) - 1)
@@ -259,7 +248,7 @@ def _phase_strips(log: RunLog, t: np.ndarray, pos: np.ndarray) -> tuple[list[np.
 
 # -- layers -------------------------------------------------------------------
 
-@layer("uav", needs=(POSE_TOPIC,))
+@layer("uav", needs=(topics.UAV_POSE,))
 def _uav(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     t, pos, q_wxyz = log.poses()  # q_enu_from_frd: body FRD into world ENU
     quat = q_wxyz[:, [1, 2, 3, 0]]  # Rerun wants x, y, z, w
@@ -271,9 +260,9 @@ def _uav(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     return VIEWS["uav"]()
 
 
-@layer("target", needs=(TARGET_TOPIC,))
+@layer("target", needs=(topics.TARGET_STATE,))
 def _target(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    tg = log.table(TARGET_TOPIC)
+    tg = log.table(topics.TARGET_STATE)
     pos = tg["pos_enu_m"]
     log_path(rec, TARGET_PATH_ENTITY, [pos], [TARGET_COLOUR])
     tf = _tf(log, "ship")
@@ -298,22 +287,22 @@ def _ship_size(log: RunLog) -> tuple[float, float, float]:
         return SHIP_SIZE_M
 
 
-@layer("camera", needs=(TF_TOPIC, CALIBRATION_TOPIC))
+@layer("camera", needs=(topics.TF, topics.CAMERA_CALIBRATION))
 def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
     tf = _tf(log, "camera")
     if tf is None:
         raise SkipLayer("no 'camera' frame on /tf")
     t, p, q = tf
-    cal = CameraCalibration.FromString(log.raw(CALIBRATION_TOPIC)[0][1])
+    cal = CameraCalibration.FromString(log.raw(topics.CAMERA_CALIBRATION)[0][1])
     K = np.array(cal.K, dtype=float).reshape(3, 3)
     rec.send_columns(CAMERA_ENTITY, indexes=_time(t), columns=rr.Transform3D.columns(translation=p, quaternion=q))
     log_pinhole(rec, K, cal.width, cal.height, opt.frustum_m)
     scale = 1.0
-    if log.topics.get(IMAGE_TOPIC):
+    if log.topics.get(topics.CAMERA_IMAGE):
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
         times, blobs = [], []
-        for _, data in log.raw(IMAGE_TOPIC):
+        for _, data in log.raw(topics.CAMERA_IMAGE):
             m = CompressedImage.FromString(data)
             times.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
             blobs.append(bytes(m.data))
@@ -323,14 +312,14 @@ def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
             rec.set_time(TIMELINE, duration=ti)
             rec.log(IMAGE_ENTITY, rr.EncodedImage(contents=blob, media_type="image/jpeg"))
         rec.reset_time()
-    if log.topics.get(DETECTION_TOPIC):
-        det = log.table(DETECTION_TOPIC)
+    if log.topics.get(topics.CAMERA_DETECTION):
+        det = log.table(topics.CAMERA_DETECTION)
         found = det["detected"].astype(bool) if "detected" in det else np.isfinite(det["u_px"])
         for ti, ok, box in zip(det["t_s"], found, det["bbox_px"]):
             rec.set_time(TIMELINE, duration=float(ti))
             detection_box(rec, bool(ok), box, scale)
         rec.reset_time()
-    if log.topics.get(IMAGE_TOPIC) or log.topics.get(DETECTION_TOPIC):
+    if log.topics.get(topics.CAMERA_IMAGE) or log.topics.get(topics.CAMERA_DETECTION):
         return VIEWS["camera"]()
     return []
 
@@ -345,67 +334,105 @@ def jpeg_width(blob: bytes) -> int | None:
         return None
 
 
-@layer("estimate", needs=(ESTIMATE_TOPIC,))
+@dataclass(frozen=True)
+class Signal:
+    """One plotted time series and where it comes from, for the replay and the live view alike.
+
+    The value is ``field`` of each ``topic`` message (its column ``index`` for a vector), in degrees when
+    ``degrees``; with ``minus_truth``, the distance from that field of the truth (``/target/state``)
+    interpolated to the message's time (:mod:`fwsim.log.truth`)."""
+
+    series: Series
+    layer: str
+    topic: str
+    field: str
+    index: int | None = None
+    degrees: bool = False
+    minus_truth: str | None = None
+
+    def column(self, table: dict) -> np.ndarray:
+        """The values from a topic's table (replay)."""
+        v = np.asarray(table[self.field], dtype=float)
+        v = v[:, self.index] if self.index is not None else v
+        return np.degrees(v) if self.degrees else v
+
+    def value(self, msg):
+        """The value of one message (live view); a vector when ``minus_truth`` (the distance comes later)."""
+        v = getattr(msg, self.field)
+        if self.minus_truth is not None:
+            return np.asarray(v, dtype=float)
+        v = float(v[self.index]) if self.index is not None else float(v)
+        return float(np.degrees(v)) if self.degrees else v
+
+
+#: Every plotted time series: the replay's layers and the live view are both made from this table.
+SIGNALS: tuple[Signal, ...] = (
+    Signal(ESTIMATE_ERROR, "estimate", topics.FSW_ESTIMATE, "pos_enu_m", minus_truth="pos_enu_m"),
+    Signal(AIRSPEED, "flight_plots", topics.UAV_STATE, "airspeed_m_s"),
+    Signal(HEIGHT, "flight_plots", topics.UAV_STATE, "height_above_sea_m"),
+    Signal(ROLL, "flight_plots", topics.UAV_STATE, "euler_ned_rad", 0, degrees=True),
+    Signal(PITCH, "flight_plots", topics.UAV_STATE, "euler_ned_rad", 1, degrees=True),
+    Signal(AIRSPEED_SP, "inner_loops", topics.AUTOPILOT_STATUS, "airspeed_sp_m_s"),
+    Signal(P_ACTUAL, "inner_loops", topics.AUTOPILOT_STATUS, "body_rates_frd_rad_s", 0, degrees=True),
+    Signal(P_SP, "inner_loops", topics.AUTOPILOT_STATUS, "body_rates_sp_frd_rad_s", 0, degrees=True),
+    Signal(Q_ACTUAL, "inner_loops", topics.AUTOPILOT_STATUS, "body_rates_frd_rad_s", 1, degrees=True),
+    Signal(Q_SP, "inner_loops", topics.AUTOPILOT_STATUS, "body_rates_sp_frd_rad_s", 1, degrees=True),
+    Signal(DISTANCE, "target_plots", topics.UAV_STATE, "pos_enu_m", minus_truth="pos_enu_m"),
+    Signal(PAN, "gimbal_plots", topics.GIMBAL_STATE, "pan_rad", degrees=True),
+    Signal(TILT, "gimbal_plots", topics.GIMBAL_STATE, "tilt_rad", degrees=True),
+)
+
+
+def signal_needs(layer_name: str) -> tuple[str, ...]:
+    """The topics a layer's signals read (the truth's too when one is relative to it)."""
+    out = []
+    for sig in SIGNALS:
+        if sig.layer == layer_name:
+            out += [sig.topic] + ([topics.TARGET_STATE] if sig.minus_truth else [])
+    return tuple(dict.fromkeys(out))
+
+
+def _plot_signals(log: RunLog, rec: rr.RecordingStream, layer_name: str) -> None:
+    for sig in SIGNALS:
+        if sig.layer != layer_name or (sig.minus_truth and not log.topics.get(topics.TARGET_STATE)):
+            continue
+        table = log.table(sig.topic)
+        t = table["t_s"]
+        v = sig.column(table)
+        if sig.minus_truth:
+            v = np.linalg.norm(v - truth_at(log, t, sig.minus_truth), axis=1)
+        _scalars(rec, sig.series, t, v)
+
+
+@layer("estimate", needs=(topics.FSW_ESTIMATE,))
 def _estimate(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    est = log.table(ESTIMATE_TOPIC)
+    est = log.table(topics.FSW_ESTIMATE)
     if "pos_enu_m" not in est:
-        raise SkipLayer(f"{ESTIMATE_TOPIC} has no pos_enu_m")
+        raise SkipLayer(f"{topics.FSW_ESTIMATE} has no pos_enu_m")
     t, pos = est["t_s"], est["pos_enu_m"]
     ok = np.all(np.isfinite(pos), axis=1)
     rec.send_columns(ESTIMATE_ENTITY, indexes=_time(t[ok]),
                      columns=rr.Points3D.columns(positions=pos[ok], radii=np.full(ok.sum(), 4.0),
                                                  colors=np.tile(ESTIMATE_COLOUR, (ok.sum(), 1))))
-    if log.topics.get(TARGET_TOPIC):
-        tg = log.table(TARGET_TOPIC)
-        truth = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
-        _scalars(rec, ESTIMATE_ERROR, t, np.linalg.norm(pos - truth, axis=1))
+    if log.topics.get(topics.TARGET_STATE):
+        _plot_signals(log, rec, "estimate")
         return VIEWS["estimate"]()
     return []
 
 
-@layer("flight_plots", needs=(STATE_TOPIC,))
-def _flight_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    st = log.table(STATE_TOPIC)
-    t = st["t_s"]
-    _scalars(rec, AIRSPEED, t, st["airspeed_m_s"])
-    _scalars(rec, HEIGHT, t, st["height_above_sea_m"])
-    eul = np.degrees(st["euler_ned_rad"])
-    _scalars(rec, ROLL, t, eul[:, 0])
-    _scalars(rec, PITCH, t, eul[:, 1])
-    return VIEWS["flight_plots"]()
+def _plot_layer(name: str) -> None:
+    """Register a layer that is nothing but its signals' time series."""
+    @layer(name, needs=signal_needs(name))
+    def _log(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+        _plot_signals(log, rec, name)
+        return VIEWS[name]()
 
 
-@layer("inner_loops", needs=(AUTOPILOT_TOPIC,))
-def _inner_loops(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    ap = log.table(AUTOPILOT_TOPIC)
-    t = ap["t_s"]
-    sp, act = np.degrees(ap["body_rates_sp_frd_rad_s"]), np.degrees(ap["body_rates_frd_rad_s"])
-    _scalars(rec, AIRSPEED_SP, t, ap["airspeed_sp_m_s"])
-    _scalars(rec, P_ACTUAL, t, act[:, 0])
-    _scalars(rec, P_SP, t, sp[:, 0])
-    _scalars(rec, Q_ACTUAL, t, act[:, 1])
-    _scalars(rec, Q_SP, t, sp[:, 1])
-    return VIEWS["inner_loops"]()
+for _name in ("flight_plots", "inner_loops", "target_plots", "gimbal_plots"):
+    _plot_layer(_name)
 
 
-@layer("target_plots", needs=(STATE_TOPIC, TARGET_TOPIC))
-def _target_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    st, tg = log.table(STATE_TOPIC), log.table(TARGET_TOPIC)
-    t = st["t_s"]
-    tp = np.column_stack([np.interp(t, tg["t_s"], tg["pos_enu_m"][:, k]) for k in range(3)])
-    _scalars(rec, DISTANCE, t, np.linalg.norm(st["pos_enu_m"] - tp, axis=1))
-    return VIEWS["target_plots"]()
-
-
-@layer("gimbal_plots", needs=(GIMBAL_TOPIC,))
-def _gimbal_plots(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
-    g = log.table(GIMBAL_TOPIC)
-    _scalars(rec, PAN, g["t_s"], np.degrees(g["pan_rad"]))
-    _scalars(rec, TILT, g["t_s"], np.degrees(g["tilt_rad"]))
-    return VIEWS["gimbal_plots"]()
-
-
-@layer("events", needs=(EVENTS_TOPIC,))
+@layer("events", needs=(topics.EVENTS,))
 def _events(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
     events = log.events()
     rec.send_columns(EVENTS_ENTITY, indexes=_time(np.array([e[0] for e in events])),

@@ -37,53 +37,31 @@ from urllib.parse import urlsplit
 import numpy as np
 import rerun as rr
 
+from fwsim import topics
 from fwsim.log import rerun_export as rx
 from fwsim.log.rerun_export import (
-    AIRSPEED,
-    AIRSPEED_SP,
-    AUTOPILOT_TOPIC,
-    CALIBRATION_TOPIC,
     CAMERA_ENTITY,
     DETECTION_COLOUR,
     DETECTION_ENTITY,
-    DETECTION_TOPIC,
-    DISTANCE,
     ESTIMATE_COLOUR,
     ESTIMATE_ENTITY,
-    ESTIMATE_ERROR,
-    ESTIMATE_TOPIC,
     EVENTS_ENTITY,
-    EVENTS_TOPIC,
-    FSW_TOPIC,
-    GIMBAL_TOPIC,
-    HEIGHT,
     IMAGE_ENTITY,
-    IMAGE_TOPIC,
     LAYERS,
-    P_ACTUAL,
-    P_SP,
-    PAN,
     PHASE_COLOURS,
-    PITCH,
-    POSE_TOPIC,
-    Q_ACTUAL,
-    Q_SP,
-    ROLL,
     RUN_ENTITY,
     SHIP_SIZE_M,
-    STATE_TOPIC,
+    SIGNALS,
     TARGET_COLOUR,
     TARGET_ENTITY,
     TARGET_PATH_ENTITY,
-    TARGET_TOPIC,
     TEXTLOG_LEVELS,
-    TF_TOPIC,
-    TILT,
     TIMELINE,
     UAV_ENTITY,
     UAV_PATH_ENTITY,
     ReplayOptions,
 )
+from fwsim.log.truth import TruthStream
 
 _logger = logging.getLogger("fwsim.log")
 
@@ -92,14 +70,6 @@ DEFAULT_PORT = 9876
 DEFAULT_URL = f"rerun+http://127.0.0.1:{DEFAULT_PORT}/proxy"
 SPEC_HELP = "spawn, connect, connect=ADDR or save=PATH.rrd"
 
-#: Time series of each layer (their styles are logged once, at the start).
-_LAYER_SERIES = {
-    "flight_plots": (AIRSPEED, HEIGHT, ROLL, PITCH),
-    "inner_loops": (AIRSPEED_SP, P_ACTUAL, P_SP, Q_ACTUAL, Q_SP),
-    "target_plots": (DISTANCE,),
-    "gimbal_plots": (PAN, TILT),
-    "estimate": (ESTIMATE_ERROR,),
-}
 #: /tf child frames drawn live (the UAV comes from /uav/pose, as in the replay).
 _TF_ENTITIES = {"camera": CAMERA_ENTITY, "ship": TARGET_ENTITY}
 
@@ -225,6 +195,13 @@ class RerunLive:
 
         self._last_t: dict[str, float] = {}  # per-topic decimation
         self._scalars: dict[str, tuple[list, list]] = {}
+        self._signals: dict[str, list] = {}  # topic -> the rx.SIGNALS drawn from it
+        self._truth: dict[str, tuple[str, TruthStream]] = {}  # signal path -> (truth field, values waiting)
+        for sig in SIGNALS:
+            if sig.layer in self.layers:
+                self._signals.setdefault(sig.topic, []).append(sig)
+                if sig.minus_truth is not None:
+                    self._truth[sig.series.path] = (sig.minus_truth, TruthStream())
         self._poses: dict[str, tuple[list, list, list]] = {}
         self._estimates: tuple[list, list] = ([], [])
         self._detections: tuple[list, list, list, list] = ([], [], [], [])  # t, boxes at t (0/1), centres, halves
@@ -232,8 +209,6 @@ class RerunLive:
         self._target_points: list = []
         self._last_pose: tuple | None = None  # (t, translation, quaternion) of the newest UAV pose
         self._pose_sent = True
-        self._uav_pos = None
-        self._target_state = None  # (t, pos, vel)
         self._cal_width: int | None = None
         self._image_scale: float | None = None
         if scenario is not None:
@@ -248,10 +223,10 @@ class RerunLive:
         self._next_health = now + health_every_s
 
         self._handlers = {
-            POSE_TOPIC: self._on_pose, TF_TOPIC: self._on_tf, STATE_TOPIC: self._on_state,
-            AUTOPILOT_TOPIC: self._on_autopilot, FSW_TOPIC: self._on_fsw, TARGET_TOPIC: self._on_target,
-            GIMBAL_TOPIC: self._on_gimbal, CALIBRATION_TOPIC: self._on_calibration, IMAGE_TOPIC: self._on_image,
-            DETECTION_TOPIC: self._on_detection, EVENTS_TOPIC: self._on_event, ESTIMATE_TOPIC: self._on_estimate,
+            topics.UAV_POSE: self._on_pose, topics.TF: self._on_tf, topics.FSW_STATUS: self._on_fsw,
+            topics.TARGET_STATE: self._on_target, topics.CAMERA_CALIBRATION: self._on_calibration,
+            topics.CAMERA_IMAGE: self._on_image, topics.CAMERA_DETECTION: self._on_detection,
+            topics.EVENTS: self._on_event, topics.FSW_ESTIMATE: self._on_estimate,
         }
 
         self._rec = rr.RecordingStream(self.options.application_id, recording_id=recording_id)
@@ -306,17 +281,21 @@ class RerunLive:
         rx.log_uav_model(rec, self.options.marker_scale)
         tgt = getattr(scenario, "target", None)
         rx.log_ship_model(rec, (tgt.length_m, tgt.width_m, tgt.height_m) if tgt is not None else SHIP_SIZE_M)
-        for name in self.layers:
-            for series in _LAYER_SERIES.get(name, ()):
-                rx.series_style(rec, series)
+        for sig in SIGNALS:
+            if sig.layer in self.layers:
+                rx.series_style(rec, sig.series)
 
     # -- the listener ---------------------------------------------------------
     def __call__(self, topic: str, t_s: float, msg: Any) -> None:
         handler = self._handlers.get(topic)
-        if handler is None or self.closed or self.failed:
+        signals = self._signals.get(topic)
+        if (handler is None and signals is None) or self.closed or self.failed:
             return
         try:
-            handler(t_s, msg)
+            if handler is not None:
+                handler(t_s, msg)
+            if signals is not None and self._due(topic, t_s):
+                self._on_signals(signals, t_s, msg)
             now = time.monotonic()
             if now >= self._next_send:
                 self._send(now)
@@ -360,22 +339,20 @@ class RerunLive:
             tr, r = msg.translation, msg.rotation
             self._pose(entity, t_s, (tr.x, tr.y, tr.z), (r.x, r.y, r.z, r.w))
 
-    def _on_state(self, t_s: float, st) -> None:
-        self._uav_pos = st.pos_enu_m
-        if self._due(STATE_TOPIC, t_s):
-            self._scalar(AIRSPEED, t_s, st.airspeed_m_s)
-            self._scalar(HEIGHT, t_s, st.height_above_sea_m)
-            self._scalar(ROLL, t_s, math.degrees(st.euler_ned_rad[0]))
-            self._scalar(PITCH, t_s, math.degrees(st.euler_ned_rad[1]))
+    def _on_signals(self, signals, t_s: float, msg) -> None:
+        """The time series drawn from this message (rx.SIGNALS); those relative to the truth wait for it."""
+        for sig in signals:
+            if sig.minus_truth is None:
+                self._scalar(sig.series, t_s, sig.value(msg))
+            else:
+                self._truth[sig.series.path][1].add(t_s, sig.value(msg))
 
-    def _on_autopilot(self, t_s: float, ap) -> None:
-        if self._due(AUTOPILOT_TOPIC, t_s):
-            sp, act = ap.body_rates_sp_frd_rad_s, ap.body_rates_frd_rad_s
-            self._scalar(AIRSPEED_SP, t_s, ap.airspeed_sp_m_s)
-            self._scalar(P_ACTUAL, t_s, math.degrees(act[0]))
-            self._scalar(P_SP, t_s, math.degrees(sp[0]))
-            self._scalar(Q_ACTUAL, t_s, math.degrees(act[1]))
-            self._scalar(Q_SP, t_s, math.degrees(sp[1]))
+    def _flush_truth(self, final: bool = False) -> None:
+        """Plot the truth-relative values whose truth has arrived (all of them at the end)."""
+        series = {sig.series.path: sig.series for sig in SIGNALS}
+        for path, (_, stream) in self._truth.items():
+            for t, value, truth in stream.ready(final):
+                self._scalar(series[path], t, float(np.linalg.norm(value - truth)))
 
     def _on_fsw(self, t_s: float, st) -> None:
         phase = int(st.phase) if st.phase == st.phase else -1
@@ -391,26 +368,17 @@ class RerunLive:
             self._strips.append(_Strip(cur.points[-1:], colour, label, phase))
 
     def _on_target(self, t_s: float, tg) -> None:
-        self._target_state = (t_s, tg.pos_enu_m, tg.vel_enu_m_s)
-        if self._due(TARGET_TOPIC, t_s):
+        for field, stream in self._truth.values():  # every truth sample: the interpolation needs them all
+            stream.push(t_s, getattr(tg, field))
+        self._flush_truth()
+        if self._due("target_path", t_s):
             self._target_points.append(tuple(float(c) for c in tg.pos_enu_m))
-            if self._uav_pos is not None:
-                self._scalar(DISTANCE, t_s, float(np.linalg.norm(self._uav_pos - tg.pos_enu_m)))
-
-    def _on_gimbal(self, t_s: float, g) -> None:
-        if self._due(GIMBAL_TOPIC, t_s):
-            self._scalar(PAN, t_s, math.degrees(g.pan_rad))
-            self._scalar(TILT, t_s, math.degrees(g.tilt_rad))
 
     def _on_estimate(self, t_s: float, est) -> None:
         pos = est.pos_enu_m
-        if not np.all(np.isfinite(pos)) or not self._due(ESTIMATE_TOPIC, t_s):
-            return
-        self._estimates[0].append(t_s)
-        self._estimates[1].append(tuple(float(c) for c in pos))
-        if self._target_state is not None:
-            t0, p0, v0 = self._target_state
-            self._scalar(ESTIMATE_ERROR, t_s, float(np.linalg.norm(pos - (p0 + v0 * (t_s - t0)))))
+        if np.all(np.isfinite(pos)) and self._due("estimate_points", t_s):
+            self._estimates[0].append(t_s)
+            self._estimates[1].append(tuple(float(c) for c in pos))
 
     def _on_calibration(self, t_s: float, cal) -> None:
         K = np.array(cal.K, dtype=float).reshape(3, 3)
@@ -426,7 +394,7 @@ class RerunLive:
         self._rec.log(IMAGE_ENTITY, rr.EncodedImage(contents=blob, media_type="image/jpeg"))
 
     def _on_detection(self, t_s: float, det) -> None:
-        if not self._due(DETECTION_TOPIC, t_s):
+        if not self._due(topics.CAMERA_DETECTION, t_s):
             return
         t, n, centres, halves = self._detections
         box = np.asarray(det.bbox_px, dtype=float) * (self._image_scale or 1.0)
@@ -451,6 +419,8 @@ class RerunLive:
     # -- sending --------------------------------------------------------------
     def _send(self, now: float, final: bool = False) -> None:
         rec = self._rec
+        if final:
+            self._flush_truth(final=True)
         for path, (t, v) in self._scalars.items():
             if t:
                 rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t)],

@@ -17,14 +17,9 @@ from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
+from fwsim import topics
 from fwsim.log.schema import spec_for
 
-STATE_TOPIC = "/uav/state"
-TF_TOPIC = "/tf"
-POSE_TOPIC = "/uav/pose"
-EVENTS_TOPIC = "/events"
-WORLD_FRAME = "world"
-UAV_FRAME = "uav"
 METADATA_NAME = "fwsim"
 STATUS_METADATA_NAME = "run_status"
 SCENARIO_ATTACHMENT = "scenario.yaml"
@@ -113,7 +108,7 @@ class LogWriter:
 
     >>> with LogWriter(path, metadata={...}, scenario_text=text) as log:
     ...     log.write_state(state)            # /uav/state, /tf, /uav/pose
-    ...     log.write("/autopilot/status", status_msg)
+    ...     log.write(topics.AUTOPILOT_STATUS, status_msg)
     ...     log.write_event(t, "phase: terminal")
 
     Leaving the with-block normally records status "completed"; an exception
@@ -173,8 +168,8 @@ class LogWriter:
         self._proto_schemas: dict[str, int] = {}
         self._quat = None  # fwsim.frames.quat_enu_from_frd, imported on first use
         # Reused protobuf messages (set fields, serialise; no per-call allocation).
-        self._tf = FrameTransform(parent_frame_id=WORLD_FRAME, child_frame_id=UAV_FRAME)
-        self._pose = PoseInFrame(frame_id=WORLD_FRAME)
+        self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
+        self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
         self._log = Log()
 
     # -- registration -----------------------------------------------------
@@ -269,7 +264,7 @@ class LogWriter:
 
     def write_state(self, state) -> None:
         """Write an AirframeState on /uav/state (JSON), /tf and /uav/pose (Foxglove)."""
-        self.write(STATE_TOPIC, state)
+        self.write(topics.UAV_STATE, state)
         quat = self._quat
         if quat is None:
             from fwsim.frames import quat_enu_from_frd
@@ -286,7 +281,7 @@ class LogWriter:
         tr, rot = tf.translation, tf.rotation
         tr.x, tr.y, tr.z = px, py, pz
         rot.w, rot.x, rot.y, rot.z = w, x, y, z
-        self._write_proto(TF_TOPIC, tf, ns)
+        self._write_proto(topics.TF, tf, ns)
 
         pose = self._pose
         pose.timestamp.seconds = sec
@@ -294,7 +289,7 @@ class LogWriter:
         pos, ori = pose.pose.position, pose.pose.orientation
         pos.x, pos.y, pos.z = px, py, pz
         ori.w, ori.x, ori.y, ori.z = w, x, y, z
-        self._write_proto(POSE_TOPIC, pose, ns)
+        self._write_proto(topics.UAV_POSE, pose, ns)
 
     def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream") -> None:
         """Attach a file (e.g. the effective scenario) to the log."""
@@ -304,7 +299,7 @@ class LogWriter:
                                   data=data)
 
     def write_transform(self, t_s: float, child_frame_id: str, pos, quat_wxyz,
-                        parent_frame_id: str = WORLD_FRAME) -> None:
+                        parent_frame_id: str = topics.WORLD_FRAME) -> None:
         """A foxglove.FrameTransform on /tf: ``child`` posed in ``parent`` (e.g. the camera, the ship)."""
         ns = _ns(t_s)
         msg = FrameTransform(parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
@@ -312,7 +307,7 @@ class LogWriter:
         msg.translation.x, msg.translation.y, msg.translation.z = (float(c) for c in pos)
         r = msg.rotation
         r.w, r.x, r.y, r.z = (float(c) for c in quat_wxyz)
-        self._write_proto(TF_TOPIC, msg, ns)
+        self._write_proto(topics.TF, msg, ns)
 
     def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
         """A foxglove.CompressedImage (e.g. a rendered camera frame)."""
@@ -353,7 +348,7 @@ class LogWriter:
         log.level = _level_value(level)
         log.message = str(text)
         log.name = name
-        self._write_proto(EVENTS_TOPIC, log, ns)
+        self._write_proto(topics.EVENTS, log, ns)
 
     # -- closing ----------------------------------------------------------
     @property

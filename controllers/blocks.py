@@ -1,0 +1,307 @@
+"""Swappable blocks: the Protocols a user's class implements, and how the scenario picks one.
+
+Four parts of the flight software are chosen in the scenario's ``controllers``
+section, each by a built-in name or by the import path of a user's class::
+
+    controllers:
+      estimator: ukf                    # the target estimator (Protocol TargetEstimator)
+      after_lock: nmpc                  # Phase 2 guidance: path | orbit | nmpc (Protocol LoiterGuidance)
+      terminal: bpng                    # Phase 3 guidance (Protocol TerminalGuidance)
+      pointing: ibvs                    # the gimbal's tracking law (Protocol PointingLaw)
+
+      estimator:                        # a user's class, with its own options
+        use: my_package.filters:MyFilter
+        options: {process_noise: 0.1}
+
+The module is imported from the Python path, else from the scenario file's
+folder or the current folder. The class is checked when the scenario is
+read: a bad path, or a class that lacks a member of the Protocol, is a
+one-line scenario error before anything flies. If the class has a ``Config``
+attribute (a pydantic model), the options are validated with it and the class
+gets the model; otherwise it gets the options as a dict. It is built as
+``cls(options, context)``, where ``context`` (:class:`BlockContext`) holds
+what a block may use: the whole ``controllers`` configuration, the camera
+model, the mount offset, the flight software's ship model and a recorder for
+its own log topics and events. A user estimator can wrap the built-in one::
+
+    class CountingUkf:
+        def __init__(self, options, context):
+            self.inner = UkfTargetEstimator(context.camera, context.config.ukf)
+        ...                                # delegate, counting calls
+
+docs/BLOCKS.md shows a whole one. What a block returns is typed
+(``controllers.messages``). Built-in classes live beside their algorithms:
+``controllers.ukf``, ``controllers.guidance``, ``controllers.pointing``.
+
+This module imports nothing heavy (no solver, filter or OpenCV): the scenario
+validation uses it.
+"""
+from __future__ import annotations
+
+import importlib
+import inspect
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["TargetEstimator", "LoiterGuidance", "TerminalGuidance", "PointingLaw", "BlockContext", "Recorder",
+           "SLOTS", "Slot", "BlockError", "builtin_names", "resolve_class", "build_block", "options_for"]
+
+
+# --------------------------------------------------------------------------- the Protocols
+
+
+@runtime_checkable
+class TargetEstimator(Protocol):
+    """A target estimator (``controllers.estimator``). The flight software's estimation block
+    (``controllers.estimation``) decides when it starts and restarts; the estimator predicts, fuses
+    and estimates. Members (``initialised``, ``tracked_height_m``: a property or a class attribute):"""
+
+    @property
+    def initialised(self) -> bool:
+        """True while it has a target (after ``initialise``, until it resets itself)."""
+        ...
+
+    @property
+    def tracked_height_m(self) -> float:
+        """Height above the ship's waterline of the point it tracks (the perception's box-centre
+        correction and the depth model use it)."""
+        ...
+
+    def initialise(self, fix, camera) -> None:
+        """Start from one detection (``DetectionFix``: its box centre ``u_px, v_px``) seen by the camera
+        (``CameraMotion``); raise ValueError when it cannot (e.g. the ray misses the sea)."""
+        ...
+
+    def predict(self, t_s: float, camera) -> None:
+        """Bring the estimate to ``t_s`` (the camera's motion since the last call in ``camera``). It may
+        reset itself here (``initialised`` false afterwards) when its state is no longer finite."""
+        ...
+
+    def update(self, fix, camera):
+        """Fuse a detection (the box centre corrected for the ship's shape); return a ``FusionResult``
+        (used, or why not, with the innovation and its test ratio when there is one)."""
+        ...
+
+    def estimate(self):
+        """The ``TargetEstimate`` now (called only while ``initialised``); it is logged on /fsw/estimate."""
+        ...
+
+    def status(self, t_s: float):
+        """Its counters (``EstimatorStatus``), logged on /fsw/estimator_status when one changes."""
+        ...
+
+
+@runtime_checkable
+class LoiterGuidance(Protocol):
+    """Phase 2 guidance (``controllers.after_lock``): circles the target on its ring until the switch."""
+
+    @property
+    def radius_m(self) -> float:
+        """R, the ring's radius round the target (the phase switch and the metrics use it)."""
+        ...
+
+    @property
+    def altitude_m(self) -> float:
+        """H, the ring's altitude (world z)."""
+        ...
+
+    def step(self, nav, target):
+        """``Measurements`` (the flight software's position), ``TargetState`` -> ``Guidance``."""
+        ...
+
+
+@runtime_checkable
+class TerminalGuidance(Protocol):
+    """Phase 3 guidance (``controllers.terminal``): to the ship at the mission's impact angles
+    (``controllers.bpng.impact_flight_path_deg`` / ``impact_heading_deg``, whichever law flies)."""
+
+    def step(self, nav, target):
+        """``Measurements``, ``TargetState`` -> ``Guidance`` (an ``AccelCommand`` or a ``RateCommand``)."""
+        ...
+
+
+@runtime_checkable
+class PointingLaw(Protocol):
+    """The gimbal's tracking law (``controllers.pointing``), while the target is being detected."""
+
+    def step(self, nav, camera, target):
+        """``Measurements``, ``CameraMotion``, ``TargetState`` -> ``GimbalCommand`` (joint rates)."""
+        ...
+
+
+# --------------------------------------------------------------------------- what a block gets
+
+
+class Recorder:
+    """Where the blocks put what goes to the log in one tick: messages by topic, and event lines.
+
+    A message is a dataclass whose first field is ``t_s`` (its JSON Schema is made from the class)."""
+
+    def __init__(self):
+        self._logs: list[tuple[str, Any]] = []
+        self._events: list[str] = []
+
+    def log(self, topic: str, msg: Any) -> None:
+        self._logs.append((topic, msg))
+
+    def event(self, text: str) -> None:
+        self._events.append(text)
+
+    def drain(self) -> tuple[tuple[tuple[str, Any], ...], tuple[str, ...]]:
+        """This tick's (logs, events), emptied."""
+        out = tuple(self._logs), tuple(self._events)
+        self._logs.clear()
+        self._events.clear()
+        return out
+
+
+@dataclass
+class BlockContext:
+    """What a block may use: the flight software's configuration and its a-priori models."""
+
+    config: Any  # controllers.config.Controllers: every block's settings
+    camera: Any  # controllers.camera_model.PinholeCamera: the camera's intrinsics
+    mount_offset_frd_m: np.ndarray  # the gimbal's rotation centre relative to the CG, body FRD
+    ship: Any  # controllers.target_model.ShipModel: the ship class's outline and its learnt heading
+    recorder: Recorder = field(default_factory=Recorder)
+    initial: Any = None  # the scenario's initial state (the initial path starts there)
+
+
+# --------------------------------------------------------------------------- the slots
+
+
+@dataclass(frozen=True)
+class Slot:
+    """One swappable part: its Protocol, the members a class must have, and the built-in blocks."""
+
+    name: str
+    protocol: type
+    members: tuple[str, ...]
+    builtins: dict[str, Callable[[BlockContext], Any]]
+
+    @property
+    def methods(self) -> tuple[str, ...]:
+        """The members that must be callable (the others may be properties or attributes)."""
+        return tuple(m for m in self.members if callable(getattr(self.protocol, m, None)))
+
+
+def _ukf(ctx: BlockContext):
+    from controllers.ukf import UkfTargetEstimator
+    return UkfTargetEstimator(ctx.camera, ctx.config.ukf)
+
+
+def _orbit(ctx: BlockContext):
+    from controllers.guidance import OrbitLoiter
+    return OrbitLoiter(ctx.config.orbit, ctx.config.initial_path.max_bank_deg)
+
+
+def _nmpc(ctx: BlockContext):
+    from controllers.guidance import NmpcLoiter
+    return NmpcLoiter(ctx.config.nmpc, ctx.recorder)
+
+
+def _bpng(ctx: BlockContext):
+    from controllers.guidance import BpngTerminal
+    return BpngTerminal(ctx.config.bpng, ctx.ship, ctx.recorder)
+
+
+def _ibvs(ctx: BlockContext):
+    from controllers.pointing import IbvsPointing
+    return IbvsPointing(ctx.config.ibvs, ctx.camera, ctx.mount_offset_frd_m, ctx.recorder)
+
+
+SLOTS: dict[str, Slot] = {
+    "estimator": Slot("estimator", TargetEstimator,
+                      ("initialised", "tracked_height_m", "initialise", "predict", "update", "estimate", "status"),
+                      {"ukf": _ukf}),
+    "after_lock": Slot("after_lock", LoiterGuidance, ("radius_m", "altitude_m", "step"),
+                       {"orbit": _orbit, "nmpc": _nmpc}),
+    "terminal": Slot("terminal", TerminalGuidance, ("step",), {"bpng": _bpng}),
+    "pointing": Slot("pointing", PointingLaw, ("step",), {"ibvs": _ibvs}),
+}
+#: after_lock's name for "no Phase 2": keep the initial path
+NO_LOITER = "path"
+
+
+class BlockError(ValueError):
+    """A block choice that cannot be used (one line)."""
+
+
+def resolve_class(path: str, slot: str, search_dirs=()) -> type:
+    """The class at ``module.sub:ClassName``, checked against the slot's Protocol; BlockError if it is not.
+
+    The module is imported from the Python path, else from ``search_dirs`` (tried in order)."""
+    s = SLOTS[slot]
+    module_name, sep, qualname = path.partition(":")
+    if not sep or not module_name or not qualname:
+        raise BlockError(f"expected a built-in name ({', '.join(builtin_names(slot))}) or an import path "
+                         f"'module.sub:ClassName', got {path!r}")
+    module = _import(module_name, search_dirs)
+    obj = module
+    for part in qualname.split("."):
+        obj = getattr(obj, part, None)
+        if obj is None:
+            raise BlockError(f"{module_name!r} has no {qualname!r}")
+    if not inspect.isclass(obj):
+        raise BlockError(f"{path!r} is not a class")
+    missing = [m for m in s.members if not hasattr(obj, m)]
+    if missing:
+        raise BlockError(f"{path} does not implement {s.protocol.__name__}: no {', '.join(missing)} "
+                         f"(methods, or properties / class attributes; see controllers/blocks.py)")
+    not_methods = [m for m in s.methods if not callable(getattr(obj, m))]
+    if not_methods:
+        raise BlockError(f"{path} does not implement {s.protocol.__name__}: {', '.join(not_methods)} "
+                         "must be a method")
+    return obj
+
+
+def _import(module_name: str, search_dirs):
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is None or not module_name.startswith(exc.name.split(".")[0]):
+            raise BlockError(f"importing {module_name!r} failed: {exc}") from None
+        first_error = exc
+    except Exception as exc:  # noqa: BLE001 - a user's module may raise anything while importing
+        raise BlockError(f"importing {module_name!r} failed: {type(exc).__name__}: {exc}") from None
+    for d in search_dirs:
+        d = str(Path(d).resolve())
+        if d in sys.path:
+            continue
+        sys.path.append(d)  # kept: the run (and a batch worker, which re-reads the scenario) imports it again
+        try:
+            return importlib.import_module(module_name)
+        except ModuleNotFoundError:
+            sys.path.remove(d)
+        except Exception as exc:  # noqa: BLE001
+            raise BlockError(f"importing {module_name!r} failed: {type(exc).__name__}: {exc}") from None
+    raise BlockError(f"cannot import {module_name!r} ({first_error}); it must be on the Python path, or in "
+                     "the scenario file's folder or the current folder")
+
+
+def builtin_names(slot: str) -> list[str]:
+    """The slot's built-in names (``after_lock`` also takes ``path``: no Phase 2)."""
+    names = list(SLOTS[slot].builtins)
+    return [NO_LOITER] + names if slot == "after_lock" else names
+
+
+def options_for(cls: type, options: dict) -> Any:
+    """The options as the class takes them: validated by its ``Config`` model if it has one, else the dict."""
+    model = getattr(cls, "Config", None)
+    if inspect.isclass(model) and hasattr(model, "model_validate"):
+        return model.model_validate(options)
+    return dict(options)
+
+
+def build_block(slot: str, choice, ctx: BlockContext, search_dirs=()):
+    """The block for a choice (``BlockChoice``): a built-in made from its config section, or a user's class
+    made as ``cls(options, ctx)``."""
+    builtin = SLOTS[slot].builtins.get(choice.use)
+    if builtin is not None:
+        return builtin(ctx)
+    cls = resolve_class(choice.use, slot, search_dirs)
+    return cls(options_for(cls, choice.options), ctx)

@@ -1,0 +1,566 @@
+"""Every setting of the flight software, in one place (the scenario's ``controllers:`` section).
+
+Each block's settings are a pydantic model with a default, a range and a
+description per field (PX4's ``module.yaml`` habit); unknown keys are errors.
+They live apart from the algorithms so that reading a scenario loads no
+solver, filter, OpenCV or ray-casting module: ``fwsim --help``, scenario
+validation and ``fwsim metrics`` stay fast. The algorithms import their
+settings from here (``controllers.ukf.UkfConfig`` is this module's).
+
+Which block flies each part of the mission is chosen here too
+(:class:`BlockChoice`: a built-in name, or ``module.sub:ClassName`` of a
+user's class implementing the block's Protocol, ``controllers.blocks``).
+
+Nothing here imports the truth side of the harness (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+_PI = math.pi
+_HALF_PI = 0.5 * math.pi
+_PanAngle = Annotated[float, Field(ge=-2.0 * _PI, le=2.0 * _PI)]
+_TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# --------------------------------------------------------------------------- navigation and acquisition
+
+
+class NavigationConfig(BaseModel):
+    """How the flight software turns GNSS fixes into its position."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    propagate: bool = Field(True, description="propagate the position with the fix velocity between fixes "
+                                              "(false: use the held fix as it is)")
+    fix_gain: float = Field(0.1, gt=0, le=1,
+                            description="K: weight of a new fix against the propagated position "
+                                        "(1: take each fix as it is; smaller smooths its noise)")
+    turn_velocity: bool = Field(
+        True, description="turn the fix velocity with the gyros between fixes (dV/dt = omega x V: the flight "
+                          "path turns with the airframe); false: hold it")
+    wind_gain: float = Field(
+        0.02, ge=0, le=1,
+        description="weight of each fix's wind (fix velocity minus airspeed along the nose, horizontal; taken in "
+                    "near-level flight only) in the running wind estimate; the velocity turns with the gyros "
+                    "relative to the air, V - wind; 0: no wind estimate")
+    max_gap_s: float = Field(1.0, gt=0, le=60,
+                             description="a fix older than this when the next arrives: restart from the fix")
+
+
+class AcquisitionConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    pan_deg: list[float] = Field(default_factory=lambda: [-90.0, 90.0], min_length=2, max_length=2,
+                                 description="pan sector swept during the search")
+    tilt_deg: list[float] = Field(default_factory=lambda: [-15.0, -35.0, -55.0, -75.0], min_length=1,
+                                  description="tilt rows of the raster, visited in order")
+    rate_deg_s: float = Field(40.0, gt=0, le=360, description="sweep rate of the joints")
+    lock_detections: int = Field(5, ge=1, le=300, description="consecutive detections that make a lock")
+
+
+class ReacquireConfig(BaseModel):
+    """What the gimbal does when the target is lost after the lock (predictive pointing)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    after_s: float = Field(0.7, ge=0, le=60, description="no detection this long: point at the estimate instead")
+    search_after_s: float = Field(20.0, gt=0, le=3600,
+                                  description="no detection this long: restart the raster search")
+    gain_1_s: float = Field(4.0, gt=0, le=50, description="joint rate per rad of pointing error")
+
+
+# --------------------------------------------------------------------------- perception and estimation
+
+
+class DetectionGateConfig(BaseModel):
+    """Which detections the UKF does not use: those a known cause has cut short (the box then lies)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    box_size_tolerance: float = Field(
+        0.1, ge=0, le=10,
+        description="skip a detection whose box width or height differs from the one the ship model predicts "
+                    "(for the course, or for every heading the box shapes allow) by more than this fraction plus "
+                    "box_size_tolerance_px: part of the ship is "
+                    "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
+    box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
+    skip_overflowing_box: bool = Field(
+        True, description="skip a detection whose box spans the whole image width or height (the ship is "
+                          "larger than the frame: the box centre says little)")
+    edge_px: float = Field(6.0, ge=0, le=100, description="a box edge this close to the image border touches it")
+    min_range_m: float = Field(
+        120.0, ge=0, le=10000,
+        description="skip detections while the estimated range to the target is below this: close in the box "
+                    "centre no longer follows the ship model (perspective, parts of the ship out of the image) "
+                    "and the estimate coasts on its velocity; 0: never")
+    max_skipped_in_a_row: int = Field(
+        30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
+                                         "(the estimate the checks rely on may be what is wrong)")
+
+
+class ShapeHeadingConfig(BaseModel):
+    """The ship's heading from the shapes of its detected boxes, for when its course is unknown (a ship
+    that lies still or moves too slowly for the estimated velocity to tell): :class:`ShapeHeading`."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = Field(True, description="false: an unknown course stays unknown (the offset is averaged "
+                                            "over headings_when_unknown headings)")
+    headings: int = Field(72, ge=4, le=720, description="candidate headings all round")
+    rate_hz: float = Field(3.0, gt=0, le=240, description="detections used per second at most (consecutive "
+                                                          "frames carry nearly the same information)")
+    sigma_fraction: float = Field(0.05, ge=0, le=1, description="std. dev. of a box side against the model's, "
+                                                                "as a fraction of the predicted side")
+    sigma_px: float = Field(3.0, gt=0, le=100, description="std. dev. of a box side against the model's, px "
+                                                           "(detector noise, model's coarseness)")
+    size_bias_range: tuple[float, float] = Field(
+        (-0.15, 0.05),
+        description="the detected boxes' widths (and, apart, heights) may all be off the model's by one "
+                    "unknown fraction in this range (a detector shrinks boxes and misses thin parts such as a "
+                    "mast): each heading's likelihood is marginalised over it, so that such a bias, which "
+                    "favours whichever heading predicts the smaller boxes, cannot pass for evidence. "
+                    "(0, 0): none")
+    size_bias_steps: int = Field(13, ge=1, le=101, description="grid points over size_bias_range")
+
+    @field_validator("size_bias_range")
+    @classmethod
+    def _bias_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not (-1.0 < v[0] <= v[1]):
+            raise ValueError(f"must be (low, high) with -1 < low <= high, got {tuple(v)}")
+        return v
+    max_effective_updates: float = Field(
+        60.0, gt=0, le=10000,
+        description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
+                    "misfit repeats from frame to frame and must not make the heading look surer than it is")
+    min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
+    min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
+                                                            "times the largest are dropped")
+    tell_bow_from_stern: bool = Field(
+        True, description="trust the box shapes to tell the bow from the stern (the superstructure stands aft, "
+                          "which shows in the box heights, most of all as the view steepens in the dive); "
+                          "false: a heading and its opposite count alike (the fore-aft part of the offset is "
+                          "then not removed)")
+    fuse_with_course: bool = Field(
+        True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
+                          "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
+    fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
+                                                                         "least this, deg")
+    max_course_off_axis_deg: float = Field(
+        25.0, gt=0, le=90,
+        description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
+                    "course: a ship moves along its axis, so such a velocity is the estimate's error")
+
+
+class ShipModelConfig(BaseModel):
+    """The flight software's outline of the ship class (ship frame: x bow, y port, z up, origin at the
+    waterline centre)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = Field(True, description="correct each detection's box centre for the ship's shape "
+                                            "before the UKF update")
+    length_m: float = Field(55.0, gt=0, le=500, description="length of the ship class, m (paper: 55)")
+    width_m: float = Field(25.0, gt=0, le=200, description="beam of the ship class, m (paper: 25)")
+    height_m: float = Field(25.0, gt=0, le=200, description="height above the waterline to the mast top, m "
+                                                            "(paper: 25)")
+    min_speed_for_course_m_s: float = Field(
+        1.5, ge=0, le=50, description="below this estimated speed the ship's course is taken as unknown")
+    max_vel_std_for_course_m_s: float = Field(
+        1.0, gt=0, le=50, description="above this standard deviation of the estimated velocity the course is "
+                                      "taken as unknown")
+    headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
+                                                                   "when the course is unknown")
+    heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
+
+
+class UkfConfig(BaseModel):
+    """Tuning of the target UKF (all noise values are 1-sigma)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pixel_noise_px: float = Field(2.0, gt=0, le=100, description="detector box-centre noise (u, v), px")
+    cam_pos_noise_m: float = Field(0.5, gt=0, le=100, description="camera position r_c (GNSS/INS), per axis, m")
+    attitude_noise_rad: float = Field(
+        0.002, ge=0, le=0.2,
+        description="attitude + encoder error; adds (range * this) to the r_c measurement noise, rad")
+    height_noise_m: float = Field(
+        0.5, ge=0, le=100,
+        description="altimeter error in the flat-sea depth; adds (range / height * this) to the r_c noise, m")
+    target_accel_noise_m_s2: float = Field(
+        0.05, gt=0, le=50,
+        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2; small: "
+                    "a ship holds its velocity for tens of seconds, and a larger value lets the dive's "
+                    "geometry-dependent box-centre errors pass into the velocity, which the last seconds coast on")
+    target_vertical_accel_noise_m_s2: float = Field(
+        0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
+    feature_process_noise: float = Field(
+        0.01, gt=0, le=10,
+        description="random walk of x1, x2 (gyro/encoder-rate errors), normalised units per sqrt(s)")
+    target_plane_height_m: float = Field(
+        0.0, ge=-100, le=200,
+        description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
+    innovation_gate: float = Field(
+        13.8, ge=0, le=1000,
+        description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "
+                    "above this (13.8: 0.1 % of good detections); 0: never")
+    innovation_gate_max_rejects: int = Field(
+        15, ge=1, le=100000, description="after this many rejections in a row the next detection is used anyway "
+                                         "(the estimate, not the detections, may be wrong)")
+    init_pos_std_frac: float = Field(
+        0.05, gt=0, le=1, description="initial horizontal position std as a fraction of the slant range")
+    init_vel_std_m_s: float = Field(10.0, gt=0, le=100, description="initial horizontal velocity std, m/s")
+    max_substep_s: float = Field(0.05, gt=0, le=1, description="largest RK4 step of the process model, s")
+    sigma_alpha: float = Field(1.0, gt=0, le=1, description="Merwe sigma-point spread alpha")
+    sigma_beta: float = Field(2.0, ge=0, le=10, description="Merwe beta (2 is optimal for Gaussians)")
+    sigma_kappa: float = Field(0.0, ge=-7, le=10, description="Merwe kappa (n + kappa must stay > 0)")
+
+
+# --------------------------------------------------------------------------- guidance and pointing
+
+
+class InitialPath(_Strict):
+    airspeed_m_s: float = Field(22.0, gt=0, le=60)
+    waypoints_enu_m: list[Vec3] = Field(default_factory=list,
+                                        description="empty: hold the initial heading and altitude")
+    max_bank_deg: float = Field(35.0, gt=0, le=60)
+
+
+class Orbit(_Strict):
+    """Circle around the estimated target after lock (a stand-in until the NMPC loiter)."""
+
+    airspeed_m_s: float = Field(22.0, gt=0, le=60)
+    radius_m: float = Field(500.0, gt=20, le=5000, description="the paper's R")
+    altitude_m: float = Field(500.0, gt=20, le=5000, description="the paper's H")
+    clockwise: bool = Field(False, description="seen from above")
+
+
+class CbfConfig(BaseModel):
+    """The self-occlusion CBF of the NMPC."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = Field(True, description="impose the CBF input constraints (eq. cbfright/cbfleft)")
+    beta: float = Field(1.0, gt=0.0, le=50.0, description="CBF class-K gain beta in h_dot >= -beta h, 1/s")
+    sides: Literal["both", "solve_time"] = Field(
+        "both", description="both: right and left rows at every stage (smooth); solve_time: the side of "
+                            "sign(R_p) at the current state for the whole horizon (the paper's switch)")
+    slack_weight_linear: float = Field(100.0, ge=0.0, le=1e9,
+                                       description="linear (exact) penalty on the CBF slack, per rad/s")
+    slack_weight_quadratic: float = Field(100.0, gt=0.0, le=1e9,
+                                          description="quadratic penalty on the CBF slack, per (rad/s)^2")
+
+
+class NmpcConfig(BaseModel):
+    """Tuning of the Phase 2 NMPC (paper eq. NMPC, limits) and its solver."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    horizon_steps: int = Field(50, ge=2, le=400, description="N, prediction = control horizon (steps)")
+    step_s: float = Field(0.1, gt=0.0, le=2.0, description="T_s, the NMPC step and the model's Euler step, s")
+    radius_m: float = Field(500.0, gt=20.0, le=5000.0, description="R, loiter radius around the target, m")
+    altitude_m: float = Field(500.0, gt=10.0, le=5000.0, description="H, loiter altitude (world z), m")
+    w1_radius: float = Field(1e-4, ge=0.0, le=1e6, description="w1, per m^2 of radius error, per stage")
+    w2_altitude: float = Field(1e-4, ge=0.0, le=1e6, description="w2, per m^2 of altitude error, per stage")
+    w3_attitude: tuple[float, float, float] = Field(
+        (30.0, 30.0, 1.0), description="W3 diagonal: per rad^2 of change of [phi, theta, psi] per step")
+    w4_continuity: float = Field(0.1, ge=0.0, le=1e6,
+                                 description="w4, per (rad/s)^2 of [u_p, u_q] change from the previous input")
+    w_airspeed: float = Field(1e-4, ge=0.0, le=1e6,
+                              description="input regularisation, per (m/s)^2 of V_U - airspeed_ref, per stage")
+    w_rates: float = Field(1e-4, ge=0.0, le=1e6,
+                           description="input regularisation, per (rad/s)^2 of u_p and u_q, per stage")
+    airspeed_ref_m_s: float = Field(22.0, gt=0.0, le=80.0, description="V_ref of the airspeed regularisation")
+    roll_max_deg: float = Field(35.0, gt=0.0, lt=80.0, description="|phi| bound")
+    pitch_max_deg: float = Field(15.0, gt=0.0, lt=60.0, description="|theta| bound")
+    airspeed_min_m_s: float = Field(18.0, gt=0.0, le=80.0, description="V_U lower bound")
+    airspeed_max_m_s: float = Field(28.0, gt=0.0, le=80.0, description="V_U upper bound")
+    roll_rate_max_rad_s: float = Field(0.8, gt=0.0, le=10.0, description="|u_p| bound, rad/s")
+    pitch_rate_max_rad_s: float = Field(0.3, gt=0.0, le=10.0, description="|u_q| bound, rad/s")
+    cbf: CbfConfig = Field(default_factory=CbfConfig)
+    integrator: Literal["euler", "rk4"] = Field("euler", description="discretisation of the model")
+    solver: Literal["rti_hpipm", "rti_qrqp", "fatrop", "ipopt"] = Field(
+        "rti_hpipm", description="rti_*: SQP real-time iterations with that QP solver (hpipm: structured "
+                                 "interior point; qrqp: comparison only); fatrop/ipopt: the full NLP to convergence")
+    hessian: Literal["exact", "gauss_newton"] = Field(
+        "exact", description="rti_*: QP Hessian. exact: Hessian of the Lagrangian (gap multipliers from the adjoint "
+                             "recursion), eigenvalues clipped per stage block; gauss_newton: 2 J_r^T J_r (oscillates "
+                             "on large radius errors, kept for comparison)")
+    hessian_min_eig: float = Field(1e-6, gt=0.0, le=1.0,
+                                   description="exact Hessian: eigenvalue floor of each stage block")
+    rti_iterations: int = Field(1, ge=1, le=50, description="SQP iterations per call once warm")
+    cold_start_iterations: int = Field(50, ge=1, le=500,
+                                       description="SQP iterations at most on the first call or after a reset; "
+                                                   "they also stop when 90 % of max_solve_ms is used")
+    cold_start_tol: float = Field(1e-5, gt=0.0, le=1.0,
+                                  description="cold start stops when the largest input step is below this")
+    ipopt_tol: float = Field(1e-8, gt=0.0, le=1e-2, description="IPOPT convergence tolerance")
+    max_solve_ms: float = Field(50.0, ge=0.0, le=1e5,
+                                description="time budget of one solve (budget: wall_clock): a later result is "
+                                            "not applied, and a cold start stops at 90 % of it")
+    budget: Literal["iterations", "wall_clock"] = Field(
+        "iterations",
+        description="iterations: a solve is bounded by its iteration counts only, so a run is the same on any "
+                    "machine and load (same seed, same log); wall_clock: also by max_solve_ms of the wall "
+                    "clock, as on a real-time mission computer (results then depend on the machine)")
+    reset_after_failures: int = Field(3, ge=1, le=1000,
+                                      description="consecutive failed solves before the warm start is rebuilt")
+    pitch_from: Literal["attitude", "flight_path"] = Field(
+        "attitude", description="theta of the model from the AHRS pitch (paper) or the flight-path angle of "
+                                "the velocity (the kinematics' z_dot = V sin(theta) then has no alpha bias)")
+
+
+class SwitchConfig(BaseModel):
+    """The Phase 2 -> 3 (loiter -> terminal) switch; the paper gives it only loosely."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    enabled: bool = Field(True, description="false: loiter until the run ends")
+    radius_tol_m: float = Field(25.0, gt=0, le=1000, description="|distance to the estimate - R| below this")
+    altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
+    dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long (counted from Phase "
+                                                             "2's start on, alongside min_loiter_s)")
+    min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
+    approach_window_deg: float | None = Field(
+        5.0, gt=0, le=180,
+        description="bearing from the UAV to the target within this of the impact heading plus the lead "
+                    "(none: any bearing)")
+    approach_lead_deg: float = Field(
+        5.0, ge=-90, le=90,
+        description="the window's centre lies this far past the impact heading in the direction the UAV goes "
+                    "round the target: the middle of the terminal law's capture region from a loiter, which "
+                    "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
+
+
+class BpngConfig(BaseModel):
+    """Tuning of the terminal guidance (paper section Phase 3)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    n_sigma: float = Field(6.0, gt=0, le=20, description="PN gain N_sigma on Omega x V_p (paper: 6, optimal)")
+    n_f: float = Field(2.0, ge=0, le=20, description="bias gain N_f on the impact-angle error (paper: 2, optimal)")
+    impact_flight_path_deg: float = Field(
+        -30.0, ge=-90, le=0,
+        description="wanted flight-path angle at impact theta_f, deg, negative when diving (paper: -30)")
+    impact_heading_deg: float = Field(
+        30.0, ge=-360, le=360, description="wanted heading at impact psi_f, deg clockwise from North (paper: 30)")
+    airspeed_m_s: float = Field(
+        22.0, gt=0, le=60,
+        description="airspeed commanded in the dive, m/s (the autopilot holds it with throttle only; "
+                    "at idle the UAV still gains speed diving)")
+    min_tgo_s: float = Field(0.5, gt=0, le=10, description="floor of t_go = |r| / |V_p|, s")
+    bias_angle_cap_deg: float | None = Field(
+        90.0, gt=0, le=180,
+        description="the bias term uses min(theta, this): the law is the small-angle optimum, and from a "
+                    "loiter round a fast ship the UAV can start more than 90 deg off V_f, where the bias "
+                    "(away from V_f) cancels the PN term and the UAV flies straight on, away from the ship; "
+                    "none: the paper's law as printed")
+    max_accel_m_s2: float = Field(
+        25.0, gt=0, le=200, description="cap on |u| (direction kept), m/s^2, gravity not included")
+    aim_at_contact: bool = Field(
+        True,
+        description="steer to where the approach along the impact direction first meets the ship's outline "
+                    "(controllers.target_model), not to the aim point inside it: the law's impact angle is "
+                    "reached where the path ends, and a dive meets the deck, side or superstructure up to "
+                    "~20 m before the aim point")
+    contact_standoff_m: float = Field(
+        2.0, ge=0, le=100,
+        description="the steering point lies this much farther out than the outline's surface (the last "
+                    "metres are flown in the endgame, along the impact direction through the aim point)")
+    endgame_tgo_s: float = Field(
+        0.4, ge=0, le=10,
+        description="below this time to go to the steering point the law's command is dropped (see "
+                    "endgame_align_s): there the LOS rate of a near hit grows without bound, and chasing it "
+                    "(saturated, the bank swinging) undid up to 5 deg of the impact angle in the last 0.3 s")
+    endgame_align_s: float | None = Field(
+        0.25, gt=0, le=10,
+        description="in the endgame, turn the velocity onto V_f with this time constant (a = |V| theta / "
+                    "this, toward V_f, perpendicular to V, capped): the law is still finishing its turn "
+                    "there; none: fly straight (gravity compensated)")
+    aim_height_m: float = Field(
+        0.0, ge=-50, le=100,
+        description="height of the aim point above the given target position (the ship's waterline "
+                    "point), m; 0 aims at the waterline")
+
+
+class IbvsConfig(BaseModel):
+    """IBVS gimbal controller settings (flight software side; angles in rad)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    lambda_1_s: float = Field(1.5, gt=0.0, le=20.0,
+                              description="feedback gain lambda: the image error decays as exp(-lambda t), 1/s")
+    feedforward: bool = Field(True, description="cancel the feature motion caused by the UAV's rotation and by "
+                                                "the UAV's and the target's velocity (paper's L2 term)")
+    singularity_damping: float = Field(0.1, gt=0.0, le=1.0,
+                                       description="mu of the damped least-squares inverse: active when the "
+                                                   "smallest singular value of J drops below mu (target line of "
+                                                   "sight near the pan axis); bounds |joint rates| by |b|/mu")
+    pan_limits_rad: list[_PanAngle] = Field(default_factory=lambda: [-_PI, _PI], min_length=2, max_length=2,
+                                            description="[min, max] pan angle the gimbal allows, rad")
+    tilt_limits_rad: list[_TiltAngle] = Field(default_factory=lambda: [-_HALF_PI, _HALF_PI], min_length=2,
+                                              max_length=2, description="[min, max] tilt angle, rad (up positive)")
+    max_pan_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="pan rate limit, rad/s")
+    max_tilt_rate_rad_s: float = Field(2.0 * _PI / 3.0, gt=0.0, le=20.0, description="tilt rate limit, rad/s")
+    hold_timeout_s: float = Field(1.0, ge=0.0, le=60.0,
+                                  description="after the track is lost, keep feeding forward (coast) this long, "
+                                              "then hold the joints, s")
+    max_detection_age_s: float = Field(0.2, gt=0.0, le=10.0,
+                                       description="a valid detection older than this (since its exposure) no "
+                                                   "longer counts as tracking, s")
+    keyhole_swing: bool = Field(True, description="near the pan axis, swing the pan round (full rate, tilt by least "
+                                                  "squares) when the target is on the far side of the axis or its "
+                                                  "azimuth is about to cross a pan limit (module docstring)")
+    keyhole_fov_fraction: float = Field(1.0, gt=0.0, le=1.0,
+                                        description="the keyhole: target within this fraction of the smallest half "
+                                                    "field of view (principal point to the nearer image edge) of the "
+                                                    "pan axis, less what the tilt limit falls short of the axis")
+    propagate_feature: bool = Field(True, description="predict the feature from the detection's exposure to now "
+                                                      "and between detections with the feature kinematics")
+    nominal_dt_s: float = Field(1.0 / 30.0, gt=0.0, le=1.0,
+                                description="controller period assumed on the first call (joint-limit "
+                                            "look-ahead and feature propagation), s")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for name, lim in (("pan", self.pan_limits_rad), ("tilt", self.tilt_limits_rad)):
+            if not lim[0] < lim[1]:
+                raise ValueError(f"{name}_limits_rad must be ordered [min, max] with min < max (got {lim})")
+        return self
+
+
+# --------------------------------------------------------------------------- scripted commands
+
+
+class RatesStep(_Strict):
+    airspeed_m_s: float = Field(gt=0, le=60)
+    roll_rate_deg_s: float = Field(0.0, ge=-200, le=200)
+    pitch_rate_deg_s: float = Field(0.0, ge=-200, le=200)
+
+
+class AccelStep(_Strict):
+    airspeed_m_s: float = Field(gt=0, le=60)
+    right_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, to the right")
+    up_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, upward")
+
+
+class ScriptStep(_Strict):
+    t_s: float = Field(ge=0, description="time from which this command holds")
+    rates: RatesStep | None = None
+    accel: AccelStep | None = None
+    gimbal_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="pan, tilt the gimbal is driven to from this step on (none: keep the last)")
+
+    @model_validator(mode="after")
+    def _one_mode(self):
+        if (self.rates is None) == (self.accel is None):
+            raise ValueError("give exactly one of 'rates' or 'accel'")
+        return self
+
+
+# --------------------------------------------------------------------------- swappable blocks
+
+
+class BlockChoice(_Strict):
+    """Which block flies a part of the mission: a built-in name, or a user's class and its options.
+
+    Written as a name (``estimator: ukf``) or as a mapping (``estimator: {use: pkg.mod:Class, options:
+    {...}}``); ``controllers.blocks`` has the Protocols and how a class is found and built."""
+
+    use: str = Field(description="a built-in name, or the import path 'module.sub:ClassName' of a user's class")
+    options: dict[str, Any] = Field(default_factory=dict,
+                                    description="the user class's options (validated by its Config model if it "
+                                                "has one); a built-in takes its settings from its own section")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_name(cls, v):
+        return {"use": v} if isinstance(v, str) else v
+
+
+def _checked(slot: str, section: str):
+    """Validation of one slot's choice: a built-in name, or a class that imports and implements the Protocol.
+
+    The scenario's validation context may say ``check_plugins: False`` (a log's scenario read back for
+    scoring: the user's module need not be importable there) and gives ``search_dirs``."""
+    def check(choice: BlockChoice, info: ValidationInfo) -> BlockChoice:
+        from controllers import blocks  # light: no solver or filter
+
+        if choice.use in blocks.builtin_names(slot):
+            if choice.options:
+                raise ValueError(f"options are for a user's class; the built-in {choice.use!r} takes its settings "
+                                 f"from controllers.{section}")
+            return choice
+        ctx = info.context or {}
+        if not ctx.get("check_plugins", True):
+            return choice
+        cls = blocks.resolve_class(choice.use, slot, ctx.get("search_dirs", ()))
+        try:
+            blocks.options_for(cls, choice.options)
+        except ValidationError as exc:
+            e = exc.errors()[0]
+            where = ".".join(str(p) for p in e["loc"])
+            raise ValueError(f"options{'.' + where if where else ''}: {e['msg']}") from None
+        return choice
+    return AfterValidator(check)
+
+
+EstimatorChoice = Annotated[BlockChoice, _checked("estimator", "ukf")]
+LoiterChoice = Annotated[BlockChoice, _checked("after_lock", "nmpc or controllers.orbit")]
+TerminalChoice = Annotated[BlockChoice, _checked("terminal", "bpng")]
+PointingChoice = Annotated[BlockChoice, _checked("pointing", "ibvs")]
+
+
+# --------------------------------------------------------------------------- the whole flight software
+
+
+class Controllers(_Strict):
+    kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
+    navigation: NavigationConfig = Field(default_factory=NavigationConfig)
+    script: list[ScriptStep] = Field(default_factory=list)
+    initial_path: InitialPath = Field(default_factory=InitialPath)
+    acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
+    estimator: EstimatorChoice = Field(
+        default_factory=lambda: BlockChoice(use="ukf"),
+        description="the target estimator: ukf (the paper's, settings in ukf), or a user's class")
+    after_lock: LoiterChoice = Field(
+        default_factory=lambda: BlockChoice(use="path"),
+        description="after the lock: keep the initial path (path), or loiter (Phase 2) with a circle follower "
+                    "(orbit) or the paper's NMPC (nmpc), or a user's class")
+    terminal: TerminalChoice = Field(
+        default_factory=lambda: BlockChoice(use="bpng"),
+        description="Phase 3 guidance: bpng (the paper's quaternion BPNG, settings in bpng), or a user's class")
+    pointing: PointingChoice = Field(
+        default_factory=lambda: BlockChoice(use="ibvs"),
+        description="the gimbal's tracking law: ibvs (the paper's, settings in ibvs), or a user's class")
+    orbit: Orbit = Field(default_factory=Orbit)
+    nmpc: NmpcConfig = Field(default_factory=NmpcConfig)
+    switch: SwitchConfig = Field(default_factory=lambda: SwitchConfig(enabled=False))
+    reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
+    bpng: BpngConfig = Field(default_factory=BpngConfig)
+    ukf: UkfConfig = Field(default_factory=UkfConfig)
+    target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
+    detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
+    ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
+
+    @model_validator(mode="after")
+    def _script(self):
+        if self.kind == "script":
+            if not self.script:
+                raise ValueError("kind 'script' needs a non-empty 'script' list")
+            times = [s.t_s for s in self.script]
+            if times != sorted(times):
+                raise ValueError("script steps must be in increasing t_s")
+        return self

@@ -1,0 +1,140 @@
+"""Guidance blocks: the built-in laws of each phase behind one small interface.
+
+Every guidance block has ``step(nav, target) -> Guidance``: the navigation
+solution (``Measurements`` with the flight software's own position) and the
+target state (``TargetState``) in, the autopilot command and its set-points
+out. A loiter block also says where its ring is (``radius_m``, ``altitude_m``)
+for the phase switch. The built-ins:
+
+* Phase 1, :class:`PathGuidance`: the initial path (``controllers.path``);
+* Phase 2 (``controllers.after_lock``), :class:`OrbitLoiter` (a circle
+  follower) and :class:`NmpcLoiter` (the paper's NMPC with the CBF,
+  ``controllers.nmpc``, solved at ``nmpc.step_s`` and held between solves);
+* Phase 3 (``controllers.terminal``), :class:`BpngTerminal`: the paper's
+  quaternion BPNG (``controllers.bpng``), steering to where the approach meets
+  the ship's outline.
+
+A user's class takes their place from the scenario (``controllers.blocks``).
+Each block writes its own log (``/fsw/nmpc``, ``/fsw/bpng``) through the
+recorder it is given.
+
+Nothing here imports the truth side of the harness (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.bpng import Bpng
+from controllers.messages import Guidance, TargetState
+from controllers.path import OrbitFollower, PathFollower
+from controllers.target_model import ShipModel
+from fwsim import topics
+from fwsim.messages import Measurements
+
+__all__ = ["PathGuidance", "OrbitLoiter", "NmpcLoiter", "BpngTerminal"]
+
+
+class PathGuidance:
+    """Phase 1: straight lines from the start through the waypoints (``initial_path``)."""
+
+    def __init__(self, path_cfg, initial_cfg):
+        self.follower = PathFollower(path_cfg.airspeed_m_s, initial_cfg.pos_enu_m,
+                                     math.radians(initial_cfg.heading_deg), path_cfg.waypoints_enu_m,
+                                     path_cfg.max_bank_deg)
+
+    def step(self, nav: Measurements, target: TargetState) -> Guidance:
+        cmd, st = self.follower.step(nav)
+        return Guidance(cmd, "path", st.course_sp_rad, st.bank_sp_rad, st.altitude_sp_m, st.cross_track_m)
+
+
+class OrbitLoiter:
+    """Phase 2: a circle of radius R at altitude H round the target estimate (``orbit``)."""
+
+    def __init__(self, orbit_cfg, max_bank_deg: float):
+        o = orbit_cfg
+        self.follower = OrbitFollower(o.airspeed_m_s, o.radius_m, o.altitude_m, o.clockwise, max_bank_deg)
+        self.radius_m, self.altitude_m = o.radius_m, o.altitude_m
+
+    def step(self, nav: Measurements, target: TargetState) -> Guidance:
+        cmd, chi_c, _ = self.follower.step(nav, target.pos_enu_m)
+        return Guidance(cmd, "loiter:orbit", course_sp_rad=chi_c, altitude_sp_m=self.altitude_m)
+
+
+class NmpcLoiter:
+    """Phase 2: the paper's NMPC with the CBF round the target estimate (``nmpc``).
+
+    It solves every ``step_s`` (the first time at its first step) and holds the command between solves;
+    each solve goes to ``/fsw/nmpc`` and a fallback to the events.
+    """
+
+    def __init__(self, nmpc_cfg, recorder):
+        from controllers.nmpc import Nmpc  # CasADi: loaded only when the NMPC flies
+
+        self.cfg = nmpc_cfg
+        self.nmpc = Nmpc(nmpc_cfg)
+        self.radius_m, self.altitude_m = nmpc_cfg.radius_m, nmpc_cfg.altitude_m
+        self._record = recorder
+        self._cmd = None
+        self._next_t = -math.inf
+
+    def step(self, nav: Measurements, target: TargetState) -> Guidance:
+        t = nav.t_s
+        if t + 1e-9 >= self._next_t:
+            self._solve(nav, target)
+        c = self._cmd
+        cmd = type(c)(t, c.airspeed_m_s, c.roll_rate_rad_s, c.pitch_rate_rad_s)
+        return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m)
+
+    def _solve(self, nav: Measurements, target: TargetState) -> None:
+        from controllers.nmpc import NmpcStatus
+
+        t, nmpc = nav.t_s, self.nmpc
+        res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, target.vel_enu_m_s)
+        self._cmd = nmpc.command(res)
+        self._next_t = t + self.cfg.step_s
+        self._record.log(topics.FSW_NMPC, NmpcStatus.from_result(res, nmpc.fallback_count))
+        if res.fallback:
+            self._record.event(f"NMPC fallback at t = {t:.2f} s: {res.status}")
+
+
+class BpngTerminal:
+    """Phase 3: the paper's quaternion BPNG to the impact angles (``bpng``).
+
+    The target's waterline point is steered to, raised by ``aim_height_m``; with ``aim_at_contact`` the
+    steering point is pulled back along the relative impact direction to where the approach first meets the
+    ship's outline (the ship model's, over the headings it may have), ``contact_standoff_m`` farther out.
+    """
+
+    def __init__(self, bpng_cfg, ship: ShipModel, recorder):
+        self.cfg = bpng_cfg
+        self.law = Bpng(bpng_cfg)
+        self.ship = ship
+        self._record = recorder
+
+    def step(self, nav: Measurements, target: TargetState) -> Guidance:
+        pos = target.pos_enu_m.copy()
+        pos[2] = 0.0  # the estimate's plane height is a camera-model detail; BPNG adds its aim height
+        cmd, status = self.law.step(nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, pos, target.vel_enu_m_s,
+                                    self.contact_aim(nav, pos, target.vel_enu_m_s))
+        self._record.log(topics.FSW_BPNG, status)
+        return Guidance(cmd, "terminal")
+
+    def contact_aim(self, nav: Measurements, target: np.ndarray, target_vel: np.ndarray) -> np.ndarray | None:
+        """Where the approach through the aim point along the impact direction (relative to the moving ship)
+        first meets the ship's outline, ``contact_standoff_m`` farther out; None: steer to the aim point.
+
+        The ship's heading comes from the estimated course; when the course is unknown the deepest entry
+        over the headings the box shapes allow (or, before they tell, ``headings_when_unknown`` headings) is
+        taken (the steering point then lies in the air at worst, and the last metres are flown in the
+        endgame, along V_f)."""
+        b = self.cfg
+        if not b.aim_at_contact:
+            return None
+        aim = self.law.aim_point(target)
+        speed = max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0)
+        d = speed * self.law.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
+        d = d / max(float(np.linalg.norm(d)), 1e-9)
+        depth = self.ship.entry_depth_m(aim, target, d, target_vel)
+        return aim - (depth + b.contact_standoff_m) * d

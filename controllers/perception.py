@@ -1,0 +1,177 @@
+"""Perception: the detector's boxes in, a fix for the estimator out, with the decision that goes with it.
+
+Per tick (:meth:`Perception.step`):
+
+1. **Lock.** Before the lock, ``acquisition.lock_detections`` frames in a row
+   with a box make it; every box before counts toward it (``acquiring``).
+2. **Gates** (:class:`~controllers.config.DetectionGateConfig`), once the
+   estimator runs: a target closer than ``min_range_m`` (``too_close``: close
+   in, the box centre no longer follows the ship model) and a box that spans
+   the whole image (``overflowing_box``) are skipped.
+3. **The ship's heading** (:class:`~controllers.target_model.ShipModel`): each
+   box (unless too close) feeds the heading-from-shapes posterior.
+4. **Box-centre correction** (``controllers.target_model``): the box centre
+   moves over the ship with the view; the offset the ship model predicts for
+   the estimated position and the plausible headings is removed, so that the
+   fix is the image of the point the estimator tracks. A box whose width or
+   height no plausible heading explains is skipped (``size_mismatch``: part of
+   the ship is hidden, or the box is wrong).
+5. **Decision.** After ``max_skipped_in_a_row`` skips in a row (bar
+   ``too_close``) the next detection is used anyway: the estimate the checks
+   rely on may be what is wrong (``overridden`` names the gate passed over).
+
+What the estimator then does with the fix (fused, innovation gate, ...) is
+decided there; the flight software logs the two together as one
+``/fsw/detection_fusion`` message per detection.
+
+Nothing here imports the truth side of the harness (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.camera_model import CameraMotion, PinholeCamera
+from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
+from controllers.messages import DetectionFix, FusionReason, TargetState
+from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px
+from fwsim import topics
+from fwsim.messages import Measurements
+
+__all__ = ["Perception", "Lock"]
+
+_NAN4 = np.full(4, np.nan)
+_NAN4.setflags(write=False)
+
+
+class Lock:
+    """Acquisition: ``lock_detections`` frames in a row with a box lock the target (for good)."""
+
+    def __init__(self, cfg: AcquisitionConfig):
+        self.cfg = cfg
+        self.streak = 0
+        self.locked = False
+        self.lock_t_s = math.nan
+
+    def observe(self, meas: Measurements) -> bool:
+        """Count this tick's detection; True on the tick the lock is made."""
+        if self.locked or not meas.det_new:
+            return False
+        self.streak = self.streak + 1 if meas.det_valid else 0
+        if self.streak >= self.cfg.lock_detections:
+            self.locked = True
+            self.lock_t_s = meas.t_s
+            return True
+        return False
+
+
+class Perception:
+    """Detections -> :class:`DetectionFix` (corrected box centre + decision); see the module text."""
+
+    def __init__(self, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship: ShipModel,
+                 camera: PinholeCamera, recorder=None):
+        self.cfg = gate
+        self.lock = Lock(acquisition)
+        self.ship = ship
+        self.camera = camera
+        self._record = recorder
+        self.skipped_in_a_row = 0
+        self.last_detection_t_s = math.nan
+
+    @classmethod
+    def from_config(cls, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship_cfg: ShipModelConfig,
+                    camera: PinholeCamera, recorder=None) -> "Perception":
+        return cls(gate, acquisition, ShipModel(ship_cfg, camera, gate.edge_px), camera, recorder)
+
+    def step(self, nav: Measurements, cam: CameraMotion | None, prior: TargetState) -> DetectionFix:
+        """This tick's fix. ``prior``: the estimate brought to now (before this detection)."""
+        lock_now = self.lock.observe(nav)
+        new = bool(nav.det_new and nav.det_valid)
+        if new:
+            self.last_detection_t_s = nav.t_s
+        u, v = nav.det_u_px, nav.det_v_px
+        pred, use, reason, overridden = _NAN4, False, "", ""
+        if new and not self.lock.locked:
+            reason = FusionReason.ACQUIRING
+        elif new and cam is None:
+            reason = FusionReason.NO_CAMERA_POSE
+        elif new and prior.from_estimator and not lock_now:
+            u, v, pred, reason = self._judge(nav, cam, prior)
+            use, overridden = self._decide(reason)
+            reason = "" if use else reason
+        elif new:
+            use = True  # the estimator is down: this detection may (re)start it
+        return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
+                            u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
+                            self.last_detection_t_s)
+
+    # ------------------------------------------------------------------ the checks
+    def _judge(self, nav: Measurements, cam: CameraMotion, prior: TargetState):
+        """(u, v corrected, predicted box, gate reason or "") of a detection while the estimator runs."""
+        gate = self._gate(nav, cam, prior)
+        h = prior.tracked_height_m
+        pos, vel = prior.pos_enu_m, prior.vel_enu_m_s
+        ref = np.array([pos[0], pos[1], pos[2] - h])
+        if gate != FusionReason.TOO_CLOSE:
+            status = self.ship.observe_box(nav.t_s, cam.pos_enu_m, cam.R_enu_from_cam, ref, nav.det_bbox_px, vel,
+                                           prior.vel_std_m_s)
+            if status is not None and self._record is not None:
+                self._record.log(topics.FSW_SHIP_HEADING, status)
+        u, v, pred, why = self._corrected(nav, cam, prior, ref)
+        return u, v, pred, gate or why
+
+    def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
+        """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
+        g = self.cfg
+        if g.min_range_m > 0.0 and np.all(np.isfinite(nav.cam_pos_enu_m)):
+            if float(np.linalg.norm(np.asarray(prior.pos_enu_m, float) - nav.cam_pos_enu_m)) < g.min_range_m:
+                return FusionReason.TOO_CLOSE
+        b = np.asarray(nav.det_bbox_px, dtype=float)
+        c, e = self.camera, g.edge_px
+        if g.skip_overflowing_box and np.all(np.isfinite(b)) and c.width_px > 0 and (
+                (b[0] <= e and b[2] >= c.width_px - 1.0 - e) or (b[1] <= e and b[3] >= c.height_px - 1.0 - e)):
+            return FusionReason.OVERFLOWING_BOX
+        return ""
+
+    def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray):
+        """The box centre with the ship's box-centre offset removed (unchanged when the model is off or does
+        not apply), the predicted box of the most likely heading, and ``size_mismatch`` when no plausible
+        heading explains the box's size (else "")."""
+        tm = self.ship.cfg
+        u, v = nav.det_u_px, nav.det_v_px
+        if not tm.enabled:
+            return u, v, _NAN4, ""
+        g = self.cfg
+        b = np.asarray(nav.det_bbox_px, dtype=float)
+        courses, weights = self.ship.headings(prior.vel_enu_m_s, prior.vel_std_m_s)
+        single = len(courses) == 1
+        boxes, pred = None, _NAN4
+        course_known = self.ship.course(prior.vel_enu_m_s, prior.vel_std_m_s) is not None
+        if (course_known or self.ship.shape.ready) and np.all(np.isfinite(b)):
+            boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+                                       courses)
+            if not np.all(np.isfinite(boxes)):
+                boxes = None
+            else:
+                pred = boxes[int(np.argmax(weights))].copy()
+                sizes = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
+                det = np.array([b[2] - b[0], b[3] - b[1]])
+                off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
+                if np.all(np.any(off, axis=1)):  # no heading the ship may have explains this box
+                    return u, v, pred, FusionReason.SIZE_MISMATCH
+        off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+                                   float(courses[0]) if single else None, prior.tracked_height_m,
+                                   tm.headings_when_unknown, boxes_px=boxes,
+                                   courses_weights=None if single else (courses, weights))
+        if off is None:
+            return u, v, pred, ""
+        return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""
+
+    def _decide(self, reason: str) -> tuple[bool, str]:
+        """(use it, the gate passed over): skip on a gate reason until max_skipped_in_a_row (bar too_close)."""
+        if reason and (reason == FusionReason.TOO_CLOSE or self.skipped_in_a_row < self.cfg.max_skipped_in_a_row):
+            self.skipped_in_a_row += 1
+            return False, ""
+        self.skipped_in_a_row = 0
+        return True, reason

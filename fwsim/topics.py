@@ -1,0 +1,38 @@
+"""Every topic and frame name of a run's log, in one place (docs/LOGS.md says what each carries).
+
+The loop, the flight software's blocks, the metrics, the figures and both
+Rerun views name topics from here; nothing else spells them out.
+"""
+from __future__ import annotations
+
+# -- the harness: the truth, and what the sensors and the camera saw
+UAV_STATE = "/uav/state"  # fwsim.messages.AirframeState (JSON)
+TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames in the world
+UAV_POSE = "/uav/pose"  # foxglove.PoseInFrame
+TARGET_STATE = "/target/state"  # fwsim.target.TargetState
+GIMBAL_STATE = "/gimbal/state"  # fwsim.gimbal.GimbalState
+CAMERA_FRAME = "/camera/frame"  # fwsim.camera.FrameGeometry: what one frame shows of the ship (truth)
+CAMERA_DETECTION = "/camera/detection"  # fwsim.camera.Detection: the detector's output
+CAMERA_IMAGE = "/camera/image"  # foxglove.CompressedImage: rendered frames
+CAMERA_CALIBRATION = "/camera/calibration"  # foxglove.CameraCalibration
+AUTOPILOT_COMMAND = "/autopilot/command"  # RateCommand | AccelCommand from the flight software
+AUTOPILOT_STATUS = "/autopilot/status"  # the inner loops' set-points
+ACTUATORS = "/actuators"  # ActuatorCommand
+EVENTS = "/events"  # foxglove.Log: phase switches, lock, warnings, the end of the run
+
+# -- the flight software (controllers/)
+FSW_STATUS = "/fsw/status"  # FlightSoftwareStatus, every tick
+FSW_GIMBAL_COMMAND = "/fsw/gimbal_command"  # GimbalCommand
+FSW_ESTIMATE = "/fsw/estimate"  # controllers.messages.TargetEstimate
+FSW_ESTIMATOR_STATUS = "/fsw/estimator_status"  # controllers.messages.EstimatorStatus, when a counter changes
+FSW_DETECTION_FUSION = "/fsw/detection_fusion"  # controllers.messages.DetectionFusion, one per detection
+FSW_SHIP_HEADING = "/fsw/ship_heading"  # controllers.target_model.ShipHeadingStatus
+FSW_IBVS = "/fsw/ibvs"  # controllers.ibvs.IbvsStatus
+FSW_NMPC = "/fsw/nmpc"  # controllers.nmpc.NmpcStatus, one per solve
+FSW_BPNG = "/fsw/bpng"  # controllers.bpng.BpngStatus
+
+# -- frames of the transforms
+WORLD_FRAME = "world"
+UAV_FRAME = "uav"
+CAMERA_FRAME_ID = "camera"
+SHIP_FRAME_ID = "ship"
