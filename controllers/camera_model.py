@@ -33,8 +33,8 @@ import numpy as np
 from fwsim.frames import camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
 from fwsim.messages import Measurements
 
-__all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "interaction_matrix",
-           "depth_on_plane"]
+__all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "rotation_matrix",
+           "translation_rates", "interaction_matrix", "depth_on_plane"]
 
 #: rays whose downward component (-d_z / |d|) is below this are treated as not meeting the sea
 MIN_RAY_DOWN = 1e-6
@@ -71,6 +71,33 @@ class PinholeCamera:
         return self.fx * np.asarray(x1, dtype=float) + self.cx, self.fy * np.asarray(x2, dtype=float) + self.cy
 
 
+def rotation_matrix(x1, x2) -> np.ndarray:
+    """L1 (2, 3), the rotational part of the feature kinematics: ``[x1_dot, x2_dot] = L1 w_cam + T``
+    (:func:`feature_rates`); ``(..., 2, 3)`` for arrays."""
+    a = _rotation_entries(np.asarray(x1, dtype=float), np.asarray(x2, dtype=float))
+    return np.stack([np.stack(a[:3], axis=-1), np.stack(a[3:], axis=-1)], axis=-2)
+
+
+def _rotation_entries(x1, x2):
+    """The six entries of L1, row by row (the one place they are written)."""
+    x12 = x1 * x2
+    return x12, -(1.0 + x1 * x1), x2, 1.0 + x2 * x2, -x12, -x1
+
+
+def translation_rates(x1, x2, Z, v_cam) -> np.ndarray:
+    """T = ``[(v_x - x1 v_z)/Z, (v_y - x2 v_z)/Z]``, the feature rates the target's velocity relative to the
+    camera causes (``v_cam``: camera frame; ``Z``: depth along the optical axis). (2,) or (n, 2)."""
+    x1 = np.asarray(x1, dtype=float)
+    x2 = np.asarray(x2, dtype=float)
+    v = np.asarray(v_cam, dtype=float)
+    return np.stack(np.broadcast_arrays(*_translation(x1, x2, Z, v)), axis=-1)
+
+
+def _translation(x1, x2, Z, v):
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    return (vx - x1 * vz) / Z, (vy - x2 * vz) / Z
+
+
 def feature_rates(x1, x2, Z, v_cam, w_cam) -> np.ndarray:
     """Time derivative ``[x1_dot, x2_dot]`` of the normalised image features.
 
@@ -89,8 +116,10 @@ def feature_rates(x1, x2, Z, v_cam, w_cam) -> np.ndarray:
         x1_dot = (v_x - x1 v_z)/Z + x1 x2 w_x - (1 + x1^2) w_y + x2 w_z
         x2_dot = (v_y - x2 v_z)/Z + (1 + x2^2) w_x - x1 x2 w_y - x1 w_z
 
-    i.e. ``[x1_dot, x2_dot] = Lv v + Lw w`` with ``Lv = [[1, 0, -x1], [0, 1, -x2]] / Z``
-    and ``Lw = [[x1 x2, -(1 + x1^2), x2], [1 + x2^2, -x1 x2, -x1]]`` (the paper's L1).
+    i.e. ``[x1_dot, x2_dot] = T + L1 w`` with ``T`` = :func:`translation_rates` (``Lv v`` with
+    ``Lv = [[1, 0, -x1], [0, 1, -x2]] / Z``) and ``L1`` = :func:`rotation_matrix`
+    ``[[x1 x2, -(1 + x1^2), x2], [1 + x2^2, -x1 x2, -x1]]`` (the paper's L1). These three functions are
+    the flight software's only statement of the kinematics: the UKF's process model and IBVS use them.
 
     This replaces the paper's eq. (6) and (8), which have typos:
       * eta_1 = (v_px x1 - v_px) x3 uses v_px twice; it must be
@@ -99,7 +128,7 @@ def feature_rates(x1, x2, Z, v_cam, w_cam) -> np.ndarray:
         (v_pz x2 - v_py) x3;
       * zeta_1 ends in omega_cx x2 and zeta_2 in omega_cx x1 (zeta_2 repeats
         omega_cx); they must be omega_cz x2 and -omega_cz x1, and Omega_2
-        starts with omega_pz where omega_px belongs (compare with Lw above);
+        starts with omega_pz where omega_px belongs (compare with L1 above);
       * the Omega terms with the mount offset m = r_c/p are the lever-arm
         velocity omega_p x r_c/p of V_c = V_p + omega_p x r_c/p written out in
         camera coordinates, plus the airframe's share of the rotation. Here
@@ -113,30 +142,26 @@ def feature_rates(x1, x2, Z, v_cam, w_cam) -> np.ndarray:
     """
     x1 = np.asarray(x1, dtype=float)
     x2 = np.asarray(x2, dtype=float)
-    Z = np.asarray(Z, dtype=float)
-    v = np.asarray(v_cam, dtype=float)
     w = np.asarray(w_cam, dtype=float)
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    t1, t2 = _translation(x1, x2, np.asarray(Z, dtype=float), np.asarray(v_cam, dtype=float))
+    a00, a01, a02, a10, a11, a12 = _rotation_entries(x1, x2)
     wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
-    x12 = x1 * x2
-    x1d = (vx - x1 * vz) / Z + x12 * wx - (1.0 + x1 * x1) * wy + x2 * wz
-    x2d = (vy - x2 * vz) / Z + (1.0 + x2 * x2) * wx - x12 * wy - x1 * wz
+    x1d = t1 + a00 * wx + a01 * wy + a02 * wz
+    x2d = t2 + a10 * wx + a11 * wy + a12 * wz
     return np.stack(np.broadcast_arrays(x1d, x2d), axis=-1)
 
 
 def interaction_matrix(x1: float, x2: float, Z: float) -> np.ndarray:
-    """(2, 6) matrix ``[Lv | Lw]`` with ``[x1_dot, x2_dot] = Lv v + Lw w`` (see :func:`feature_rates`).
+    """(2, 6) matrix ``[Lv | L1]`` with ``[x1_dot, x2_dot] = Lv v + L1 w`` (see :func:`feature_rates`):
+    ``Lv`` is :func:`translation_rates` of the unit velocities, ``L1`` :func:`rotation_matrix`.
 
     Sign convention: ``v`` is the TARGET's velocity relative to the camera
     (``R_cam_from_enu (V_q - V_c)``), so ``Lv`` is minus the classical IBVS
-    ``Lv`` written for the camera's own velocity; ``Lw`` (columns for the
+    ``Lv`` written for the camera's own velocity; ``L1`` (columns for the
     camera's angular velocity w_x, w_y, w_z) is the classical one (paper's L1).
     """
-    x1, x2, Z = float(x1), float(x2), float(Z)
-    return np.array([
-        [1.0 / Z, 0.0, -x1 / Z, x1 * x2, -(1.0 + x1 * x1), x2],
-        [0.0, 1.0 / Z, -x2 / Z, 1.0 + x2 * x2, -x1 * x2, -x1],
-    ])
+    Lv = translation_rates(float(x1), float(x2), float(Z), np.eye(3)).T
+    return np.hstack([Lv, rotation_matrix(float(x1), float(x2))])
 
 
 def depth_on_plane(x1, x2, R_enu_from_cam, cam_z_m, plane_z_m: float = 0.0):

@@ -19,7 +19,7 @@ hence ``edot = L1 omega + T`` with::
     L1 = [[x1 x2, -(1 + x1^2),  x2],        T = [(v_x - x1 v_z) / Z,
           [1 + x2^2,   -x1 x2, -x1]]             (v_y - x2 v_z) / Z]
 
-(this module keeps its own copy of these formulas; ``tests/test_ibvs.py`` checks
+(``controllers.camera_model``'s, the UKF's too; ``tests/test_ibvs.py`` checks
 them against finite differences of the projection).
 
 The law. Everything in ``edot`` that the joints do not cause is "known"
@@ -155,6 +155,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from controllers.config import IbvsConfig
 from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import GimbalCommand, Measurements
@@ -167,32 +168,12 @@ _SWING_EXIT_RAD = math.radians(30.0)  # a swing ends with the pan this close to 
 _SWING_DEADBAND_RAD = math.radians(5.0)  # an unwind needs the azimuth to go this far past a pan limit
 
 
-# --------------------------------------------------------------------------- feature kinematics (own copy)
+# --------------------------------------------------------------------------- feature kinematics
 
-
-def l1_matrix(x1: float, x2: float) -> np.ndarray:
-    """L1 (2x3): rotational part of the feature kinematics, ``sdot = L1 omega_cam + T``."""
-    return np.array([[x1 * x2, -(1.0 + x1 * x1), x2], [1.0 + x2 * x2, -x1 * x2, -x1]])
-
-
-def translational_feature_rates(x1: float, x2: float, depth_m: float, v_rel_cam_m_s) -> np.ndarray:
-    """T = [(v_x - x1 v_z)/Z, (v_y - x2 v_z)/Z]: feature rate from the target's velocity relative to the camera.
-
-    ``v_rel_cam_m_s`` = R_cam_from_enu (V_q - V_c) (camera frame), ``depth_m`` = Z (along the optical axis).
-    """
-    vx, vy, vz = float(v_rel_cam_m_s[0]), float(v_rel_cam_m_s[1]), float(v_rel_cam_m_s[2])
-    inv_z = 1.0 / float(depth_m)
-    return np.array([(vx - x1 * vz) * inv_z, (vy - x2 * vz) * inv_z])
-
-
-def feature_rates(x1: float, x2: float, depth_m: float, v_rel_cam_m_s, omega_cam_rad_s) -> np.ndarray:
-    """[x1dot, x2dot] = L1 omega + T for a target at feature (x1, x2) and depth Z (pinhole model).
-
-    ``omega_cam_rad_s``: camera angular velocity w.r.t. the world, camera frame;
-    ``v_rel_cam_m_s``: target velocity relative to the camera, camera frame.
-    """
-    return l1_matrix(x1, x2) @ np.asarray(omega_cam_rad_s, dtype=float) + translational_feature_rates(
-        x1, x2, depth_m, v_rel_cam_m_s)
+#: The rotational (L1) and translational (T) parts of the feature kinematics: controllers.camera_model's,
+#: the UKF's too (one implementation; ``tests/test_ibvs.py`` checks them against finite differences).
+l1_matrix = rotation_matrix
+translational_feature_rates = translation_rates
 
 
 def joint_jacobian(x1: float, x2: float, tilt_rad: float) -> np.ndarray:

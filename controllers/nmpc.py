@@ -136,13 +136,15 @@ def continuous_dynamics(x, u):
                       up + uq * ca.sin(phi) * ca.tan(theta), uq * ca.cos(phi), -(G / V) * ca.tan(phi) * ct)
 
 
-def _discrete_step(x, u, dt: float, integrator: str):
+def _discrete_step(x, u, dt: float, integrator: str, dynamics=continuous_dynamics):
+    """X_{k+1} from X_k under U_k held for dt: Euler forward (the paper's) or RK4; on casadi symbols
+    (``continuous_dynamics``) or on numbers (``_np_dyn``, the same model in numpy)."""
     if integrator == "euler":
-        return x + dt * continuous_dynamics(x, u)
-    k1 = continuous_dynamics(x, u)
-    k2 = continuous_dynamics(x + 0.5 * dt * k1, u)
-    k3 = continuous_dynamics(x + 0.5 * dt * k2, u)
-    k4 = continuous_dynamics(x + dt * k3, u)
+        return x + dt * dynamics(x, u)
+    k1 = dynamics(x, u)
+    k2 = dynamics(x + 0.5 * dt * k1, u)
+    k3 = dynamics(x + 0.5 * dt * k2, u)
+    k4 = dynamics(x + dt * k3, u)
     return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
@@ -320,13 +322,8 @@ def _np_dyn(x, u):
 
 
 def _np_step(x, u, dt, integrator):
-    if integrator == "euler":
-        return x + dt * _np_dyn(x, u)
-    k1 = _np_dyn(x, u)
-    k2 = _np_dyn(x + 0.5 * dt * k1, u)
-    k3 = _np_dyn(x + 0.5 * dt * k2, u)
-    k4 = _np_dyn(x + dt * k3, u)
-    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    """:func:`_discrete_step` on numbers."""
+    return _discrete_step(x, u, dt, integrator, _np_dyn)
 
 
 class _Buffered:

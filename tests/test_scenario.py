@@ -138,3 +138,11 @@ def test_the_flight_softwares_gimbal_limits_must_lie_within_the_gimbals(override
     s = parse_scenario(text, "g.yaml", {"controllers.ibvs.tilt_limits_rad": [-1.2, 0.5],
                                         "controllers.ibvs.max_pan_rate_rad_s": 1.0})
     assert s.controllers.ibvs.tilt_limits_rad == [-1.2, 0.5]
+
+
+def test_the_readmes_scenario_example_is_a_valid_scenario():
+    from fwsim import PROJECT_ROOT
+    text = (PROJECT_ROOT / "README.md").read_text()
+    example = text.split("### Scenario files", 1)[1].split("```yaml", 1)[1].split("```", 1)[0]
+    s = parse_scenario(example, "README.md")
+    assert s.name == "my_case" and s.controllers.after_lock.use == "nmpc" and s.controllers.estimator.use == "ukf"
