@@ -1,4 +1,4 @@
-"""Target state estimation: the paper's 8-state UKF (section "UKF") on filterpy.
+"""Target state estimation: the paper's 8-state UKF (section "UKF").
 
 State ``x = [x1, x2, r_q (3, world ENU, m), V_q (3, m/s)]``:
 
@@ -33,8 +33,8 @@ perception's :class:`~controllers.messages.DetectionFix` (the box centre
 corrected for the ship's shape) and answers each update with a
 :class:`~controllers.messages.FusionResult` (used, or why not, with the
 innovation and its test ratio); :class:`UnscentedCore` is the
-generic unscented machinery (filterpy + batched process model + covariance
-hygiene), reusable with any ``fx``/``hx`` (the tests run it on a linear case
+generic unscented machinery (filterpy's equations, batched over the sigma
+points, with covariance hygiene), reusable with any ``fx``/``hx`` (the tests run it on a linear case
 against a linear Kalman filter).
 
 Timing: the detection is used at the tick it arrives, with the camera pose of
@@ -48,8 +48,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from controllers.camera_model import CameraMotion, PinholeCamera, depth_on_plane, feature_rates
 from controllers.config import UkfConfig
@@ -81,83 +80,104 @@ def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
 
 
 def _safe_cholesky(M: np.ndarray) -> np.ndarray:
-    """Upper Cholesky factor (filterpy's convention); the diagonal's square root if M is not positive definite.
+    """Upper Cholesky factor (LAPACK potrf, as ``scipy.linalg.cholesky``); the diagonal's square root if M is
+    not positive definite or not finite.
 
-    The fallback only keeps filterpy's sigma-point call from raising; the
-    covariance itself is repaired (and counted) by ``UnscentedCore._guard``.
+    The fallback only keeps the sigma points finite; the covariance itself is repaired (and counted) by
+    ``UnscentedCore._guard``.
     """
-    try:
-        return scipy.linalg.cholesky(M)
-    except (np.linalg.LinAlgError, ValueError):
-        return np.diag(np.sqrt(np.maximum(np.abs(np.nan_to_num(np.diag(M))), _VAR_FLOOR)))
-
-
-class _BatchUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with the process model applied to all sigma points at once: fx(sigmas (m, n), dt, **kw)."""
-
-    def compute_process_sigmas(self, dt, fx=None, **fx_args):
-        fx = self.fx if fx is None else fx
-        sigmas = self.points_fn.sigma_points(self.x, self.P)
-        self.sigmas_f = np.asarray(fx(sigmas, dt, **fx_args), dtype=float).reshape(sigmas.shape)
+    if np.isfinite(M).all():
+        c, info = _dpotrf(M, lower=0, clean=1)
+        if info == 0:
+            return c
+    return np.diag(np.sqrt(np.maximum(np.abs(np.nan_to_num(np.diag(M))), _VAR_FLOOR)))
 
 
 class UnscentedCore:
-    """Generic UKF: filterpy ``UnscentedKalmanFilter`` + ``MerweScaledSigmaPoints`` with covariance hygiene.
+    """Generic UKF: Van der Merwe's scaled sigma points and the unscented transform, with covariance hygiene.
+
+    The equations are filterpy's (``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints``; the same
+    operations in the same order, so the same numbers), without its per-call overhead:
 
     * ``predict(dt, fx_batch, Q, **kw)``: ``fx_batch(sigmas (2n+1, n), dt, **kw) -> (2n+1, n)``;
-    * ``update(z, hx, R, **kw) -> innovation``: ``hx(x (n,), **kw) -> (dim_z,)``; the
-      sigma points are drawn from the current (x, P), so updates may follow
-      each other or an initialisation without a predict in between;
-    * after each step P is symmetrised; if it is not positive definite
-      (Cholesky fails) it is replaced by its diagonal (absolute values,
-      floored) and ``numerical_resets`` counts it. Non-finite state raises
+    * ``update(z, hx_batch, R, **kw) -> innovation``: ``hx_batch(sigmas (2n+1, n), **kw) -> (2n+1, dim_z)``;
+      the sigma points are drawn from the current (x, P), so updates may follow each other or an
+      initialisation without a predict in between;
+    * after each step P is symmetrised; if it is not positive definite (Cholesky fails) it is replaced by
+      its diagonal (absolute values, floored) and ``numerical_resets`` counts it. Non-finite state raises
       ``FloatingPointError``.
     """
 
     def __init__(self, dim_x: int, dim_z: int, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
         if dim_x + kappa <= 0:
             raise ValueError(f"dim_x + kappa must be > 0 (dim_x={dim_x}, kappa={kappa})")
-        points = MerweScaledSigmaPoints(dim_x, alpha=alpha, beta=beta, kappa=kappa, sqrt_method=_safe_cholesky)
-        self._kf = _BatchUKF(dim_x=dim_x, dim_z=dim_z, dt=1.0, hx=None, fx=None, points=points)
+        n = dim_x
+        lambda_ = alpha ** 2 * (n + kappa) - n
+        c = .5 / (n + lambda_)
+        self.Wc = np.full(2 * n + 1, c)
+        self.Wm = np.full(2 * n + 1, c)
+        self.Wc[0] = lambda_ / (n + lambda_) + (1 - alpha ** 2 + beta)
+        self.Wm[0] = lambda_ / (n + lambda_)
+        self._diag_wc = np.diag(self.Wc)
+        self._wc_col = self.Wc[:, None]
+        self._scale = lambda_ + n
+        self.n, self.dim_z = n, dim_z
+        self._x = np.zeros(n)
+        self._P = np.eye(n)
+        self._guarded = False  # P was checked (and symmetrised) since it last changed
         self.numerical_resets = 0
         self.last_nis = math.nan  # normalised innovation squared of the last update over its gate rows
 
     @property
     def x(self) -> np.ndarray:
-        return self._kf.x.copy()
+        return self._x.copy()
 
     @property
     def P(self) -> np.ndarray:
-        return self._kf.P.copy()
+        return self._P.copy()
 
-    @property
-    def filter(self) -> UnscentedKalmanFilter:
-        """The underlying filterpy object (read its S, K, y, ...; do not step it directly)."""
-        return self._kf
+    def sigma_points(self, x: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """(2n+1, n): x, then x plus and minus the rows of the upper Cholesky factor of (lambda + n) P."""
+        n = self.n
+        U = _safe_cholesky(self._scale * P)
+        sigmas = np.empty((2 * n + 1, n))
+        sigmas[0] = x
+        np.subtract(x, -U, out=sigmas[1:n + 1])
+        np.subtract(x, U, out=sigmas[n + 1:])
+        return sigmas
 
     def set_state(self, x, P) -> None:
-        self._kf.x = np.array(x, dtype=float)
-        self._kf.P = np.array(P, dtype=float)
+        self._x = np.array(x, dtype=float)
+        self._P = np.array(P, dtype=float)
+        self._guarded = False
         self._guard()
 
     def predict(self, dt: float, fx_batch, Q, **fx_args) -> None:
         self._guard()
-        self._kf.Q = np.asarray(Q, dtype=float)
-        self._kf.predict(dt=dt, fx=fx_batch, **fx_args)
+        sigmas = self.sigma_points(self._x, self._P)
+        sigmas_f = np.asarray(fx_batch(sigmas, dt, **fx_args), dtype=float).reshape(sigmas.shape)
+        # the unscented transform: x = sum W_m X, P = sum W_c (X - x)(X - x)^T + Q
+        x = np.dot(self.Wm, sigmas_f)
+        y = sigmas_f - x[np.newaxis, :]
+        P = np.dot(y.T, np.dot(self._diag_wc, y))
+        P += Q
+        self._x, self._P, self._guarded = x, P, False
         self._guard()
 
-    def update(self, z, hx, R, gate: tuple[float, list[int]] | None = None, **hx_args) -> np.ndarray | None:
-        """Unscented update (filterpy's equations). ``gate = (threshold, rows)``: if the normalised innovation
-        squared over ``rows`` (``y' S^-1 y``, kept in ``last_nis``) exceeds the threshold (``inf``: never),
-        the update is not applied and None is returned; otherwise the innovation."""
+    def update(self, z, hx_batch, R, gate: tuple[float, list[int]] | None = None,
+               **hx_args) -> np.ndarray | None:
+        """Unscented update. ``gate = (threshold, rows)``: if the normalised innovation squared over ``rows``
+        (``y' S^-1 y``, kept in ``last_nis``) exceeds the threshold (``inf``: never), the update is not applied
+        and None is returned; otherwise the innovation."""
         self._guard()
-        kf = self._kf
-        kf.sigmas_f = kf.points_fn.sigma_points(kf.x, kf.P)
+        x = self._x
+        sigmas = self.sigma_points(x, self._P)
         z = np.asarray(z, dtype=float)
-        sig_h = np.array([hx(s, **hx_args) for s in kf.sigmas_f])
-        zp = kf.Wm @ sig_h
+        sig_h = np.asarray(hx_batch(sigmas, **hx_args), dtype=float)
+        zp = self.Wm @ sig_h
         dz = sig_h - zp
-        S = dz.T @ (kf.Wc[:, None] * dz) + np.asarray(R, dtype=float)
+        wdz = self._wc_col * dz
+        S = dz.T @ wdz + np.asarray(R, dtype=float)
         y = z - zp
         self.last_nis = math.nan
         if gate is not None:
@@ -166,30 +186,27 @@ class UnscentedCore:
             self.last_nis = float(y[rows] @ np.linalg.solve(Sg, y[rows]))
             if self.last_nis > gate[0]:
                 return None
-        Pxz = (kf.sigmas_f - kf.x).T @ (kf.Wc[:, None] * dz)
+        Pxz = (sigmas - x).T @ wdz
         K = np.linalg.solve(S.T, Pxz.T).T  # Pxz S^-1 (S symmetric)
-        kf.x = kf.x + K @ y
-        kf.P = kf.P - K @ S @ K.T
-        kf.y, kf.S, kf.K, kf.z = y, S, K, z.copy()
+        self._x = x + K @ y
+        self._P = self._P - K @ S @ K.T
+        self._guarded = False
         self._guard()
         return y.copy()
 
     def _guard(self) -> None:
-        kf = self._kf
-        if not np.all(np.isfinite(kf.x)):
+        if self._guarded:  # checked since it last changed (symmetrising a symmetric P changes nothing)
+            return
+        if not np.isfinite(self._x).all():
             raise FloatingPointError("UKF state is not finite")
-        P = 0.5 * (kf.P + kf.P.T)
-        ok = bool(np.all(np.isfinite(P)))
-        if ok:
-            try:
-                np.linalg.cholesky(P)
-            except np.linalg.LinAlgError:
-                ok = False
+        P = 0.5 * (self._P + self._P.T)
+        ok = bool(np.isfinite(P).all()) and _dpotrf(P, lower=1, clean=0)[1] == 0
         if not ok:
             d = np.abs(np.nan_to_num(np.diag(P), nan=1.0, posinf=1.0))
             P = np.diag(np.maximum(d, _VAR_FLOOR))
             self.numerical_resets += 1
-        kf.P = P
+        self._P = P
+        self._guarded = True
 
 
 # --------------------------------------------------------------------------- the paper's UKF
@@ -244,16 +261,17 @@ def _fx_batch(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float
     return X
 
 
-def _hx(x: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_ec: np.ndarray, cam_h: float,
-        plane_z: float) -> np.ndarray:
-    """[u, v, r_c] predicted from one state: pinhole + flat-sea depth along the ray through (x1, x2)."""
-    x1, x2 = float(x[0]), float(x[1])
-    d = R_ec[:, 0] * x1 + R_ec[:, 1] * x2 + R_ec[:, 2]
-    Z = (cam_h - plane_z) / max(-float(d[2]), _MIN_RAY_DOWN)
-    out = np.empty(5)
-    out[0] = f_u * x1 + c_u
-    out[1] = f_v * x2 + c_v
-    out[2:5] = x[2:5] - d * Z
+def _hx_batch(X: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_ec: np.ndarray, cam_h: float,
+              plane_z: float) -> np.ndarray:
+    """[u, v, r_c] predicted from each state (rows of X): pinhole + flat-sea depth along the ray through
+    (x1, x2). Row by row the same operations as one state at a time."""
+    x1, x2 = X[:, 0:1], X[:, 1:2]
+    d = R_ec[:, 0] * x1 + R_ec[:, 1] * x2 + R_ec[:, 2]  # (m, 3) rays in the world
+    Z = (cam_h - plane_z) / np.maximum(-d[:, 2:3], _MIN_RAY_DOWN)
+    out = np.empty((X.shape[0], 5))
+    out[:, 0:1] = f_u * x1 + c_u
+    out[:, 1:2] = f_v * x2 + c_v
+    out[:, 2:5] = X[:, 2:5] - d * Z
     return out
 
 
@@ -438,7 +456,7 @@ class UkfTargetEstimator:
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
         gate = (c.innovation_gate if gating else math.inf, [0, 1])
         try:
-            y = self._core.update(z, _hx, R, gate=gate, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
+            y = self._core.update(z, _hx_batch, R, gate=gate, f_u=cam.fx, f_v=cam.fy, c_u=cam.cx, c_v=cam.cy,
                                   R_ec=motion.R_enu_from_cam, cam_h=motion.height_m,
                                   plane_z=c.target_plane_height_m)
         except FloatingPointError:

@@ -38,6 +38,7 @@ from fwsim.camera import Detector
 from fwsim.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
+from fwsim.profiling import BlockTimer, time_flight_software, time_harness
 from fwsim.scenario import Scenario
 from fwsim.sensors import Sensors, rng_for
 from fwsim.world import World
@@ -50,6 +51,7 @@ class RunResult:
     reason: str
     sim_time_s: float
     wall_time_s: float
+    blocks: list | None = None  # fwsim.profiling.BlockTime per block, with run(..., profile=BlockTimer())
 
     @property
     def real_time_factor(self) -> float:
@@ -124,7 +126,7 @@ def _log_truth(log: LogWriter, truth) -> None:
 
 def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress: Callable[[float, float], None] | None = None,
-        listeners: Iterable[Listener] = ()) -> RunResult:
+        listeners: Iterable[Listener] = (), profile: BlockTimer | None = None) -> RunResult:
     """Fly a scenario; always leaves a complete MCAP log at ``log_path``.
 
     ``progress(sim_t_s, duration_s)`` is called about once per simulated
@@ -133,7 +135,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     view); one that raises is detached and the run goes on. Ends at
     ``duration_s``, at sea contact (``stop.min_height_m``), or on an error
     (the log records why). KeyboardInterrupt is logged as 'interrupted' and
-    re-raised.
+    re-raised. ``profile``: a :class:`fwsim.profiling.BlockTimer` that times
+    every block (``RunResult.blocks``).
     """
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -169,6 +172,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             cam = scenario.camera
             detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
             fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
+            if profile is not None:
+                time_harness(profile, sensors=sensors, detector=detector, autopilot=autopilot, world=world, log=log)
+                time_flight_software(profile, fsw)
             log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
             _log_truth(log, truth)
@@ -231,4 +237,6 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
         log.close(status, reason)
     if progress is not None:
         progress(sim_t, scenario.duration_s)
-    return RunResult(log_path, status, reason, sim_t, time.perf_counter() - wall0)
+    wall = time.perf_counter() - wall0
+    blocks = profile.report(wall, sim_t) if profile is not None else None
+    return RunResult(log_path, status, reason, sim_t, wall, blocks)

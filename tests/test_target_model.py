@@ -124,7 +124,7 @@ def test_innovation_gate_rejects_an_outlier_and_keeps_the_state():
     core = UnscentedCore(2, 2, 1.0, 2.0, 0.0)
     core.set_state(np.zeros(2), np.eye(2))
     R = np.eye(2) * 0.01
-    hx = lambda x: x  # noqa: E731
+    hx = lambda X: X  # noqa: E731  (a batch of sigma points)
     assert core.update(np.array([10.0, 0.0]), hx, R, gate=(13.8, [0, 1])) is None
     np.testing.assert_array_equal(core.x, np.zeros(2))
     y = core.update(np.array([1.0, 0.0]), hx, R, gate=(13.8, [0, 1]))

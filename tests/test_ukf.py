@@ -160,7 +160,7 @@ def test_unscented_core_equals_a_linear_kalman_filter_on_a_linear_case(alpha, be
         assert np.allclose(core.P, kf.P, rtol=1e-8, atol=1e-10)
         if k % 7 != 3:  # some steps without a measurement
             kf.update(z)
-            y = core.update(z, lambda x: H @ x, R)
+            y = core.update(z, lambda X: X @ H.T, R)
             assert np.allclose(y, kf.y, rtol=1e-8, atol=1e-10)
         assert np.allclose(core.x, kf.x, rtol=1e-8, atol=1e-10)
         assert np.allclose(core.P, kf.P, rtol=1e-8, atol=1e-10)
