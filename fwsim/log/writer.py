@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import os
+import struct
 import sys
 import time
 import traceback
@@ -14,6 +15,9 @@ from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
@@ -52,6 +56,98 @@ def _ns(t_s: float) -> int:
     """Sim time in seconds -> MCAP nanoseconds (MCAP times are unsigned)."""
     ns = int(t_s * 1e9)
     return ns if ns > 0 else 0
+
+
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
+
+
+class _FastChunkBuilder:
+    """mcap's ChunkBuilder with the message records packed in one ``struct`` call into a bytearray (the
+    library builds each through a BytesIO, five packs and a seek: most of a message's cost)."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+        self.message_indices: dict[int, MessageIndex] = {}
+        self.message_start_time = 0
+        self.message_end_time = 0
+        self.num_messages = 0
+
+    @property
+    def count(self) -> int:
+        return len(self.buf)
+
+    def add(self, channel_id: int, sequence: int, log_time: int, publish_time: int, data: bytes) -> None:
+        if self.num_messages == 0:
+            self.message_start_time = log_time
+        elif log_time < self.message_start_time:
+            self.message_start_time = log_time
+        if log_time > self.message_end_time:
+            self.message_end_time = log_time
+        index = self.message_indices.get(channel_id)
+        if index is None:
+            index = self.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
+        buf = self.buf
+        index.records.append((log_time, len(buf)))
+        self.num_messages += 1
+        buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence, log_time, publish_time)
+        buf += data
+
+    def _record(self, record) -> None:
+        rb = RecordBuilder()
+        record.write(rb)
+        self.buf += rb.end()
+
+    def add_channel(self, channel) -> None:
+        self._record(channel)
+
+    def add_schema(self, schema) -> None:
+        self._record(schema)
+
+    def end(self) -> bytes:
+        out = bytes(self.buf)
+        self.buf = bytearray()
+        return out
+
+    def reset(self) -> None:
+        self.message_end_time = 0
+        self.message_indices.clear()
+        self.message_start_time = 0
+        self.buf = bytearray()
+        self.num_messages = 0
+
+
+class _FastWriter(Writer):
+    """``mcap.writer.Writer`` whose ``add_message`` packs each record in one call (:class:`_FastChunkBuilder`):
+    the same file, byte for byte. It reaches into the writer's private state (its statistics, chunk
+    builder and chunk size); ``fast`` is False, and the library's own path is used, if a future ``mcap``
+    lays them out otherwise."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        names = ("_Writer__statistics", "_Writer__chunk_builder", "_Writer__chunk_size", "_Writer__finalize_chunk")
+        self.fast = all(hasattr(self, n) for n in names) and self._Writer__chunk_builder is not None
+        if self.fast:
+            self._Writer__chunk_builder = _FastChunkBuilder()
+            self._stats = self._Writer__statistics
+            self._chunk = self._Writer__chunk_builder
+            self._chunk_size = self._Writer__chunk_size
+
+    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0):
+        if not self.fast:
+            return super().add_message(channel_id, log_time, data, publish_time, sequence)
+        st = self._stats
+        if st.message_count == 0:
+            st.message_start_time = log_time
+        elif log_time < st.message_start_time:
+            st.message_start_time = log_time
+        if log_time > st.message_end_time:
+            st.message_end_time = log_time
+        st.channel_message_counts[channel_id] += 1
+        st.message_count += 1
+        chunk = self._chunk
+        chunk.add(channel_id, sequence, log_time, publish_time, data)
+        if len(chunk.buf) > self._chunk_size:
+            self._Writer__finalize_chunk()
 
 
 class _FlushingFile:
@@ -140,7 +236,7 @@ class LogWriter:
         self._file = open(self.path, "wb")
         self._closed = False
         try:
-            self._mcap = Writer(
+            self._mcap = _FastWriter(
                 _FlushingFile(self._file),
                 chunk_size=chunk_size,
                 compression=CompressionType.ZSTD,
