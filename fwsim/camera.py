@@ -27,6 +27,14 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from fwsim.gimbal import GimbalConfig
 
 _MISS = 1e30  # embree reports a miss as a huge distance
+# render colours (BGR) and the sun
+_SKY = np.array([235.0, 206.0, 170.0], np.float32)
+_SKY_FADE = np.array([60.0, 70.0, 90.0], np.float32)
+_SEA = np.array([120.0, 80.0, 30.0], np.float32)
+_HAZE = np.array([200.0, 180.0, 150.0], np.float32)
+_HULL = np.array([150.0, 150.0, 160.0], np.float32)
+_AIRFRAME = np.array([60.0, 60.0, 60.0], np.float32)
+_SUN = np.array([0.4, 0.3, 0.86]) / np.linalg.norm([0.4, 0.3, 0.86])
 
 
 class _Strict(BaseModel):
@@ -184,8 +192,9 @@ class RayCaster:
 
         ``ship_rays`` (indices) limits the ship test to rays that can reach it;
         the UAV is tested only on rays that hit the ship (``uav_only_where_ship``)
-        or, otherwise, on rays that can reach the UAV at all: from a camera below
-        the UAV's lowest point, a ray heading down (body z) cannot.
+        or, otherwise, on every ray; either way only on rays that can reach the UAV
+        at all: from a camera below the UAV's lowest point, a ray heading down
+        (body z) cannot.
         """
         n = len(dirs_w)
         d_ship = np.full(n, np.inf)
@@ -193,12 +202,14 @@ class RayCaster:
         if idx.size:
             d_ship[idx] = _first_hit(self._ship, *ship.to_local(origin_w, dirs_w[idx]))
         d_uav = np.full(n, np.inf)
+        below = ((origin_w - uav.t) @ uav.R[:, 2]) > self.uav_lowest_z_m  # the camera below the UAV's lowest point
         if uav_only_where_ship:
             idx = np.flatnonzero(np.isfinite(d_ship))
+            if below and idx.size:  # then only a ray heading up (body z) can meet the UAV
+                idx = idx[dirs_w[idx] @ uav.R[:, 2] < 0.0]
         else:
-            o_body = (origin_w - uav.t) @ uav.R
             idx = np.arange(n)
-            if o_body[2] > self.uav_lowest_z_m:
+            if below:
                 idx = np.flatnonzero(dirs_w @ uav.R[:, 2] < 0.0)
         if idx.size:
             d_uav[idx] = _first_hit(self._uav, *uav.to_local(origin_w, dirs_w[idx]))
@@ -297,27 +308,23 @@ class Camera:
                       & (vv <= box[3] * s + 1))
             ship_rays = np.flatnonzero(inside.ravel())
         d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship, ship_rays=ship_rays, uav_only_where_ship=False)
-        n = len(dirs_w)
         dz = dirs_w[:, 2].astype(np.float32)
-        # sky: lighter toward the horizon
-        elev = np.clip(dz, 0.0, 1.0)[:, None]
-        img = np.array([235.0, 206.0, 170.0], np.float32) - elev * np.array([60.0, 70.0, 90.0], np.float32)
-        # sea plane z = 0, fading into haze with distance
+        # sky: lighter toward the horizon; the sea plane z = 0, fading into haze with distance
         down = dz < -1e-6
-        d_sea = np.full(n, np.inf, np.float32)
-        d_sea[down] = -np.float32(cam_pos[2]) / dz[down]
-        haze = np.clip(d_sea[down] / 4000.0, 0.0, 1.0)[:, None]
-        img[down] = (np.array([120.0, 80.0, 30.0], np.float32) * (1 - haze)
-                     + np.array([200.0, 180.0, 150.0], np.float32) * haze)
-        sun = np.array([0.4, 0.3, 0.86])
-        sun /= np.linalg.norm(sun)
+        with np.errstate(divide="ignore"):
+            d_sea = np.where(down, -np.float32(cam_pos[2]) / dz, np.float32(np.inf))
+        elev = np.clip(dz, 0.0, 1.0)
+        haze = np.clip(d_sea / 4000.0, 0.0, 1.0)
+        # colour planes first (3, n): numpy's loops then run along the pixels, not along 3 channels
+        img = np.where(down, _SEA[:, None] * (1 - haze) + _HAZE[:, None] * haze,
+                       _SKY[:, None] - elev * _SKY_FADE[:, None]).T
         ship_px = np.isfinite(d_ship) & (d_ship < d_sea + 1.0) & ~(d_uav < d_ship)
         if ship_px.any():
-            shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ sun)
-            img[ship_px] = np.array([150.0, 150.0, 160.0], np.float32) * shade[:, None].astype(np.float32)
+            shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ _SUN)
+            img[ship_px] = _HULL * shade[:, None].astype(np.float32)
         uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
-        img[uav_px] = np.array([60.0, 60.0, 60.0], np.float32)
-        out = img.reshape(rc.height_px, rc.width_px, 3).astype(np.uint8)
+        img[uav_px] = _AIRFRAME
+        out = img.reshape(rc.height_px, rc.width_px, 3).astype(np.uint8, order="C")
         if bbox_px is not None and np.all(np.isfinite(bbox_px)):
             s = np.array([rc.width_px / self.cfg.width_px, rc.height_px / self.cfg.height_px] * 2)
             b = np.round(bbox_px * s).astype(int)
