@@ -144,11 +144,10 @@ class Perception:
             return u, v, _NAN4, ""
         g = self.cfg
         b = np.asarray(nav.det_bbox_px, dtype=float)
-        courses, weights = self.ship.headings(prior.vel_enu_m_s, prior.vel_std_m_s)
+        courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         single = len(courses) == 1
         boxes, pred = None, _NAN4
-        course_known = self.ship.course(prior.vel_enu_m_s, prior.vel_std_m_s) is not None
-        if (course_known or self.ship.shape.ready) and np.all(np.isfinite(b)):
+        if (course is not None or self.ship.shape.ready) and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses)
             if not np.all(np.isfinite(boxes)):

@@ -197,6 +197,7 @@ class ShapeHeading:
         self.updates = 0
         self._last_t = -math.inf
         self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
+        self._axis = None  # axis_enu_rad() of the current loglik
 
     def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px) -> bool:
         """Use one detected box (u0, v0, u1, v1); True when it was used."""
@@ -218,7 +219,7 @@ class ShapeHeading:
         self._loglik_bias -= np.log1p(0.5 * r * r)
         self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
         self.updates += 1
-        self._weights = None
+        self._weights = self._axis = None
         self._last_t = t_s
         return True
 
@@ -241,11 +242,13 @@ class ShapeHeading:
 
     def axis_enu_rad(self) -> float:
         """Direction of the ship's fore-aft axis (counter-clockwise from East, in [0, pi)): the most likely
-        heading folded onto its opposite."""
-        w = self.weights()
-        n = len(w)
-        k = int(np.argmax(w[: n // 2] + np.roll(w, n // 2)[: n // 2])) if n % 2 == 0 else int(np.argmax(w))
-        return float(self.courses_enu_rad[k]) % math.pi
+        heading folded onto its opposite (kept until the next update)."""
+        if self._weights is None or self._axis is None:
+            w = self.weights()
+            n = len(w)
+            k = int(np.argmax(w[: n // 2] + np.roll(w, n // 2)[: n // 2])) if n % 2 == 0 else int(np.argmax(w))
+            self._axis = float(self.courses_enu_rad[k]) % math.pi
+        return self._axis
 
     @property
     def ready(self) -> bool:
@@ -296,6 +299,13 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         courses, weights = list(courses_weights[0]), np.asarray(courses_weights[1], dtype=float)
     else:
         courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
+    if boxes_px is not None:  # all at once (the same numbers as one by one below)
+        b = np.asarray(boxes_px, dtype=float)
+        if not np.isfinite(b).all():
+            return None
+        offsets = np.stack([0.5 * (b[:, 0] + b[:, 2]) - uv_tracked[0], 0.5 * (b[:, 1] + b[:, 3]) - uv_tracked[1]],
+                           axis=1)
+        return np.average(offsets, axis=0, weights=weights)
     offsets = []
     for i, course in enumerate(courses):
         box = boxes_px[i] if boxes_px is not None else \
@@ -350,6 +360,9 @@ class ShipModel:
         return course
 
     def headings(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        return self.headings_and_course(vel_enu, vel_std_m_s)[:2]
+
+    def headings_and_course(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, float | None]:
         """The ship's possible headings (bow direction, counter-clockwise from East) and their weights, from
         its estimated velocity (std ``vel_std_m_s``) and the box shapes:
 
@@ -363,20 +376,20 @@ class ShipModel:
         sh = self.cfg.heading_from_shape
         if course is not None:
             if not (self.shape.ready and sh.fuse_with_course):
-                return np.array([course]), np.ones(1)
+                return np.array([course]), np.ones(1), course
             speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
             sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
             w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
             if not np.sum(w) > 0.0:
-                return np.array([course]), np.ones(1)
+                return np.array([course]), np.ones(1), course
             keep = w >= sh.min_weight * np.max(w)
-            return self.shape.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+            return self.shape.courses_enu_rad[keep], w[keep] / np.sum(w[keep]), course
         shaped = self.shape.headings()
         if shaped is not None:
-            return shaped
+            return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
-        return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n)
+        return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float) -> ShipHeadingStatus | None:

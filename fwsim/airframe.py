@@ -68,6 +68,17 @@ def aircraft_hash(name: str, aircraft_dir: Path = AIRCRAFT_DIR) -> str:
     return h.hexdigest()
 
 
+#: JSBSim properties read each tick (state()) and written (step()), in this order
+_STATE = ("position/lat-geod-rad", "position/long-gc-rad", "position/h-sl-meters",
+          "velocities/v-north-fps", "velocities/v-east-fps", "velocities/v-down-fps",
+          "attitude/phi-rad", "attitude/theta-rad", "attitude/psi-rad",
+          "velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec",
+          "accelerations/a-pilot-x-ft_sec2", "accelerations/a-pilot-y-ft_sec2", "accelerations/a-pilot-z-ft_sec2",
+          "fcs/aileron-pos-rad", "fcs/elevator-pos-rad", "fcs/rudder-pos-rad",
+          "velocities/vt-fps", "aero/alpha-rad", "aero/beta-rad", "fcs/motor-throttle-norm")
+_COMMANDS = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm", "fcs/throttle-cmd-norm")
+
+
 class Airframe:
     """One JSBSim aircraft flying in the world ENU frame."""
 
@@ -87,6 +98,8 @@ class Airframe:
             raise AirframeError(f"JSBSim could not load aircraft '{aircraft}' from {xml}")
         fdm.set_dt(self.dt_s)
         self._fdm = fdm
+        self._getters = None  # property nodes' getters of _STATE, made on the first state() (after loading)
+        self._setters = None
         self._mass_kg = fdm["inertia/mass-slugs"] * 14.5939029
         self._wind_enu = np.asarray(wind_enu_m_s, dtype=float)
         self.trim: TrimResult | None = None
@@ -180,46 +193,48 @@ class Airframe:
     # ------------------------------------------------------------------ stepping
     def step(self, act: ActuatorCommand) -> AirframeState:
         """Apply actuator commands and advance JSBSim by one dt."""
-        fdm = self._fdm
-        fdm["fcs/aileron-cmd-norm"] = act.aileron_norm
-        fdm["fcs/elevator-cmd-norm"] = act.elevator_norm
-        fdm["fcs/rudder-cmd-norm"] = act.rudder_norm
-        fdm["fcs/throttle-cmd-norm"] = act.throttle_norm
-        if not fdm.run():
+        set_ail, set_elev, set_rud, set_thr = self._commands()
+        set_ail(act.aileron_norm)
+        set_elev(act.elevator_norm)
+        set_rud(act.rudder_norm)
+        set_thr(act.throttle_norm)
+        if not self._fdm.run():
             raise AirframeError("JSBSim stopped running")
         self.t_s += self.dt_s
         return self.state()
 
+    def _commands(self):
+        """Setters of the four command properties (JSBSim's property nodes, looked up once)."""
+        if self._setters is None:
+            pm = self._fdm.get_property_manager()
+            self._setters = tuple(pm.get_node(n).set_double_value for n in _COMMANDS)
+        return self._setters
+
     def state(self) -> AirframeState:
-        """The truth state in the project's frames."""
-        fdm = self._fdm
-        pos = self.origin.enu_from_geodetic(
-            fdm["position/lat-geod-rad"], fdm["position/long-gc-rad"], fdm["position/h-sl-meters"])
-        vel = enu_from_ned(np.array([fdm["velocities/v-north-fps"], fdm["velocities/v-east-fps"],
-                                     fdm["velocities/v-down-fps"]]) * FT)
-        euler = np.array([fdm["attitude/phi-rad"], fdm["attitude/theta-rad"], fdm["attitude/psi-rad"]])
-        pqr = np.array([fdm["velocities/p-rad_sec"], fdm["velocities/q-rad_sec"], fdm["velocities/r-rad_sec"]])
-        f_body = np.array([fdm["accelerations/a-pilot-x-ft_sec2"], fdm["accelerations/a-pilot-y-ft_sec2"],
-                           fdm["accelerations/a-pilot-z-ft_sec2"]]) * FT
-        surfaces = np.array([fdm["fcs/aileron-pos-rad"], fdm["fcs/elevator-pos-rad"], fdm["fcs/rudder-pos-rad"]])
-        airspeed = fdm["velocities/vt-fps"] * FT
-        st = AirframeState(
+        """The truth state in the project's frames (every property read through its node, once per call)."""
+        if self._getters is None:
+            pm = self._fdm.get_property_manager()
+            self._getters = tuple(pm.get_node(n).get_double_value for n in _STATE)
+        (lat, lon, h, vn, ve, vd, phi, theta, psi, p, q, r, fx, fy, fz, ail, elev, rud, vt, alpha, beta,
+         thr) = [g() for g in self._getters]
+        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(h) and math.isfinite(phi)
+                and math.isfinite(theta) and math.isfinite(psi) and math.isfinite(vt)):
+            raise AirframeError(f"JSBSim state diverged at t = {self.t_s:.3f} s (non-finite position or attitude)")
+        pos = self.origin.enu_from_geodetic(lat, lon, h)
+        return AirframeState(
             t_s=self.t_s,
             pos_enu_m=pos,
-            vel_enu_m_s=vel,
-            euler_ned_rad=euler,
-            body_rates_frd_rad_s=pqr,
-            airspeed_m_s=airspeed,
-            alpha_rad=fdm["aero/alpha-rad"],
-            beta_rad=fdm["aero/beta-rad"],
-            specific_force_frd_m_s2=f_body,
-            throttle_norm=fdm["fcs/motor-throttle-norm"],
-            surfaces_rad=surfaces,
+            vel_enu_m_s=enu_from_ned(np.array([vn, ve, vd]) * FT),
+            euler_ned_rad=np.array([phi, theta, psi]),
+            body_rates_frd_rad_s=np.array([p, q, r]),
+            airspeed_m_s=vt * FT,
+            alpha_rad=alpha,
+            beta_rad=beta,
+            specific_force_frd_m_s2=np.array([fx, fy, fz]) * FT,
+            throttle_norm=thr,
+            surfaces_rad=np.array([ail, elev, rud]),
             height_above_sea_m=float(pos[2]),
         )
-        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(euler)) and math.isfinite(airspeed)):
-            raise AirframeError(f"JSBSim state diverged at t = {self.t_s:.3f} s (non-finite position or attitude)")
-        return st
 
     def property(self, name: str) -> float:
         """Read any JSBSim property (for diagnostics and tests)."""

@@ -166,6 +166,8 @@ class Autopilot:
         self.rudder_from_sideslip = _PI(v("sideslip_kp"), v("sideslip_ki"), -1.0, 1.0)
         self._normal_accel_integ = 0.0
         self._p_sp = 0.0
+        gains = {name: v(name) for name in type(params).model_fields}  # looked up once, not per tick
+        self._gain = gains.__getitem__
 
     # ------------------------------------------------------------------ modes
     def _rates_from_rate_command(self, cmd: RateCommand, st: AirframeState, V: float):
@@ -183,7 +185,7 @@ class Autopilot:
         return p, q, r, math.nan, None, None
 
     def _rates_from_accel_command(self, cmd: AccelCommand, st: AirframeState, V: float):
-        pv = self.p.v
+        pv = self._gain
         vel = st.vel_enu_m_s
         speed = float(np.linalg.norm(vel))
         if speed < 1.0:
@@ -231,7 +233,7 @@ class Autopilot:
 
     # ------------------------------------------------------------------ step
     def step(self, cmd: AutopilotCommand, st: AirframeState) -> tuple[ActuatorCommand, AutopilotStatus]:
-        pv = self.p.v
+        pv = self._gain
         dt = self.dt_s
         V = max(st.airspeed_m_s, 5.0)
         fb = (self.v_ref / V) ** 2  # feedback scaling with dynamic pressure
