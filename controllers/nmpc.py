@@ -74,6 +74,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.cbf import G, cbf_rows, cbf_terms
+from controllers.compiled import Buffered
 from controllers.config import NmpcConfig
 from fwsim.frames import wrap_pi
 from fwsim.messages import Measurements, RateCommand
@@ -326,43 +327,6 @@ def _np_step(x, u, dt, integrator):
     return _discrete_step(x, u, dt, integrator, _np_dyn)
 
 
-class _Buffered:
-    """A CasADi Function evaluated on preallocated numpy arrays (``Function.buffer``: no DM conversions).
-
-    ``inputs[i]`` / ``outputs[i]`` hold the nonzeros (column-major) of input/output i. ``rebind``: bind the
-    arrays again before each evaluation and zero the outputs (the QP plugins consume the output pointers
-    on evaluation and accumulate into them; 15 us).
-    """
-
-    def __init__(self, f: ca.Function, rebind: bool = False):
-        self.f = f
-        self.rebind = rebind
-        self.inputs = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
-        self.outputs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
-        self.buf, self._eval = f.buffer()
-        self._bind()
-
-    def _bind(self) -> None:
-        for i, a in enumerate(self.inputs):
-            self.buf.set_arg(i, memoryview(a))
-        for i, r in enumerate(self.outputs):
-            self.buf.set_res(i, memoryview(r))
-
-    def __call__(self, *args) -> list[np.ndarray]:
-        for dst, src in zip(self.inputs, args):
-            if src is not None:
-                dst[:] = src
-        if self.rebind:
-            for r in self.outputs:
-                r.fill(0.0)
-            self._bind()
-        self._eval()
-        return self.outputs
-
-    def stats(self) -> dict:
-        return self.buf.stats()
-
-
 class Nmpc:
     """The Phase 2 NMPC: ``solve`` at 10 Hz, ``command`` to turn a result into a RateCommand."""
 
@@ -374,7 +338,7 @@ class Nmpc:
         self.problem = pb = _Problem(cfg)
         self._build_solver()
         self._init_bounds()
-        self._eval = _Buffered(pb.eval_fun)
+        self._eval = Buffered(pb.eval_fun)
         self.fallback_count = 0
         self.reset()
 
@@ -384,7 +348,7 @@ class Nmpc:
         N = pb.N
         if self._is_rti:
             qp_fun = pb.qp_function()
-            self._qp_fun = _Buffered(qp_fun)
+            self._qp_fun = Buffered(qp_fun)
             self._h_sp = pb.hessian_sparsity()
             # _HESS_REG on the diagonal entries of the block-diagonal pattern (column-major within blocks)
             self._h_reg = np.concatenate([(_HESS_REG * np.eye(len(b))).reshape(-1) for b in pb.blocks])
@@ -400,7 +364,7 @@ class Nmpc:
                 opts = {"error_on_fail": False, "print_iter": False, "print_header": False,
                         "print_info": False, "max_iter": 1000}
                 qp = ca.conic("nmpc_qp_solver", "qrqp", qp_sp, opts)
-            self._qp = _Buffered(qp, rebind=True)
+            self._qp = Buffered(qp, rebind=True)
         else:
             nlp = {"x": pb.w, "p": pb.p, "f": pb.J, "g": pb.c}
             if cfg.solver == "ipopt":

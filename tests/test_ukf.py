@@ -336,3 +336,44 @@ def test_a_short_burst_of_biased_detections_barely_moves_the_velocity():
     # a nervous process model lets the same burst through into the velocity
     _, nervous = vel_error_after_burst(UkfConfig(target_accel_noise_m_s2=0.2))
     assert nervous > after + 0.3
+
+
+@pytest.mark.parametrize("dt, omega", [(1 / 30, [0.01, -0.02, 0.03]), (0.12, [0.3, 0.1, -0.2]), (1 / 30, [0.0, 0.0, 0.0])])
+def test_the_compiled_process_model_equals_the_numpy_one(dt, omega):
+    """The filter integrates its sigma points with a CasADi function (controllers.compiled): the same RK4 of the
+    same model as the numpy form to rounding, over one substep and several (dt > max_substep_s), rotating or not."""
+    from controllers.ukf import _fx_batch, _fx_compiled
+    rng = np.random.default_rng(3)
+    S = np.column_stack([rng.normal(0, 0.2, (17, 2)), rng.normal([100.0, 50.0, 3.75], 20, (17, 3)),
+                         rng.normal(0, 3, (17, 3))])
+    _, R = F.camera_pose_world(np.array([-500.0, 10.0, 500.0]), np.array([0.1, -0.05, 0.4]), MOUNT, -0.3, -0.6)
+    args = (dt, np.array([-500.0, 10.0, 500.0]), R, np.array([3.0, 22.0, -1.0]), np.array(omega), 0.05)
+    ref, got = _fx_batch(S, *args), _fx_compiled(S, *args)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+    assert not np.array_equal(ref, S)
+
+
+def test_the_compiled_update_equals_the_numpy_one():
+    """The UKF's measurement update is one CasADi function: the same innovation, chi-square statistic, state and
+    covariance as UnscentedCore.update with the batched pinhole + flat-sea measurement model in numpy, to
+    rounding."""
+    from controllers.ukf import _CompiledUpdate, _hx_batch
+    x = np.array([0.05, -0.02, 100.0, 40.0, 3.75, 2.0, 1.0, 0.0])
+    # a covariance as the filter has them (the pixel and r_c rows of S are nearly dependent: S's condition
+    # number is ~1e5 here, so both solves agree to ~1e-11 relative)
+    P = np.diag([1e-4, 1e-4, 25, 25, 1, 4, 4, 0.25])
+    P[2, 5] = P[5, 2] = P[3, 6] = P[6, 3] = 1.0
+    _, R = F.camera_pose_world(np.array([-400.0, 10.0, 480.0]), np.array([0.1, -0.05, 0.4]), MOUNT, -0.3, -0.6)
+    args = dict(f_u=CAM.fx, f_v=CAM.fy, c_u=CAM.cx, c_v=CAM.cy, R_ec=R, cam_h=480.0, plane_z=3.75)
+    r = np.array([4.0, 4.0, 0.6, 0.6, 0.6])
+    ref = UnscentedCore(8, 5, 1.0, 2.0, 0.0)
+    ref.set_state(x, P)
+    z = _hx_batch(x[None, :], **args)[0] + np.array([3.0, -2.0, 0.5, -0.4, 0.2])
+    y_ref = ref.update(z, _hx_batch, np.diag(r), gate=(math.inf, [0, 1]), **args)
+    core = UnscentedCore(8, 5, 1.0, 2.0, 0.0)
+    core.set_state(x, P)
+    y, nis, x_new, P_new = _CompiledUpdate.for_core(core)(core.current_sigma_points(), x, core.P, z, r, **args)
+    np.testing.assert_allclose(y, y_ref, rtol=1e-10, atol=1e-9)
+    assert nis == pytest.approx(ref.last_nis, rel=1e-10)
+    np.testing.assert_allclose(x_new, ref.x, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(P_new, ref.P, rtol=1e-8, atol=1e-10)
