@@ -157,7 +157,7 @@ from typing import NamedTuple
 import numpy as np
 
 from controllers.config import BpngConfig
-from fwsim.frames import dcm_enu_from_frd
+from fwsim.frames import cross3, dcm_enu_from_frd
 from fwsim.messages import AccelCommand
 
 _MIN_RANGE_M = 1e-3  # below: LOS rate undefined, set to 0
@@ -206,6 +206,14 @@ class BpngTerms(NamedTuple):
     saturated: np.ndarray  # the cap was active
 
 
+def _cross(a, b):
+    """a x b over the last axis (fwsim.frames.cross3 for two single vectors: the same products, without
+    np.cross's overhead)."""
+    if a.ndim == 1 and b.ndim == 1:
+        return cross3(a, b)
+    return np.cross(a, b)
+
+
 def _dot(a, b):
     return np.sum(a * b, axis=-1)
 
@@ -237,11 +245,11 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
     # LOS rate Omega = r x r_dot / |r|^2 (0 at the target)
     far = rng >= _MIN_RANGE_M
     rng_safe = np.where(far, rng, 1.0)
-    omega = np.where(far[..., None], np.cross(r, r_dot) / (rng_safe * rng_safe)[..., None], 0.0)
+    omega = np.where(far[..., None], _cross(r, r_dot) / (rng_safe * rng_safe)[..., None], 0.0)
     t_go = np.maximum(rng / np.maximum(speed, _MIN_SPEED_M_S), min_tgo_s)
 
     # angle still to turn and the axis that turns V_p toward V_f
-    c = np.cross(v_hat, vf_hat)
+    c = _cross(v_hat, vf_hat)
     s = _norm(c)
     theta = np.arctan2(s, _dot(v_hat, vf_hat))
     regular = s > _PARALLEL_EPS
@@ -250,8 +258,8 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
     if np.any(anti):
         n = np.where(anti[..., None], _antiparallel_axis(v_hat, r), n)
 
-    a_pn = n_sigma * np.cross(omega, v_p)
-    a_bias = -(n_f * np.minimum(theta, bias_angle_cap_rad) / t_go)[..., None] * np.cross(n, v_p)  # AWAY from V_f
+    a_pn = n_sigma * _cross(omega, v_p)
+    a_bias = -(n_f * np.minimum(theta, bias_angle_cap_rad) / t_go)[..., None] * _cross(n, v_p)  # AWAY from V_f
     a = a_pn + a_bias
     a = a - _dot(a, v_hat)[..., None] * v_hat  # perpendicular to V_p
     mag = _norm(a)
@@ -273,7 +281,7 @@ def _antiparallel_axis(v_hat, r):
     e = e / np.where(ne > 0.0, ne, 1.0)[..., None]
     m = np.where(vertical[..., None], e, m / np.where(vertical, 1.0, nm)[..., None])
     # the bias is -k (n x V): it points along the target's side when n . (V x r) < 0
-    side = _dot(m, np.cross(v_hat, r))
+    side = _dot(m, _cross(v_hat, r))
     return np.where((side > 0.0)[..., None], -m, m)
 
 

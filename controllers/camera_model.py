@@ -74,6 +74,9 @@ class PinholeCamera:
 def rotation_matrix(x1, x2) -> np.ndarray:
     """L1 (2, 3), the rotational part of the feature kinematics: ``[x1_dot, x2_dot] = L1 w_cam + T``
     (:func:`feature_rates`); ``(..., 2, 3)`` for arrays."""
+    if isinstance(x1, (float, np.floating)) and isinstance(x2, (float, np.floating)):  # one feature: quickly
+        a = _rotation_entries(float(x1), float(x2))
+        return np.array([a[:3], a[3:]])
     a = _rotation_entries(np.asarray(x1, dtype=float), np.asarray(x2, dtype=float))
     return np.stack([np.stack(a[:3], axis=-1), np.stack(a[3:], axis=-1)], axis=-2)
 
@@ -87,6 +90,9 @@ def _rotation_entries(x1, x2):
 def translation_rates(x1, x2, Z, v_cam) -> np.ndarray:
     """T = ``[(v_x - x1 v_z)/Z, (v_y - x2 v_z)/Z]``, the feature rates the target's velocity relative to the
     camera causes (``v_cam``: camera frame; ``Z``: depth along the optical axis). (2,) or (n, 2)."""
+    if isinstance(x1, (float, np.floating)) and isinstance(x2, (float, np.floating)) and np.ndim(v_cam) == 1:
+        v = v_cam
+        return np.array(_translation(float(x1), float(x2), float(Z), (float(v[0]), float(v[1]), float(v[2]))))
     x1 = np.asarray(x1, dtype=float)
     x2 = np.asarray(x2, dtype=float)
     v = np.asarray(v_cam, dtype=float)
@@ -94,7 +100,8 @@ def translation_rates(x1, x2, Z, v_cam) -> np.ndarray:
 
 
 def _translation(x1, x2, Z, v):
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    """The two entries of T (the one place they are written); ``v`` an array (..., 3) or a 3-tuple."""
+    vx, vy, vz = (v[0], v[1], v[2]) if isinstance(v, tuple) else (v[..., 0], v[..., 1], v[..., 2])
     return (vx - x1 * vz) / Z, (vy - x2 * vz) / Z
 
 

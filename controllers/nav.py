@@ -45,7 +45,7 @@ import math
 import numpy as np
 
 from controllers.config import NavigationConfig
-from fwsim.frames import dcm_enu_from_frd
+from fwsim.frames import cross3, dcm_enu_from_frd
 from fwsim.messages import Measurements
 
 __all__ = ["NavigationConfig", "Navigation"]
@@ -94,9 +94,9 @@ class Navigation:
                 self._update_wind(v, R, meas)
             w = R @ np.asarray(meas.body_rates_frd_rad_s, float)
             if self._vel is None or meas.nav_t_s != self._fix_t or t - self._t > self.cfg.max_gap_s:
-                self._vel = v + np.cross(w, v - self.wind_enu_m_s) * (t - meas.nav_t_s)
+                self._vel = v + cross3(w, v - self.wind_enu_m_s) * (t - meas.nav_t_s)
             else:
-                self._vel = self._vel + np.cross(w, self._vel - self.wind_enu_m_s) * (t - self._t)
+                self._vel = self._vel + cross3(w, self._vel - self.wind_enu_m_s) * (t - self._t)
             v_now = self._vel
         else:
             v_now = v

@@ -60,6 +60,8 @@ __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel",
 
 #: points closer than this in front of the camera make the projection meaningless: no correction
 _MIN_DEPTH_M = 0.5
+#: predicted boxes for up to this many courses at once come from a compiled function (beyond, numpy is faster)
+_COMPILED_MAX_COURSES = 8
 
 
 class ShipOutline:
@@ -143,7 +145,75 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
 
 def predicted_boxes_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,
                        courses_enu_rad) -> np.ndarray:
-    """:func:`predicted_box_px` for many courses at once: (n, 4), a row of NaN where that function gives None."""
+    """:func:`predicted_box_px` for many courses at once: (n, 4), a row of NaN where that function gives None.
+
+    A few courses (the perception's, every detection) go through one compiled function
+    (:class:`_CompiledBoxes`), many (the heading posterior's 72) through numpy, which is faster for them:
+    :func:`predicted_boxes_px_numpy`, the same numbers to rounding."""
+    c = np.asarray(courses_enu_rad, dtype=float)
+    if c.size == 0 or c.size > _COMPILED_MAX_COURSES:
+        return predicted_boxes_px_numpy(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, c)
+    W = camera.width_px if camera.width_px > 0 else math.inf
+    H = camera.height_px if camera.height_px > 0 else math.inf
+    return _CompiledBoxes.for_outline(outline)(c, (camera.fx, camera.fy, camera.cx, camera.cy, W - 1.0, H - 1.0),
+                                              cam_pos_enu_m, R_enu_from_cam, ref_enu_m)
+
+
+class _CompiledBoxes:
+    """The predicted boxes of one outline as CasADi functions (one per number of courses, built on first use)."""
+
+    _cache: dict[int, "_CompiledBoxes"] = {}
+
+    @classmethod
+    def for_outline(cls, outline: ShipOutline) -> "_CompiledBoxes":
+        key = id(outline)
+        hit = cls._cache.get(key)
+        if hit is None or hit.outline is not outline:
+            hit = cls._cache[key] = cls(outline)
+        return hit
+
+    def __init__(self, outline: ShipOutline):
+        self.outline = outline
+        self._funs: dict[int, object] = {}
+
+    def _function(self, n: int):
+        fun = self._funs.get(n)
+        if fun is None:
+            import casadi as ca
+
+            from controllers.compiled import Buffered
+            pts = self.outline.points_ship_m
+            c, k = ca.SX.sym("c", n), ca.SX.sym("k", 6)  # courses; fx, fy, cx, cy, W - 1, H - 1
+            cam, R, ref = ca.SX.sym("cam", 3), ca.SX.sym("R", 3, 3), ca.SX.sym("ref", 3)
+            rel = ref - cam
+            rows = []
+            for i in range(n):  # one course: the outline turned, moved, seen by the camera
+                cs, sn = ca.cos(c[i]), ca.sin(c[i])
+                e0 = cs * ca.DM(pts[:, 0]) - sn * ca.DM(pts[:, 1]) + rel[0]
+                e1 = sn * ca.DM(pts[:, 0]) + cs * ca.DM(pts[:, 1]) + rel[1]
+                e2 = ca.DM(pts[:, 2]) + rel[2]
+                p = [e0 * R[0, j] + e1 * R[1, j] + e2 * R[2, j] for j in range(3)]  # (enu @ R_ce.T)[:, j]
+                ok = ca.mmin(p[2]) >= _MIN_DEPTH_M
+                zs = ca.if_else(p[2] >= _MIN_DEPTH_M, p[2], 1.0)
+                u = k[0] * p[0] / zs + k[2]
+                v = k[1] * p[1] / zs + k[3]
+                box = ca.vertcat(ca.fmax(ca.mmin(u), 0.0), ca.fmax(ca.mmin(v), 0.0),
+                                 ca.fmin(ca.mmax(u), k[4]), ca.fmin(ca.mmax(v), k[5]))
+                ok = ca.logic_and(ok, ca.logic_and(box[0] <= box[2], box[1] <= box[3]))
+                rows.append(ca.if_else(ok, box, ca.DM.nan(4, 1)))
+            fun = self._funs[n] = Buffered(ca.Function(f"ship_boxes_{n}", [c, k, cam, R, ref],
+                                                       [ca.horzcat(*rows)]))
+        return fun
+
+    def __call__(self, courses, k, cam_pos, R_enu_from_cam, ref) -> np.ndarray:
+        out = self._function(len(courses))(courses, k, cam_pos, np.asarray(R_enu_from_cam, dtype=float).T.ravel(),
+                                           ref)[0]
+        return out.reshape(len(courses), 4).copy()
+
+
+def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,
+                             courses_enu_rad) -> np.ndarray:
+    """:func:`predicted_boxes_px` in numpy."""
     c = np.asarray(courses_enu_rad, dtype=float)
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     pts = outline.points_ship_m

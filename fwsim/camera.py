@@ -161,7 +161,8 @@ class Pose:
     t: np.ndarray
 
     def to_local(self, origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rays into the local frame; ``origins`` may be one point (3,) shared by all rays."""
+        """Rays into the local frame; ``origins`` may be one point (3,) shared by all rays (returned as
+        float32 rows, as the ray caster takes them)."""
         o = (origins - self.t) @ self.R
         if o.ndim == 1:
             o = np.broadcast_to(o.astype(np.float32), dirs.shape)
@@ -197,10 +198,12 @@ class RayCaster:
         (body z) cannot.
         """
         n = len(dirs_w)
-        d_ship = np.full(n, np.inf)
-        idx = np.arange(n) if ship_rays is None else ship_rays
-        if idx.size:
-            d_ship[idx] = _first_hit(self._ship, *ship.to_local(origin_w, dirs_w[idx]))
+        if ship_rays is None:
+            d_ship = _first_hit(self._ship, *ship.to_local(origin_w, dirs_w)) if n else np.full(0, np.inf)
+        else:
+            d_ship = np.full(n, np.inf)
+            if ship_rays.size:
+                d_ship[ship_rays] = _first_hit(self._ship, *ship.to_local(origin_w, dirs_w[ship_rays]))
         d_uav = np.full(n, np.inf)
         below = ((origin_w - uav.t) @ uav.R[:, 2]) > self.uav_lowest_z_m  # the camera below the UAV's lowest point
         if uav_only_where_ship:
@@ -217,11 +220,18 @@ class RayCaster:
 
 
 def _summarise(t_s, u, v, d_ship, d_uav, stride, rays) -> FrameGeometry:
+    """The frame from the rays' first hits. ``u, v``: each ray's pixel, or (columns, rows) of a grid of
+    rays cast row by row (the box is then found from the rows and columns that have a visible pixel)."""
     ship = np.isfinite(d_ship)
     vis = ship & ~(d_uav < d_ship)
     n_ship, n_vis = int(ship.sum()), int(vis.sum())
     area = float(stride * stride)
-    if n_vis:
+    if n_vis and len(u) * len(v) == len(d_ship) and len(u) != len(d_ship):  # a grid: columns u, rows v
+        grid = vis.reshape(len(v), len(u))
+        cols, rows = u[grid.any(axis=0)], v[grid.any(axis=1)]
+        bbox = np.array([cols[0], rows[0], cols[-1], rows[-1]], dtype=float)
+        centre = np.array([(bbox[0] + bbox[2]) / 2, (bbox[1] + bbox[3]) / 2])
+    elif n_vis:
         bbox = np.array([u[vis].min(), v[vis].min(), u[vis].max(), v[vis].max()], dtype=float)
         centre = np.array([(bbox[0] + bbox[2]) / 2, (bbox[1] + bbox[3]) / 2])
     else:
@@ -257,9 +267,11 @@ class Camera:
             return None
         W, H, m = self.cfg.width_px, self.cfg.height_px, self.cfg.roi_margin_px
         if front.all():
-            uv = self.K.project(p_cam)
-            u0, v0 = np.floor(uv.min(axis=0)) - m
-            u1, v1 = np.ceil(uv.max(axis=0)) + m
+            K = self.K
+            u = K.fx * p_cam[:, 0] / p_cam[:, 2] + K.cx  # K.project's pixels
+            v = K.fy * p_cam[:, 1] / p_cam[:, 2] + K.cy
+            u0, v0 = math.floor(u.min()) - m, math.floor(v.min()) - m
+            u1, v1 = math.ceil(u.max()) + m, math.ceil(v.max()) + m
         else:  # the box straddles the camera plane: the whole image may show it
             u0, v0, u1, v1 = 0, 0, W - 1, H - 1
         u0, v0 = max(int(u0), 0), max(int(v0), 0)
@@ -276,13 +288,11 @@ class Camera:
         u0, v0, u1, v1 = box
         area = (u1 - u0 + 1) * (v1 - v0 + 1)
         stride = max(1, math.ceil(math.sqrt(area / self.cfg.max_roi_rays)))
-        us = np.arange(u0, u1 + 1, stride)
-        vs = np.arange(v0, v1 + 1, stride)
-        u = np.tile(us, len(vs)).astype(float)
-        v = np.repeat(vs, len(us)).astype(float)
+        us = np.arange(u0, u1 + 1, stride, dtype=float)  # the grid's columns and rows, cast row by row
+        vs = np.arange(v0, v1 + 1, stride, dtype=float)
         dirs_w = self._ray_table[v0:v1 + 1:stride, u0:u1 + 1:stride].reshape(-1, 3) @ R_enu_cam.T
         d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship)
-        return _summarise(t_s, u, v, d_ship, d_uav, stride, len(u))
+        return _summarise(t_s, us, vs, d_ship, d_uav, stride, len(us) * len(vs))
 
     def detect_full_frame(self, t_s, cam_pos, R_enu_cam, uav: Pose, ship: Pose) -> FrameGeometry:
         """The same measurement from every pixel of the image (the reference for ``detect``)."""

@@ -371,3 +371,19 @@ def test_size_bias_range_must_be_ordered_and_keep_boxes_positive():
             ShapeHeadingConfig(size_bias_range=bad)
     assert len(ShapeHeading(ShapeHeadingConfig(size_bias_range=(0.0, 0.0)), ShipOutline(ShipModelConfig()),
                             PinholeCamera.from_config(CAM_CFG)).size_biases) == 1
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 8, 9, 72])
+def test_the_compiled_boxes_equal_the_numpy_ones(n):
+    """Predicted boxes for a few courses come from a compiled function, for many from numpy: the same boxes to
+    rounding, invalid rows (a point behind the camera, a box off the image) NaN in both."""
+    from controllers.target_model import predicted_boxes_px_numpy
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    for cp, Rc, _ in list(views(0.0))[::9]:
+        for ref in (np.zeros(3), np.array([30.0, -20.0, 0.0]), cp - 10.0 * Rc[:, 2]):
+            courses = np.linspace(0.1, 6.2, n)
+            a = predicted_boxes_px(outline, fsw_cam, cp, Rc, ref, courses)
+            b = predicted_boxes_px_numpy(outline, fsw_cam, cp, Rc, ref, courses)
+            np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+            np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)], rtol=1e-12, atol=1e-9)
