@@ -11,8 +11,12 @@ import platform
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fwsim import SCENARIO_DIR, topics
+
+if TYPE_CHECKING:
+    from fwsim.loop import RunResult
 
 
 def _best_of(fn, repeats: int) -> float:
@@ -145,14 +149,35 @@ def closed_loop(scenario_path: Path, repeats: int = 2) -> tuple[float, float, fl
     return sim, wall, sim / wall
 
 
-def run_bench(quick: bool = False) -> dict[str, float | str]:
+def block_breakdown(scenario, text: str) -> tuple[RunResult, list]:
+    """One profiled run of ``scenario`` (log in a temporary folder): its result and its blocks
+    (:class:`fwsim.profiling.BlockTime`, most expensive first)."""
+    from fwsim.loop import run
+    from fwsim.profiling import BlockTimer
+    with tempfile.TemporaryDirectory() as tmp:
+        r = run(scenario, text, Path(tmp) / "profiled.mcap", profile=BlockTimer())
+    return r, r.blocks
+
+
+def blocks_json(blocks) -> dict[str, dict[str, float]]:
+    """Blocks as ``{name: {share, ms_per_sim_s, seconds, calls}}`` (the ``--json`` form)."""
+    return {b.name: {"share": b.share, "ms_per_sim_s": b.ms_per_sim_s, "seconds": b.seconds, "calls": b.calls}
+            for b in blocks}
+
+
+def run_bench(quick: bool = False) -> dict[str, float | str | dict]:
+    """Every figure of ``fwsim bench``. The paper mission flies unprofiled for its real-time factor (best
+    of two) and once more under a :class:`fwsim.profiling.BlockTimer` for ``paper_mission_blocks``."""
+    from fwsim.scenario import load_scenario
     seconds = 10.0 if quick else 30.0
     repeats = 1 if quick else 3
     raw = jsbsim_raw_steps_per_s(seconds, repeats)
     wrap = wrapper_steps_per_s(seconds, repeats)
     sim, wall, rtf = closed_loop(SCENARIO_DIR / "autopilot_checkout.yaml", 1 if quick else 2)
     det_med, det_p99 = detection_frame_ms(200 if quick else 600)
-    p_sim, p_wall, p_rtf = closed_loop(SCENARIO_DIR / "paper_mission.yaml", 1)
+    p_sim, p_wall, p_rtf = closed_loop(SCENARIO_DIR / "paper_mission.yaml", 1 if quick else 2)
+    paper, paper_text = load_scenario(SCENARIO_DIR / "paper_mission.yaml")
+    profiled, blocks = block_breakdown(paper, paper_text)
     state_us, msg_us = log_writer_us()
     nmpc = nmpc_vs_ipopt(30.0 if quick else 60.0)
     return {
@@ -168,8 +193,10 @@ def run_bench(quick: bool = False) -> dict[str, float | str]:
         "detection_frame_ms_p99": det_p99,
         "paper_mission_sim_s": p_sim,
         "paper_mission_real_time_factor": p_rtf,
+        "paper_mission_profiled_real_time_factor": profiled.real_time_factor,
         "log_write_state_us": state_us,
         "log_write_message_us": msg_us,
         **nmpc,
         "peak_memory_mb": peak_memory_mb(),
+        "paper_mission_blocks": blocks_json(blocks),
     }

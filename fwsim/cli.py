@@ -3,7 +3,8 @@
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
                                            [--rerun spawn|connect[=ADDR]|save=PATH.rrd]
     fwsim metrics runs/<log>.mcap [--json]
-    fwsim bench [--json] [--quick]
+    fwsim run SCENARIO --profile                # plus where the wall time went, block by block
+    fwsim bench [--json] [--quick] [SCENARIO]
     fwsim batch SPEC.yaml [--workers N] [--out DIR] [--resume] [--ray auto|local|ADDRESS]
     fwsim compare BASELINE RUN [--tolerances FILE]
     fwsim plot LOG [--out DIR] [--only a,b]
@@ -85,9 +86,13 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
                   TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
                   console=console, disable=args.quiet, transient=True) as bar:
         task = bar.add_task("run", total=scenario.duration_s)
+        timer = None
+        if getattr(args, "profile", False):
+            from fwsim.profiling import BlockTimer
+            timer = BlockTimer()
         try:
             result = run(scenario, text, log_path, progress=lambda t, T: bar.update(task, completed=t),
-                         listeners=[live] if live is not None else ())
+                         listeners=[live] if live is not None else (), profile=timer)
         except KeyboardInterrupt:
             bar.stop()
             console.print(f"[yellow]interrupted[/]; the log is complete: {log_path}")
@@ -101,7 +106,22 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
     console.print(f"sim time {result.sim_time_s:.1f} s, wall time {result.wall_time_s:.2f} s, "
                   f"real-time factor {result.real_time_factor:.1f}x")
     console.print(f"log: {result.log_path}")
+    if result.blocks is not None:
+        _print_blocks(f"where the time went: {scenario.name}", result.blocks, result.wall_time_s, result.sim_time_s)
     return 0 if result.status == "completed" else 1
+
+
+def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
+    """The per-block wall-time table of a profiled run (fwsim.profiling)."""
+    table = Table(title=title, caption=f"{sim_s:.1f} s simulated in {wall_s:.2f} s of wall time "
+                                       f"({sim_s / wall_s if wall_s > 0 else float('nan'):.1f}x real time, "
+                                       "timers included)")
+    for col in ("block", "share", "ms per sim s", "calls", "us per call"):
+        table.add_column(col, justify="left" if col == "block" else "right")
+    for b in blocks:
+        per_call = f"{1e6 * b.seconds / b.calls:.1f}" if b.calls else ""
+        table.add_row(b.name, f"{100 * b.share:.1f} %", f"{b.ms_per_sim_s:.2f}", str(b.calls or ""), per_call)
+    Console().print(table)
 
 
 def cmd_metrics(args) -> int:
@@ -118,13 +138,31 @@ def cmd_metrics(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fwsim.bench import run_bench
-    console.print("measuring (JSBSim raw, airframe wrapper, closed loops, detection frames) ...")
+    from fwsim.bench import block_breakdown, blocks_json, run_bench
+    if args.scenario is not None:  # one scenario, profiled block by block
+        scenario, text = load_scenario(args.scenario, parse_sets(args.set))
+        console.print(f"flying {scenario.name} ({scenario.duration_s:g} s) with a timer on every block ...")
+        result, blocks = block_breakdown(scenario, text)
+        if args.json:
+            print(json.dumps({"scenario": scenario.name, "status": result.status, "sim_s": result.sim_time_s,
+                              "wall_s": result.wall_time_s, "real_time_factor": result.real_time_factor,
+                              "blocks": blocks_json(blocks)}, indent=2))
+            return 0
+        _print_blocks(f"fwsim bench {args.scenario}", blocks, result.wall_time_s, result.sim_time_s)
+        return 0
+    console.print("measuring (JSBSim raw, airframe wrapper, closed loops, detection frames, "
+                  "the paper mission block by block) ...")
     res = run_bench(quick=args.quick)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
+    blocks = res.pop("paper_mission_blocks")
     _print_table("fwsim bench", res)
+    from fwsim.profiling import BlockTime
+    rows = [BlockTime(k, v["seconds"], v["calls"], v["share"], v["ms_per_sim_s"]) for k, v in blocks.items()]
+    wall = sum(b.seconds for b in rows)
+    _print_blocks("paper mission, block by block (a separate, profiled run)", rows, wall,
+                  res["paper_mission_sim_s"])
     return 0
 
 
@@ -244,6 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
                    help="override a scenario field, e.g. --set seed=3 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--profile", action="store_true",
+                   help="time every block (sensors, the flight software's blocks, autopilot, JSBSim, camera, "
+                        "renders, logging) and print where the wall time went")
     r.add_argument("--rerun", metavar="spawn|connect[=ADDR]|save=PATH.rrd",
                    help="also stream the run to Rerun as it flies (the MCAP log is written as always): "
                         "'spawn' a viewer, 'connect' to a running one (default rerun+http://127.0.0.1:9876/proxy; "
@@ -256,6 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="measure simulation speed on this machine")
     b.add_argument("--json", action="store_true", help="print JSON instead of a table")
     b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
+    b.add_argument("scenario", nargs="?", help="only this scenario, profiled block by block")
+    b.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                   help="override a field of SCENARIO (repeatable)")
     b.set_defaults(func=cmd_bench)
     ba = sub.add_parser("batch", help="fly many runs from a batch spec (process pool or Ray); summary table")
     ba.add_argument("spec", help="batch spec YAML (docs/TOOLS.md)")
