@@ -18,16 +18,9 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import (
-    AfterValidator,
-    BaseModel,
-    ConfigDict,
-    Field,
-    ValidationError,
-    ValidationInfo,
-    field_validator,
-    model_validator,
-)
+from pydantic import AfterValidator, Field, ValidationError, ValidationInfo, field_validator, model_validator
+
+from fwsim.configbase import StrictModel
 
 _PI = math.pi
 _HALF_PI = 0.5 * math.pi
@@ -36,17 +29,15 @@ _TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = StrictModel
 
 
 # --------------------------------------------------------------------------- navigation and acquisition
 
 
-class NavigationConfig(BaseModel):
+class NavigationConfig(StrictModel):
     """How the flight software turns GNSS fixes into its position."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     propagate: bool = Field(True, description="propagate the position with the fix velocity between fixes "
                                               "(false: use the held fix as it is)")
     fix_gain: float = Field(0.1, gt=0, le=1,
@@ -64,8 +55,7 @@ class NavigationConfig(BaseModel):
                              description="a fix older than this when the next arrives: restart from the fix")
 
 
-class AcquisitionConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class AcquisitionConfig(StrictModel):
     pan_deg: list[float] = Field(default_factory=lambda: [-90.0, 90.0], min_length=2, max_length=2,
                                  description="pan sector swept during the search")
     tilt_deg: list[float] = Field(default_factory=lambda: [-15.0, -35.0, -55.0, -75.0], min_length=1,
@@ -74,10 +64,9 @@ class AcquisitionConfig(BaseModel):
     lock_detections: int = Field(5, ge=1, le=300, description="consecutive detections that make a lock")
 
 
-class ReacquireConfig(BaseModel):
+class ReacquireConfig(StrictModel):
     """What the gimbal does when the target is lost after the lock (predictive pointing)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     after_s: float = Field(0.7, ge=0, le=60, description="no detection this long: point at the estimate instead")
     search_after_s: float = Field(20.0, gt=0, le=3600,
                                   description="no detection this long: restart the raster search")
@@ -87,10 +76,9 @@ class ReacquireConfig(BaseModel):
 # --------------------------------------------------------------------------- perception and estimation
 
 
-class DetectionGateConfig(BaseModel):
+class DetectionGateConfig(StrictModel):
     """Which detections the UKF does not use: those a known cause has cut short (the box then lies)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     box_size_tolerance: float = Field(
         0.1, ge=0, le=10,
         description="skip a detection whose box width or height differs from the one the ship model predicts "
@@ -112,11 +100,10 @@ class DetectionGateConfig(BaseModel):
                                          "(the estimate the checks rely on may be what is wrong)")
 
 
-class ShapeHeadingConfig(BaseModel):
+class ShapeHeadingConfig(StrictModel):
     """The ship's heading from the shapes of its detected boxes, for when its course is unknown (a ship
     that lies still or moves too slowly for the estimated velocity to tell): :class:`ShapeHeading`."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = Field(True, description="false: an unknown course stays unknown (the offset is averaged "
                                             "over headings_when_unknown headings)")
@@ -165,11 +152,10 @@ class ShapeHeadingConfig(BaseModel):
                     "course: a ship moves along its axis, so such a velocity is the estimate's error")
 
 
-class ShipModelConfig(BaseModel):
+class ShipModelConfig(StrictModel):
     """The flight software's outline of the ship class (ship frame: x bow, y port, z up, origin at the
     waterline centre)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = Field(True, description="correct each detection's box centre for the ship's shape "
                                             "before the UKF update")
@@ -187,10 +173,9 @@ class ShipModelConfig(BaseModel):
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
 
 
-class UkfConfig(BaseModel):
+class UkfConfig(StrictModel):
     """Tuning of the target UKF (all noise values are 1-sigma)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     pixel_noise_px: float = Field(2.0, gt=0, le=100, description="detector box-centre noise (u, v), px")
     cam_pos_noise_m: float = Field(0.5, gt=0, le=100, description="camera position r_c (GNSS/INS), per axis, m")
@@ -248,10 +233,9 @@ class Orbit(_Strict):
     clockwise: bool = Field(False, description="seen from above")
 
 
-class CbfConfig(BaseModel):
+class CbfConfig(StrictModel):
     """The self-occlusion CBF of the NMPC."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = Field(True, description="impose the CBF input constraints (eq. cbfright/cbfleft)")
     beta: float = Field(1.0, gt=0.0, le=50.0, description="CBF class-K gain beta in h_dot >= -beta h, 1/s")
@@ -264,10 +248,9 @@ class CbfConfig(BaseModel):
                                           description="quadratic penalty on the CBF slack, per (rad/s)^2")
 
 
-class NmpcConfig(BaseModel):
+class NmpcConfig(StrictModel):
     """Tuning of the Phase 2 NMPC (paper eq. NMPC, limits) and its solver."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     horizon_steps: int = Field(50, ge=2, le=400, description="N, prediction = control horizon (steps)")
     step_s: float = Field(0.1, gt=0.0, le=2.0, description="T_s, the NMPC step and the model's Euler step, s")
@@ -323,10 +306,9 @@ class NmpcConfig(BaseModel):
                                 "the velocity (the kinematics' z_dot = V sin(theta) then has no alpha bias)")
 
 
-class SwitchConfig(BaseModel):
+class SwitchConfig(StrictModel):
     """The Phase 2 -> 3 (loiter -> terminal) switch; the paper gives it only loosely."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     enabled: bool = Field(True, description="false: loiter until the run ends")
     radius_tol_m: float = Field(25.0, gt=0, le=1000, description="|distance to the estimate - R| below this")
     altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
@@ -344,10 +326,9 @@ class SwitchConfig(BaseModel):
                     "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
 
 
-class BpngConfig(BaseModel):
+class BpngConfig(StrictModel):
     """Tuning of the terminal guidance (paper section Phase 3)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     n_sigma: float = Field(6.0, gt=0, le=20, description="PN gain N_sigma on Omega x V_p (paper: 6, optimal)")
     n_f: float = Field(2.0, ge=0, le=20, description="bias gain N_f on the impact-angle error (paper: 2, optimal)")
@@ -395,10 +376,9 @@ class BpngConfig(BaseModel):
                     "point), m; 0 aims at the waterline")
 
 
-class IbvsConfig(BaseModel):
+class IbvsConfig(StrictModel):
     """IBVS gimbal controller settings (flight software side; angles in rad)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     lambda_1_s: float = Field(1.5, gt=0.0, le=20.0,
                               description="feedback gain lambda: the image error decays as exp(-lambda t), 1/s")

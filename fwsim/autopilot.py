@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict
 
 from fwsim import AIRCRAFT_DIR
+from fwsim.configbase import StrictModel
 from fwsim.frames import cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand, AutopilotStatus, RateCommand
 
@@ -49,8 +49,7 @@ G_M_S2 = 9.80665
 _NAN3 = np.full(3, np.nan)
 
 
-class Gain(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class Gain(StrictModel):
     value: float
     unit: str
     min: float
@@ -58,10 +57,9 @@ class Gain(BaseModel):
     description: str
 
 
-class AutopilotParams(BaseModel):
+class AutopilotParams(StrictModel):
     """Every gain with unit, range and description (aircraft/<name>/autopilot.yaml)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     ref_airspeed_m_s: Gain
     airspeed_kp: Gain
     airspeed_ki: Gain
@@ -171,7 +169,7 @@ class Autopilot:
 
     # ------------------------------------------------------------------ modes
     def _rates_from_rate_command(self, cmd: RateCommand, st: AirframeState, V: float):
-        phi, theta, _ = st.euler_ned_rad
+        phi, theta, _ = st.euler_ned_rad.tolist()  # Python floats: the same values, cheaper scalar maths
         sphi, cphi = math.sin(phi), math.cos(phi)
         sth, cth = math.sin(theta), math.cos(theta)
         # Euler rates of the paper's model (eq. add_tran, eq. dynamics)
@@ -248,7 +246,7 @@ class Autopilot:
         dp = pv("max_roll_accel_rad_s2") * dt  # the roll-rate set-point slews: a step asks what no aileron gives
         p_sp = self._p_sp = _clip(p_sp, self._p_sp - dp, self._p_sp + dp)
         q_sp = _clip(q_sp, -pv("max_pitch_rate_rad_s"), pv("max_pitch_rate_rad_s"))
-        p, q, r = st.body_rates_frd_rad_s
+        p, q, r = st.body_rates_frd_rad_s.tolist()
 
         aileron = self.aileron_from_roll_rate.step(p_sp - p, dt, ff=pv("roll_rate_ff") * ff * p_sp, scale=fb)
         # positive elevator pitches nose down: the loop works on -elevator
@@ -259,7 +257,7 @@ class Autopilot:
         rudder = -self.rudder_from_sideslip.step(st.beta_rad, dt, ff=yaw_demand, scale=fb)
 
         vel = st.vel_enu_m_s
-        sin_gamma = float(vel[2]) / max(float(np.linalg.norm(vel)), 1.0)
+        sin_gamma = float(vel[2]) / max(math.sqrt(float(vel.dot(vel))), 1.0)  # np.linalg.norm's own sum
         throttle = self.airspeed_from_throttle.step(
             cmd.airspeed_m_s - st.airspeed_m_s, dt, ff=self._throttle_trim + pv("airspeed_climb_ff") * sin_gamma)
 

@@ -22,8 +22,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
+from fwsim.configbase import StrictModel
 from fwsim.gimbal import GimbalConfig
 
 _MISS = 1e30  # embree reports a miss as a huge distance
@@ -37,8 +38,7 @@ _AIRFRAME = np.array([60.0, 60.0, 60.0], np.float32)
 _SUN = np.array([0.4, 0.3, 0.86]) / np.linalg.norm([0.4, 0.3, 0.86])
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = StrictModel
 
 
 class DetectorConfig(_Strict):

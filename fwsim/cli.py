@@ -22,6 +22,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from fwsim.scenario import ScenarioError, load_scenario, parse_sets
+from fwsim.yamlfile import short
 
 console = Console(stderr=True)
 
@@ -38,6 +39,19 @@ def _log_exists(path: Path) -> bool:
         return True
     console.print(f"[red]{path}: no such log file[/]")
     return False
+
+
+def _flight_log(path: Path):
+    """The log at ``path`` if it holds a flight, else None after a one-line error (missing, not MCAP,
+    corrupted, or no UAV state in it)."""
+    from fwsim.log.reader import LogError, read_flight_log
+    if not _log_exists(path):
+        return None
+    try:
+        return read_flight_log(path)
+    except (LogError, OSError) as exc:
+        print(f"error: {short(exc, 300)}", file=sys.stderr)
+        return None
 
 
 def _print_table(title: str, rows: dict) -> None:
@@ -93,10 +107,10 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
         try:
             result = run(scenario, text, log_path, progress=lambda t, T: bar.update(task, completed=t),
                          listeners=[live] if live is not None else (), profile=timer)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             bar.stop()
             console.print(f"[yellow]interrupted[/]; the log is complete: {log_path}")
-            return 130
+            return 128 + int(getattr(exc, "signum", 2))
         except Exception as exc:
             bar.stop()
             console.print(f"[red]run failed[/]: {type(exc).__name__}: {exc}\nthe log says why: {log_path}")
@@ -127,9 +141,14 @@ def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
 def cmd_metrics(args) -> int:
     from fwsim.metrics import compute_metrics
     path = Path(args.log)
-    if not _log_exists(path):
+    log = _flight_log(path)
+    if log is None:
         return 2
-    m = compute_metrics(path)
+    try:
+        m = compute_metrics(log)
+    except (ValueError, KeyError) as exc:  # e.g. a message that does not decode: the file is damaged
+        print(f"error: {path}: not a readable fwsim log: {short(exc, 200)}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(m, indent=2, allow_nan=True))
         return 0
@@ -216,7 +235,11 @@ def cmd_batch(args) -> int:
 
 def cmd_compare(args) -> int:
     from fwsim.compare import compare_files
-    cmp = compare_files(args.baseline, args.run, args.tolerances)
+    try:
+        cmp = compare_files(args.baseline, args.run, args.tolerances)
+    except (ValueError, KeyError) as exc:  # a file that is not a readable log, metrics file or baseline
+        print(f"error: {short(exc, 300)}", file=sys.stderr)
+        return 2
     out = Console()
     if not out.is_terminal:
         out = Console(width=200)
@@ -235,11 +258,12 @@ def cmd_compare(args) -> int:
 def cmd_plot(args) -> int:
     from fwsim.plot import plot_log
     path = Path(args.log)
-    if not _log_exists(path):
+    log = _flight_log(path)
+    if log is None:
         return 2
     out = Path(args.out) if args.out else path.with_name(f"{path.stem}_plots")
     try:
-        res = plot_log(path, out, only=args.only.split(",") if args.only else None)
+        res = plot_log(log, out, only=args.only.split(",") if args.only else None)
     except ValueError as exc:
         console.print(f"[red]error[/]: {exc}")
         return 2
@@ -255,11 +279,12 @@ def cmd_plot(args) -> int:
 def cmd_replay(args) -> int:
     from fwsim.log.rerun_export import ReplayOptions, export_rrd
     path = Path(args.log)
-    if not _log_exists(path):
+    log = _flight_log(path)
+    if log is None:
         return 2
     rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
     try:
-        res = export_rrd(path, rrd, ReplayOptions(marker_scale=args.marker_scale))
+        res = export_rrd(log, rrd, ReplayOptions(marker_scale=args.marker_scale))
     except ValueError as exc:
         console.print(f"[red]error[/]: {exc}")
         return 2
@@ -274,6 +299,8 @@ def cmd_replay(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fwsim", description="Fixed-wing UAV tracking and terminal guidance harness "
                                                           "around JSBSim.")
+    from fwsim import __version__
+    p.add_argument("--version", action="version", version=f"fwsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="fly a scenario and write its MCAP log")
     r.add_argument("scenario", help="scenario YAML file")
@@ -331,12 +358,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before a run started (a run's own interrupt is handled where it flies)
+        print("interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -295,10 +295,10 @@ def load_metrics(path: str | Path) -> MetricsSource:
         raise CompareError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        from fwsim.log import read_log
+        from fwsim.log.reader import read_flight_log
         from fwsim.metrics import compute_metrics
         try:
-            log = read_log(path)
+            log = read_flight_log(path)
         except ValueError as exc:
             raise CompareError(str(exc)) from None
         meta = log.metadata.get("fwsim", {})

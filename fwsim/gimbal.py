@@ -35,7 +35,9 @@ import math
 from dataclasses import dataclass
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from fwsim.configbase import StrictModel
 
 # The pan-tilt kinematics live in fwsim.frames (the flight software needs them too);
 # re-exported here for the harness.
@@ -58,10 +60,9 @@ _PanAngle = Annotated[float, Field(ge=-2.0 * _PI, le=2.0 * _PI)]
 _TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
 
 
-class GimbalConfig(BaseModel):
+class GimbalConfig(StrictModel):
     """Pan-tilt gimbal parameters (paper's gimbal table; DESIGN.md section 5). All angles in rad."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     mount_offset_frd_m: list[_Offset] = Field(
         default_factory=lambda: [0.0, 0.0, 0.10], min_length=3, max_length=3,

@@ -62,28 +62,46 @@ class RunStopped(Exception):
     """The run ended early for a reason the scenario defines (sea contact, ...)."""
 
 
+class Interrupted(KeyboardInterrupt):
+    """The run was stopped by a signal (``signum``: SIGINT for Ctrl-C, SIGTERM from a scheduler); the log is
+    complete and says so."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 class _StopOnSigint:
-    """Turns Ctrl-C into a flag the loop checks once per tick, so an interrupt never lands in the
-    middle of writing the log; a second Ctrl-C interrupts at once. Main thread only."""
+    """Turns Ctrl-C (SIGINT) and SIGTERM (what a batch scheduler, a container or Ray sends) into a flag the
+    loop checks once per tick, so a signal never lands in the middle of writing the log; a second one
+    interrupts at once. Main thread only."""
+
+    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self):
         self.requested = False
-        self._previous = None
+        self.signum = signal.SIGINT
+        self._previous: dict[int, object] = {}
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            self._previous = signal.getsignal(signal.SIGINT)
-            signal.signal(signal.SIGINT, self._handle)
+            for sig in self._SIGNALS:
+                self._previous[sig] = signal.getsignal(sig)
+                signal.signal(sig, self._handle)
         return self
 
     def _handle(self, signum, frame):
         if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
+            raise Interrupted(signum)
+        self.requested, self.signum = True, signum
+
+    @property
+    def description(self) -> str:
+        return "Ctrl-C" if self.signum == signal.SIGINT else signal.Signals(self.signum).name
 
     def __exit__(self, *exc):
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
         return False
 
 
@@ -227,8 +245,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     progress(sim_t, scenario.duration_s)
                 if sigint.requested:
                     _log_truth(log, truth)
-                    log.close("interrupted", f"interrupted (Ctrl-C) at t = {sim_t:.2f} s")
-                    raise KeyboardInterrupt
+                    log.close("interrupted", f"interrupted ({sigint.description}) at t = {sim_t:.2f} s")
+                    raise Interrupted(sigint.signum)
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too

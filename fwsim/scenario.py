@@ -15,19 +15,19 @@ import copy
 from pathlib import Path
 from typing import Annotated, Any
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from controllers.config import Controllers
 from fwsim.camera import CameraConfig
+from fwsim.configbase import StrictModel
 from fwsim.sensors import SensorsConfig
 from fwsim.target import TargetConfig
+from fwsim.yamlfile import load_yaml_text, read_text, short
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = StrictModel
 
 
 class Rates(_Strict):
@@ -131,10 +131,10 @@ def _format_errors(source: str, exc: ValidationError) -> str:
     lines = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
-        msg = err["msg"].removeprefix("Value error, ")
+        msg = short(err["msg"].removeprefix("Value error, "), 200)
         got = ""
         if err["type"] not in ("missing", "extra_forbidden") and "input" in err and not isinstance(err["input"], dict):
-            got = f" (got {err['input']!r})"
+            got = f" (got {short(repr(err['input']), 60)})"
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         lines.append(f"{source}: {loc}: {msg}{got}" if loc else f"{source}: {msg}{got}")
@@ -148,24 +148,43 @@ def parse_sets(items: list[str]) -> dict[str, Any]:
         if "=" not in item:
             raise ScenarioError(f"--set {item}: expected PATH=VALUE (e.g. initial.airspeed_m_s=24)")
         key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
+        key = key.strip()
+        if not key or any(not part for part in key.split(".")):
+            raise ScenarioError(f"--set {short(item)}: expected PATH=VALUE with a dotted PATH (e.g. seed=3)")
+        out[key] = load_yaml_text(value, f"--set {short(key, 60)}", ScenarioError)
     return out
 
 
 def set_path(data: dict, path: str, value: Any) -> None:
-    """Set ``a.b.c`` (list indices allowed: ``script.2.t_s``) in nested YAML data."""
+    """Set ``a.b.c`` (list indices allowed: ``script.2.t_s``) in nested YAML data; ScenarioError naming the
+    path when it cannot lead anywhere (an index past a list's end, a key inside a number ...)."""
     keys = path.split(".")
-    node = data
-    for k in keys[:-1]:
+    node: Any = data
+    for depth, k in enumerate(keys):
+        last = depth == len(keys) - 1
+        here = ".".join(keys[:depth]) or "the file"
         if isinstance(node, list):
-            node = node[int(k)]
+            try:
+                i = int(k)
+                if not -len(node) <= i < len(node):
+                    raise IndexError
+            except (ValueError, IndexError):
+                raise ScenarioError(f"--set {short(path, 60)}: {here} is a list of {len(node)}; "
+                                    f"'{short(k, 20)}' is not one of its indices") from None
+            if last:
+                node[i] = value
+            else:
+                node = node[i]
+        elif isinstance(node, dict):
+            if last:
+                node[k] = value
+            else:
+                if node.get(k) is None:
+                    node[k] = {}
+                node = node[k]
         else:
-            node = node.setdefault(k, {})
-    last = keys[-1]
-    if isinstance(node, list):
-        node[int(last)] = value
-    else:
-        node[last] = value
+            raise ScenarioError(f"--set {short(path, 60)}: {here} is a single value ({short(repr(node), 30)}), "
+                                "it has no fields")
 
 
 def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, Any] | None = None,
@@ -175,13 +194,7 @@ def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, A
     A user's block class named in ``controllers`` (``controllers.blocks``) is imported and checked, from the
     Python path, else the folder of ``source`` (when it is a file) or the current folder; ``check_plugins``
     false skips that (a log's scenario read back for scoring, where the user's module may be missing)."""
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ScenarioError(f"{source}{where}: YAML syntax error: {problem}") from None
+    data = load_yaml_text(text, source, ScenarioError)
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: the file must be a mapping of keys (got {type(data).__name__})")
     if overrides:
@@ -201,5 +214,5 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: no such scenario file")
-    text = path.read_text()
+    text = read_text(path, "scenario file", ScenarioError)
     return parse_scenario(text, str(path), overrides), text

@@ -13,15 +13,15 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from fwsim.configbase import StrictModel
 from fwsim.messages import AirframeState, Measurements
 
 
-class SensorsConfig(BaseModel):
+class SensorsConfig(StrictModel):
     """Noise standard deviations (zero: ideal)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
     position_noise_m: float = Field(0.5, ge=0, le=100, description="GNSS/INS position, per axis")
     velocity_noise_m_s: float = Field(0.05, ge=0, le=10, description="GNSS/INS velocity, per axis")
     attitude_noise_rad: float = Field(0.002, ge=0, le=0.2, description="AHRS roll, pitch, yaw")

@@ -58,8 +58,9 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator
 
+from fwsim.configbase import StrictModel
 from fwsim.frames import wrap_pi
 
 if TYPE_CHECKING:  # trimesh is imported lazily: the scenario schema imports this module
@@ -89,8 +90,7 @@ INTEGRATION_STEP_S = 0.05
 _Coord = Annotated[float, Field(ge=-1e6, le=1e6, allow_inf_nan=False)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = StrictModel
 
 
 class ConstantVelocity(_Strict):

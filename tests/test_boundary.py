@@ -16,7 +16,7 @@ from fwsim.scenario import parse_scenario
 
 TRUTH_MODULES = {"jsbsim", "fwsim.airframe", "fwsim.autopilot", "fwsim.loop", "fwsim.sensors", "fwsim.target",
                  "fwsim.camera", "fwsim.gimbal", "fwsim.world", "fwsim.log", "fwsim.metrics", "fwsim.cli"}
-ALLOWED_FWSIM = {"fwsim.messages", "fwsim.frames", "fwsim.topics", "fwsim"}
+ALLOWED_FWSIM = {"fwsim.messages", "fwsim.frames", "fwsim.topics", "fwsim.configbase", "fwsim"}
 
 
 def imported_modules(path: Path) -> set[str]:

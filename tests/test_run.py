@@ -121,7 +121,8 @@ def test_sea_contact_ends_the_run(tmp_path):
     assert result.sim_time_s < 30
 
 
-def test_sigint_leaves_a_readable_log(tmp_path):
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
     log_path = tmp_path / "int.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "fwsim.cli", "run", str(CHECKOUT), "--quiet",
                              "--log", str(log_path), "--set", "duration_s=3000"],
@@ -129,12 +130,12 @@ def test_sigint_leaves_a_readable_log(tmp_path):
     deadline = time.time() + 60
     while time.time() < deadline and (not log_path.exists() or log_path.stat().st_size < 50_000):
         time.sleep(0.1)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     assert "interrupted" in err
     log = read_log(log_path)
-    assert log.status == "interrupted" and not log.truncated
+    assert log.status == "interrupted" and not log.truncated and word in log.reason
     assert log.topics["/uav/state"] > 30
 
 

@@ -47,6 +47,7 @@ class RunLog:
         self.attachments: dict[str, bytes] = {}
         self.truncated = False
         self.truncation_error = ""
+        self.corrupted = False  # a record that does not parse (not just a file cut short)
         self.status = "unknown"
         self.reason = ""
         self.scenario_text = ""
@@ -200,6 +201,10 @@ class _Truncated(Exception):
     pass
 
 
+class LogError(ValueError):
+    """A file that is not a readable fwsim log (not MCAP, corrupted, or holding no flight)."""
+
+
 def _decompress(chunk: Chunk) -> bytes:
     if chunk.compression == "zstd":
         return zstandard.ZstdDecompressor().decompress(
@@ -264,7 +269,7 @@ def read_log(path: str | os.PathLike) -> RunLog:
     with open(log.path, "rb") as f:
         magic = f.read(len(MCAP0_MAGIC))
         if not magic or magic != MCAP0_MAGIC[: len(magic)]:
-            raise ValueError(f"{log.path} is not an MCAP file")
+            raise LogError(f"{log.path} is not an MCAP file")
         try:
             if len(magic) < len(MCAP0_MAGIC):
                 raise _Truncated("inside the leading magic")
@@ -286,8 +291,11 @@ def read_log(path: str | os.PathLike) -> RunLog:
                     _read_chunk(log, body)
                 else:
                     _add_record(log, opcode, body)
-        except Exception as e:  # noqa: BLE001 - whatever breaks at the cut ends the read
-            log.truncation_error = f"{type(e).__name__}: {e}"
+        except _Truncated as e:
+            log.truncation_error = f"cut off {e}"
+        except Exception as e:  # noqa: BLE001 - a record that does not parse: the file is damaged there
+            log.truncation_error = f"corrupted at byte {f.tell()}: {type(e).__name__}: {e}"
+            log.corrupted = True
     log.truncated = not footer_seen
     # Channels whose messages were all lost in the cut still show (count 0).
     for topic in log.topics:
@@ -299,10 +307,23 @@ def read_log(path: str | os.PathLike) -> RunLog:
     else:
         log.status = "unknown"
         log.reason = "no run_status record (file cut off before the writer closed it)"
-    effective = log.attachments.get("scenario_effective.yaml")
-    if effective is not None:
-        log.effective_scenario_text = effective.decode("utf-8")
-    scenario = log.attachments.get(SCENARIO_ATTACHMENT)
-    if scenario is not None:
-        log.scenario_text = scenario.decode("utf-8")
+    try:
+        effective = log.attachments.get("scenario_effective.yaml")
+        if effective is not None:
+            log.effective_scenario_text = effective.decode("utf-8")
+        scenario = log.attachments.get(SCENARIO_ATTACHMENT)
+        if scenario is not None:
+            log.scenario_text = scenario.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise LogError(f"{log.path}: corrupted (its scenario attachment is not UTF-8 text: {exc.reason})") from None
+    return log
+
+
+def read_flight_log(path: str | os.PathLike) -> RunLog:
+    """:func:`read_log` for the tools that score or show a flight: LogError (one line) unless the file holds
+    at least one UAV state."""
+    log = read_log(path)
+    if not log.topics.get("/uav/state"):
+        why = log.truncation_error or "no /uav/state messages"
+        raise LogError(f"{log.path}: holds no flight to read ({why})")
     return log

@@ -1,0 +1,121 @@
+"""Bad input of every kind ends in one short line and exit code 2, never a traceback (scenario files, --set,
+log files)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from fwsim import SCENARIO_DIR
+from fwsim.cli import main
+from fwsim.scenario import ScenarioError, load_scenario, parse_scenario, parse_sets
+from fwsim.yamlfile import MAX_VALUES, load_yaml_text
+
+PAPER = SCENARIO_DIR / "paper_mission.yaml"
+PAPER_TEXT = PAPER.read_text()
+
+
+def _bomb(levels: int = 9) -> str:
+    text = "a: &a [" + ", ".join(['"lol"'] * 9) + "]\n"
+    prev = "a"
+    for name in "bcdefghijk"[:levels]:
+        text += f"{name}: &{name} [" + ", ".join([f"*{prev}"] * 9) + "]\n"
+        prev = name
+    return text
+
+
+BAD_YAML = {
+    "deep nesting": ("a: " + "[" * 3000 + "]" * 3000, "nested too deeply"),
+    "huge integer": ("seed: " + "9" * 5000, "bad value"),
+    "bad !!float": ("seed: !!float abc", "bad value"),
+    "bad !!bool": ("seed: !!bool 3", "bad value"),
+    "python tag": ("name: !!python/object/apply:os.system [ls]", "YAML error"),
+    "duplicate key": ("name: a\nname: b", "appears twice"),
+    "alias bomb": (_bomb(), "too large"),
+    "syntax": ("seed: [1", "YAML syntax error"),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_YAML))
+def test_bad_yaml_is_one_short_line(name):
+    text, words = BAD_YAML[name]
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "x.yaml")
+    msg = str(exc.value)
+    assert words in msg and "\n" not in msg and len(msg) < 300 and msg.startswith("x.yaml")
+
+
+def test_a_date_is_text_and_merge_keys_still_work():
+    assert load_yaml_text("name: 2024-02-30", "x", ScenarioError) == {"name": "2024-02-30"}
+    data = load_yaml_text("base: &b {x: 1, y: 2}\nother:\n  <<: *b\n  y: 3\n", "x", ScenarioError)
+    assert data["other"] == {"x": 1, "y": 3}
+
+
+def test_aliases_below_the_limit_load():
+    data = load_yaml_text(_bomb(levels=3), "x", ScenarioError)  # 9**4 values: well under the limit
+    assert len(data["d"]) == 9 and 9 ** 5 < MAX_VALUES
+
+
+def test_non_utf8_file(tmp_path):
+    p = tmp_path / "latin.yaml"
+    p.write_bytes(b"name: caf\xe9\n")
+    with pytest.raises(ScenarioError, match="not UTF-8"):
+        load_scenario(p)
+
+
+@pytest.mark.parametrize("override, words", [
+    ({"world.wind_enu_m_s": [float("nan"), 0, 0]}, "world.wind_enu_m_s.0: Input should be a finite number"),
+    ({"camera.detector.latency_s": float("inf")}, "finite number"),
+    ({"initial.airspeed_m_s": True}, "airspeed_m_s: a number is expected here, not true/false"),
+    ({"seed": False}, "seed: a number is expected"),
+    ({"initial.pos_enu_m": [0, True, 100]}, "not true/false"),
+])
+def test_non_finite_numbers_and_booleans_are_rejected(override, words):
+    with pytest.raises(ScenarioError, match=words.replace(".", r"\.")):
+        load_scenario(PAPER, override)
+
+
+def test_booleans_still_go_where_booleans_belong():
+    s, _ = load_scenario(PAPER, {"controllers.switch.enabled": False})
+    assert s.controllers.switch.enabled is False
+
+
+def test_long_inputs_are_not_echoed():
+    text = PAPER_TEXT.replace("name: paper_mission", "name: paper_mission\nseed: '" + "y" * 100_000 + "'", 1)
+    text = text.replace("seed: 7\n", "", 1)
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(text, "x.yaml")
+    assert len(str(exc.value)) < 400
+
+
+@pytest.mark.parametrize("item, words", [
+    ("seed=[1", "YAML syntax error"),
+    ("initial.pos_enu_m.7=1", "is a list of 3"),
+    ("name.x=1", "has no fields"),
+    ("=3", "dotted PATH"),
+    ("a..b=1", "dotted PATH"),
+    ("seed", "expected PATH=VALUE"),
+])
+def test_bad_set_items(item, words):
+    with pytest.raises(ScenarioError, match=words):
+        load_scenario(PAPER, parse_sets([item]))
+
+
+def test_cli_bad_inputs_exit_2_without_a_traceback(tmp_path, capsys):
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)  # the magic, then noise
+    text = tmp_path / "text.mcap"
+    text.write_text("hello\n")
+    cases = [["run", str(PAPER), "--set", "name.x=1"], ["metrics", str(junk)], ["metrics", str(text)],
+             ["plot", str(junk)], ["replay", str(junk)], ["compare", str(junk), str(text)]]
+    for argv in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("error") and "Traceback" not in err and len(err.splitlines()) == 1, (argv, err)
+
+
+def test_version():
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "--version"], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0 and proc.stdout.startswith("fwsim ")
