@@ -61,6 +61,13 @@ def _ns(t_s: float) -> int:
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
 
 
+def _time_range(start: int, end: int, count: int, log_time: int) -> tuple[int, int]:
+    """(start, end) of a message time range after one more message at ``log_time`` (``count`` before it)."""
+    if count == 0 or log_time < start:
+        start = log_time
+    return start, (log_time if log_time > end else end)
+
+
 class _FastChunkBuilder:
     """mcap's ChunkBuilder with the message records packed in one ``struct`` call into a bytearray (the
     library builds each through a BytesIO, five packs and a seek: most of a message's cost)."""
@@ -77,12 +84,8 @@ class _FastChunkBuilder:
         return len(self.buf)
 
     def add(self, channel_id: int, sequence: int, log_time: int, publish_time: int, data: bytes) -> None:
-        if self.num_messages == 0:
-            self.message_start_time = log_time
-        elif log_time < self.message_start_time:
-            self.message_start_time = log_time
-        if log_time > self.message_end_time:
-            self.message_end_time = log_time
+        self.message_start_time, self.message_end_time = _time_range(
+            self.message_start_time, self.message_end_time, self.num_messages, log_time)
         index = self.message_indices.get(channel_id)
         if index is None:
             index = self.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
@@ -136,12 +139,8 @@ class _FastWriter(Writer):
         if not self.fast:
             return super().add_message(channel_id, log_time, data, publish_time, sequence)
         st = self._stats
-        if st.message_count == 0:
-            st.message_start_time = log_time
-        elif log_time < st.message_start_time:
-            st.message_start_time = log_time
-        if log_time > st.message_end_time:
-            st.message_end_time = log_time
+        st.message_start_time, st.message_end_time = _time_range(
+            st.message_start_time, st.message_end_time, st.message_count, log_time)
         st.channel_message_counts[channel_id] += 1
         st.message_count += 1
         chunk = self._chunk
