@@ -236,7 +236,7 @@ def cmd_batch(args) -> int:
 def cmd_compare(args) -> int:
     from fwsim.compare import compare_files
     try:
-        cmp = compare_files(args.baseline, args.run, args.tolerances)
+        cmp = compare_files(args.baseline, args.run, args.tolerances, any_runs=args.any)
     except (ValueError, KeyError) as exc:  # a file that is not a readable log, metrics file or baseline
         print(f"error: {short(exc, 300)}", file=sys.stderr)
         return 2
@@ -342,6 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("baseline", help="baseline: a log (.mcap), metrics (.json) or baseline file (.yaml)")
     c.add_argument("run", help="run: a log (.mcap), metrics (.json) or baseline file (.yaml)")
     c.add_argument("--tolerances", help="YAML of per-metric tolerances (overrides the baseline's own)")
+    c.add_argument("--any", action="store_true",
+                   help="compare even when the two flew different scenarios, seeds or durations")
     c.set_defaults(func=cmd_compare)
     pl = sub.add_parser("plot", help="PNG figures from a log")
     pl.add_argument("log", help="MCAP log of a run")

@@ -273,6 +273,32 @@ class MetricsSource:
     metrics: dict[str, Any]
     tolerances: dict[str, Tolerance] = field(default_factory=dict)
     label: str = ""
+    flown: dict[str, Any] | None = None  # what was flown (scenario name, seed, duration), when the source says
+
+
+def _flown(scenario_data: Any) -> dict[str, Any] | None:
+    """The identity of a flight for comparability: scenario name, seed and duration (None if unknown)."""
+    if not isinstance(scenario_data, dict):
+        return None
+    return {"scenario": scenario_data.get("name"), "seed": scenario_data.get("seed"),
+            "duration_s": scenario_data.get("duration_s")}
+
+
+def _describe_flown(f: dict[str, Any]) -> str:
+    return f"{f['scenario']} seed {f['seed']} for {f['duration_s']:g} s" if isinstance(
+        f.get("duration_s"), (int, float)) else f"{f['scenario']} seed {f['seed']}"
+
+
+def check_comparable(base: MetricsSource, run: MetricsSource) -> None:
+    """CompareError (one line) when both sources say what they flew and it is not the same flight."""
+    if base.flown is None or run.flown is None or base.flown == run.flown:
+        return
+    hints = [f"{k}={base.flown[k]:g}" if isinstance(base.flown[k], float) else f"{k}={base.flown[k]}"
+             for k in ("seed", "duration_s") if base.flown[k] != run.flown[k]]
+    hint = f" (fly it with --set {' --set '.join(hints)})" if hints and base.flown["scenario"] == run.flown[
+        "scenario"] else ""
+    raise CompareError(f"not comparable: the baseline is {_describe_flown(base.flown)}, the run "
+                       f"{_describe_flown(run.flown)}{hint}; --any compares them anyway")
 
 
 def _clean(metrics: dict[str, Any], source: str) -> dict[str, Any]:
@@ -303,7 +329,13 @@ def load_metrics(path: str | Path) -> MetricsSource:
             raise CompareError(str(exc)) from None
         meta = log.metadata.get("fwsim", {})
         label = f"{path} (scenario {meta.get('scenario', '?')}, seed {meta.get('seed', '?')})"
-        return MetricsSource(compute_metrics(log), {}, label)
+        flown = None
+        if log.effective_scenario_text:
+            try:
+                flown = _flown(yaml.safe_load(log.effective_scenario_text))
+            except yaml.YAMLError:
+                flown = None
+        return MetricsSource(compute_metrics(log), {}, label, flown)
     if suffix == ".json":
         try:
             data = json.loads(path.read_text())
@@ -316,7 +348,7 @@ def load_metrics(path: str | Path) -> MetricsSource:
         return MetricsSource(_clean(data, str(path)), {}, str(path))
     if suffix in (".yaml", ".yml"):
         b = load_baseline(path)
-        return MetricsSource(b.metrics, b.tolerances, str(path))
+        return MetricsSource(b.metrics, b.tolerances, str(path), _baseline_flown(b))
     raise CompareError(f"{path}: unsupported file type {suffix!r} (use .mcap, .json or a baseline .yaml)")
 
 
@@ -329,9 +361,23 @@ def load_tolerance_file(path: str | Path) -> dict[str, Tolerance]:
     return parse_tolerances(data, str(path))
 
 
-def compare_files(baseline: str | Path, run: str | Path, tolerances: str | Path | None = None) -> Comparison:
-    """``fwsim compare``: the baseline's own tolerances, overridden per metric by ``tolerances``."""
+def _baseline_flown(b: "Baseline") -> dict[str, Any] | None:
+    """What a baseline's run flies: its scenario file with its overrides (None if that file is gone)."""
+    from fwsim.scenario import ScenarioError, load_scenario
+    try:
+        scenario, _ = load_scenario(b.scenario, b.overrides)
+    except ScenarioError:
+        return None
+    return _flown(scenario.model_dump(mode="json"))
+
+
+def compare_files(baseline: str | Path, run: str | Path, tolerances: str | Path | None = None,
+                  any_runs: bool = False) -> Comparison:
+    """``fwsim compare``: the baseline's own tolerances, overridden per metric by ``tolerances``. Unless
+    ``any_runs``, two sources that say what they flew must have flown the same scenario, seed and duration."""
     base, new = load_metrics(baseline), load_metrics(run)
+    if not any_runs:
+        check_comparable(base, new)
     tol = dict(base.tolerances)
     if tolerances is not None:
         tol.update(load_tolerance_file(tolerances))
