@@ -305,6 +305,16 @@ class NmpcConfig(StrictModel):
         "attitude", description="theta of the model from the AHRS pitch (paper) or the flight-path angle of "
                                 "the velocity (the kinematics' z_dot = V sin(theta) then has no alpha bias)")
 
+    @model_validator(mode="after")
+    def _airspeed_bounds(self):
+        if not self.airspeed_min_m_s < self.airspeed_max_m_s:
+            raise ValueError(f"airspeed_min_m_s ({self.airspeed_min_m_s:g}) must be below airspeed_max_m_s "
+                             f"({self.airspeed_max_m_s:g})")
+        if not self.airspeed_min_m_s <= self.airspeed_ref_m_s <= self.airspeed_max_m_s:
+            raise ValueError(f"airspeed_ref_m_s ({self.airspeed_ref_m_s:g}) must lie within [airspeed_min_m_s, "
+                             f"airspeed_max_m_s] = [{self.airspeed_min_m_s:g}, {self.airspeed_max_m_s:g}]")
+        return self
+
 
 class SwitchConfig(StrictModel):
     """The Phase 2 -> 3 (loiter -> terminal) switch; the paper gives it only loosely."""

@@ -30,6 +30,10 @@ Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 _Strict = StrictModel
 
 
+#: how far from the world origin a run may start (see Scenario._within_the_flat_earth_mapping)
+MAX_RANGE_FROM_ORIGIN_M = 20_000.0
+
+
 class Rates(_Strict):
     sim_hz: float = Field(120.0, gt=0, le=2000, description="JSBSim and autopilot rate")
     flight_software_hz: float = Field(30.0, gt=0, le=1000, description="rate of the flight software step")
@@ -48,6 +52,21 @@ class Aircraft(_Strict):
     name: str = Field("fwuav", description="folder under aircraft/")
     autopilot_gains: dict[str, float] = Field(default_factory=dict,
                                               description="overrides of aircraft/<name>/autopilot.yaml values")
+
+    @model_validator(mode="after")
+    def _known(self):
+        """The aircraft exists (aircraft/<name>/ with its JSBSim file) and every gain named is one of its
+        autopilot's, within that gain's range."""
+        from fwsim import AIRCRAFT_DIR
+        known = sorted(p.name for p in AIRCRAFT_DIR.iterdir() if (p / f"{p.name}.xml").is_file())
+        if self.name not in known:
+            raise ValueError(f"name: no aircraft '{short(self.name, 40)}' under aircraft/ (known: {', '.join(known)})")
+        from fwsim.autopilot import load_autopilot_params
+        try:
+            load_autopilot_params(self.name, overrides=self.autopilot_gains)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ValueError(f"autopilot_gains: {short(exc, 160)}") from None
+        return self
 
 
 class World(_Strict):
@@ -106,6 +125,19 @@ class Scenario(_Strict):
             if a > b + 1e-9:
                 raise ValueError(f"controllers.ibvs.{name}: {a:g} is faster than the gimbal's "
                                  f"camera.gimbal.{name} {b:g}")
+        return self
+
+    @model_validator(mode="after")
+    def _within_the_flat_earth_mapping(self):
+        """The start within MAX_RANGE_FROM_ORIGIN_M of the world origin, horizontally: the ENU <-> geodetic
+        mapping (fwsim/frames.py, GeoOrigin) scales latitude and longitude about the origin, so distances
+        distort with distance from it (1.6e-4 per km of northing at mid latitudes)."""
+        x, y, _ = self.initial.pos_enu_m
+        r = (x * x + y * y) ** 0.5
+        if r > MAX_RANGE_FROM_ORIGIN_M:
+            raise ValueError(f"initial.pos_enu_m: {r / 1000:.0f} km from the world origin, beyond the flat-earth "
+                             f"mapping's {MAX_RANGE_FROM_ORIGIN_M / 1000:.0f} km; move world.origin_lat_deg / "
+                             "origin_lon_deg near the start instead")
         return self
 
     @model_validator(mode="after")

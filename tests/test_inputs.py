@@ -76,6 +76,19 @@ def test_non_finite_numbers_and_booleans_are_rejected(override, words):
         load_scenario(PAPER, override)
 
 
+@pytest.mark.parametrize("override, words", [
+    ({"controllers.nmpc.airspeed_min_m_s": 30, "controllers.nmpc.airspeed_max_m_s": 20}, "must be below"),
+    ({"controllers.nmpc.airspeed_ref_m_s": 40}, "must lie within"),
+    ({"aircraft.name": "nope"}, "no aircraft 'nope'"),
+    ({"aircraft.autopilot_gains": {"nope": 1}}, "unknown autopilot gain 'nope'"),
+    ({"aircraft.autopilot_gains": {"airspeed_kp": 1e9}}, "outside its range"),
+    ({"initial.pos_enu_m": [900_000, 0, 1000]}, "900 km from the world origin"),
+])
+def test_settings_that_cannot_fly_fail_validation(override, words):
+    with pytest.raises(ScenarioError, match=words):
+        load_scenario(PAPER, override)
+
+
 def test_booleans_still_go_where_booleans_belong():
     s, _ = load_scenario(PAPER, {"controllers.switch.enabled": False})
     assert s.controllers.switch.enabled is False
