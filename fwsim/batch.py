@@ -16,8 +16,11 @@ A batch spec (YAML) lists scenario files and what to sweep::
           - {theta_f_deg: -30, psi_f_deg: 30, ship_heading_deg: 0, ship_speed_m_s: 5}
         args: {duration_s: 90}           # keyword arguments for every case
         seeds: [1]
+      - scenario: ../scenarios/paper_mission.yaml   # or Monte Carlo draws (fwsim.dispersions)
+        samples: 100                     # sample k flies the scenario's seed + k
+        dispersions: {target.speed_m_s: {uniform: [0, 10]}, target.heading_deg: {uniform_angle_deg: true}}
 
-Every run gets a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
+The spec's top-level ``seed:`` seeds the dispersions' draws. Every run gets a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
 is the first 8 hex digits of the SHA-256 of its overrides (``set`` + one grid
 point, canonical JSON; for a generated scenario its arguments too), and writes
 its log to ``OUT/logs/<id>.mcap``. A generated run's arguments are columns
@@ -62,8 +65,8 @@ BASE_COLUMNS = ("id", "scenario", "seed", "overrides", "status", "reason", "erro
                 "resumed")
 #: Statuses of a finished log that ``--resume`` keeps.
 FINISHED_STATUSES = ("completed", "failed")
-_SPEC_KEYS = {"name", "runs"}
-_RUN_KEYS = {"scenario", "generator", "cases", "args", "seeds", "grid", "set"}
+_SPEC_KEYS = {"name", "runs", "seed"}
+_RUN_KEYS = {"scenario", "generator", "cases", "args", "seeds", "grid", "set", "dispersions", "samples"}
 
 
 class BatchSpecError(ScenarioError):
@@ -82,6 +85,7 @@ class RunJob:
     log_path: str  # absolute path of its MCAP log
     generator: str = ""  # "module:function" making the scenario (a dict) from the case's arguments
     case: dict[str, Any] = field(default_factory=dict)  # those arguments
+    dispersed: tuple[str, ...] = ()  # the override paths drawn from distributions (fwsim.dispersions)
 
     def all_overrides(self) -> dict[str, Any]:
         return {**self.overrides, "seed": self.seed}
@@ -170,10 +174,13 @@ def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]
     if unknown:
         raise BatchSpecError(f"{path}: {sorted(unknown)[0]}: unknown key (allowed: {sorted(_SPEC_KEYS)})")
     name = str(data.get("name") or path.stem)
+    seed = data.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise BatchSpecError(f"{path}: seed: expected an integer >= 0 for the dispersions' draws (got {seed!r})")
     logs = Path(out_dir).resolve() / "logs"
     jobs: list[RunJob] = []
     for i, entry in enumerate(data["runs"]):
-        jobs += _entry_jobs(path, i, entry, logs)
+        jobs += _entry_jobs(path, i, entry, logs, seed)
     seen: dict[str, int] = {}
     for j in jobs:
         seen[j.id] = seen.get(j.id, 0) + 1
@@ -196,8 +203,24 @@ def _cases(entry: dict, where: str) -> list[dict[str, Any]]:
     return [{**args, **c} for c in cases]
 
 
-def _entry_jobs(path: Path, i: int, entry: Any, logs: Path) -> list[RunJob]:
-    """The runs of one entry of a spec: cases x grid points x seeds (each validated)."""
+def _samples(entry: dict, where: str, batch_seed: int, index: int) -> list[dict[str, Any]]:
+    """The drawn overrides of each sample (``dispersions`` with ``samples``); [{}] without dispersions."""
+    from fwsim.dispersions import draw, parse_dispersions
+    if "dispersions" not in entry:
+        if "samples" in entry:
+            raise BatchSpecError(f"{where}: 'samples' goes with 'dispersions'")
+        return [{}]
+    n = entry.get("samples")
+    if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= 100_000:
+        raise BatchSpecError(f"{where}.samples: expected the number of draws, 1 to 100000 (got {n!r})")
+    return draw(parse_dispersions(entry["dispersions"], f"{where}.dispersions", BatchSpecError), n, batch_seed,
+                index)
+
+
+def _entry_jobs(path: Path, i: int, entry: Any, logs: Path, batch_seed: int = 0) -> list[RunJob]:
+    """The runs of one entry of a spec: cases x grid points x samples x seeds (each validated). A sample
+    without ``seeds`` flies the scenario's seed plus its index (sensor noise differs from sample to
+    sample)."""
     where = f"{path}: runs.{i}"
     if not isinstance(entry, dict) or ("scenario" in entry) == ("generator" in entry):
         raise BatchSpecError(f"{where}: expected a mapping with a 'scenario:' file or a 'generator:'")
@@ -222,10 +245,19 @@ def _entry_jobs(path: Path, i: int, entry: Any, logs: Path) -> list[RunJob]:
     if seeds is not None and ("seed" in fixed or "seed" in grid):
         raise BatchSpecError(f"{where}: give the seed in 'seeds' or in 'set'/'grid', not both")
     keys = list(grid)
+    samples = _samples(entry, where, batch_seed, i)
+    dispersed = tuple(sorted(samples[0]))
+    if "seed" in dispersed:
+        raise BatchSpecError(f"{where}.dispersions.seed: the seed is not drawn (each sample takes the scenario's "
+                             "seed plus its index, or 'seeds')")
     jobs = []
-    for case, point in itertools.product(_cases(entry, where), list(itertools.product(*(grid[k] for k in keys)))):
-        overrides = {**fixed, **dict(zip(keys, point))}
+    combos = itertools.product(_cases(entry, where), list(itertools.product(*(grid[k] for k in keys))),
+                               enumerate(samples))
+    for case, point, (k, drawn) in combos:
+        overrides = {**fixed, **dict(zip(keys, point)), **drawn}
         base_seed = overrides.pop("seed", None)
+        if drawn and seeds is None:
+            base_seed = (base_seed if base_seed is not None else _scenario_seed(scenario_file, generator, case)) + k
         for seed in seeds if seeds is not None else [base_seed]:
             ov = dict(overrides) if seed is None else {**overrides, "seed": seed}
             try:
@@ -237,8 +269,16 @@ def _entry_jobs(path: Path, i: int, entry: Any, logs: Path) -> list[RunJob]:
                                      f"{exc}") from None
             rid = run_id(scenario.name, scenario.seed, {**overrides, **({"case": case} if generator else {})})
             jobs.append(RunJob(rid, scenario.name, scenario_file, scenario.seed, overrides,
-                               str(logs / f"{rid}.mcap"), generator, case))
+                               str(logs / f"{rid}.mcap"), generator, case, dispersed))
     return jobs
+
+
+def _scenario_seed(scenario_file: str, generator: str, case: dict) -> int:
+    """The seed a scenario (file or generated) flies without overrides."""
+    try:
+        return _load(scenario_file, generator, case, {})[0].seed
+    except Exception as exc:  # noqa: BLE001 - reported in one line like any other entry problem
+        raise BatchSpecError(f"{scenario_file or generator}: {type(exc).__name__}: {exc}") from None
 
 
 def _load(scenario_file: str, generator: str, case: dict, overrides: dict):
@@ -537,6 +577,7 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
             "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "runs": len(jobs), "finished": len(result.rows),
             "failed": sum(r["status"] != "completed" for r in result.rows),
+            "dispersed": sorted({p for j in jobs for p in j.dispersed}),
             "interrupted": result.interrupted, "executor": f"ray ({ray_address})" if ray_address else
             f"process pool ({workers} workers)"})
     return result

@@ -256,3 +256,70 @@ def test_generator_errors_are_one_line(tmp_path, body, message):
     with pytest.raises(BatchSpecError) as exc:
         load_spec(spec, tmp_path / "out")
     assert message in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+
+
+# -- dispersions ------------------------------------------------------------------
+
+DISPERSED = f"""
+seed: 11
+runs:
+  - scenario: {CHECKOUT}
+    samples: 6
+    set: {{duration_s: 2}}
+    dispersions:
+      initial.airspeed_m_s: {{uniform: [19, 23]}}
+      initial.heading_deg: {{uniform_angle_deg: true}}
+      world.wind_enu_m_s: {{normal: [[0, 0, 0], [2, 2, 0]]}}
+      camera.detector.pixel_noise_px: {{choice: [1.0, 3.0]}}
+"""
+
+
+def test_dispersions_draw_reproducibly_within_their_bounds(tmp_path):
+    spec = write_spec(tmp_path, DISPERSED)
+    _, jobs = load_spec(spec, tmp_path / "out")
+    _, again = load_spec(spec, tmp_path / "elsewhere")
+    assert [j.id for j in jobs] == [j.id for j in again] and [j.overrides for j in jobs] == [j.overrides for j in again]
+    assert len(jobs) == 6 and len({j.id for j in jobs}) == 6
+    base = load_spec(write_spec(tmp_path, f"runs: [{{scenario: {CHECKOUT}}}]", "plain.yaml"), tmp_path)[1][0].seed
+    assert [j.seed for j in jobs] == [base + k for k in range(6)]  # each sample its own sensor noise
+    for j in jobs:
+        o = j.overrides
+        assert 19 <= o["initial.airspeed_m_s"] <= 23 and 0 <= o["initial.heading_deg"] < 360
+        assert len(o["world.wind_enu_m_s"]) == 3 and o["world.wind_enu_m_s"][2] == 0.0
+        assert o["camera.detector.pixel_noise_px"] in (1.0, 3.0)
+        assert j.dispersed == ("camera.detector.pixel_noise_px", "initial.airspeed_m_s", "initial.heading_deg",
+                               "world.wind_enu_m_s")
+    assert len({j.overrides["initial.airspeed_m_s"] for j in jobs}) == 6
+    # another batch seed draws otherwise; dropping a field leaves the others' draws as they were
+    other = load_spec(write_spec(tmp_path, DISPERSED.replace("seed: 11", "seed: 12"), "s12.yaml"), tmp_path)[1]
+    assert other[0].overrides["initial.airspeed_m_s"] != jobs[0].overrides["initial.airspeed_m_s"]
+    fewer = load_spec(write_spec(tmp_path, DISPERSED.replace(
+        "      camera.detector.pixel_noise_px: {choice: [1.0, 3.0]}\n", ""), "fewer.yaml"), tmp_path)[1]
+    assert [j.overrides["initial.airspeed_m_s"] for j in fewer] == [j.overrides["initial.airspeed_m_s"] for j in jobs]
+
+
+def test_dispersed_values_are_summary_columns(tmp_path):
+    spec = write_spec(tmp_path, DISPERSED.replace("samples: 6", "samples: 2"))
+    res = run_batch(spec, tmp_path / "out", workers=2)
+    assert [r["status"] for r in res.rows] == ["completed", "completed"]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["batch"]["dispersed"] == ["camera.detector.pixel_noise_px", "initial.airspeed_m_s",
+                                             "initial.heading_deg", "world.wind_enu_m_s"]
+    for row, job in zip(summary["rows"], load_spec(spec, tmp_path / "out")[1]):
+        assert row["set.initial.airspeed_m_s"] == job.overrides["initial.airspeed_m_s"]
+
+
+@pytest.mark.parametrize("body, message", [
+    ("dispersions: {initial.airspeed_m_s: {uniform: [23, 19]}}\n    samples: 2", "low must not exceed high"),
+    ("dispersions: {initial.airspeed_m_s: {normal: [20, -1]}}\n    samples: 2", "standard deviation"),
+    ("dispersions: {initial.airspeed_m_s: {beta: [1, 2]}}\n    samples: 2", "expected one of"),
+    ("dispersions: {initial.airspeed_m_s: {uniform: [19, 23]}}", "samples: expected the number of draws"),
+    ("samples: 3", "'samples' goes with 'dispersions'"),
+    ("dispersions: {seed: {choice: [1, 2]}}\n    samples: 2", "the seed is not drawn"),
+    ("dispersions: {initial.airspeed_m_s: {uniform: [100, 200]}}\n    samples: 2", "initial.airspeed_m_s"),
+])
+def test_dispersion_errors_are_one_line(tmp_path, body, message):
+    spec = write_spec(tmp_path, f"runs:\n  - scenario: {CHECKOUT}\n    {body}\n")
+    with pytest.raises(BatchSpecError, match=message) as exc:
+        load_spec(spec, tmp_path)
+    assert "\n" not in str(exc.value)
