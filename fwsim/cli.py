@@ -1,4 +1,4 @@
-"""Command line: ``fwsim run | metrics | bench | batch | compare | plot | replay``.
+"""Command line: ``fwsim run | metrics | bench | batch | compare | plot | replay | report``.
 
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
                                            [--rerun spawn|connect[=ADDR]|save=PATH.rrd]
@@ -9,6 +9,7 @@
     fwsim compare BASELINE RUN [--tolerances FILE]
     fwsim plot LOG [--out DIR] [--only a,b]
     fwsim replay LOG [--rrd OUT.rrd]
+    fwsim report BATCH_OUT                      # a batch's statistics: report.html and a headline
 """
 from __future__ import annotations
 
@@ -276,6 +277,18 @@ def cmd_plot(args) -> int:
     return 1 if res.failed else 0
 
 
+def cmd_report(args) -> int:
+    from fwsim.report import ReportError, write_report
+    try:
+        rep, path = write_report(args.out_dir)
+    except ReportError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    _print_table(f"fwsim report: {rep.name}", dict(rep.headline()))
+    console.print(f"report: {path}")
+    return 0
+
+
 def cmd_replay(args) -> int:
     from fwsim.log.rerun_export import ReplayOptions, export_rrd
     path = Path(args.log)
@@ -350,6 +363,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", help="folder for the PNGs (default: <log>_plots/ beside the log)")
     pl.add_argument("--only", help="comma-separated figure names (default: all)")
     pl.set_defaults(func=cmd_plot)
+    rep = sub.add_parser("report", help="statistics of a batch (hit probability, CEP, angle errors) as report.html")
+    rep.add_argument("out_dir", help="the output folder of `fwsim batch` (with summary.json)")
+    rep.set_defaults(func=cmd_report)
     rp = sub.add_parser("replay", help="turn a log into a Rerun recording (.rrd)")
     rp.add_argument("log", help="MCAP log of a run")
     rp.add_argument("--rrd", help="output .rrd (default: the log's path with .rrd)")

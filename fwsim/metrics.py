@@ -16,7 +16,9 @@ centre of gravity to the ship's aim point (target.aim_point_ship_m: midships,
 half-way up the hull, inside it), with the path continued straight along the
 final velocity for ``MISS_EXTENSION_S`` past an impact: a run ends when the
 UAV reaches the hull or the sea, and the miss distance should measure where
-the guidance was taking it. ``hit`` is 1 when the run's last state is
+the guidance was taking it; ``miss_bow_m``, ``miss_port_m`` and ``miss_up_m``
+are that closest approach's offset in the ship's frame (towards the bow, to
+port, up). ``hit`` is 1 when the run's last state is
 inside the hull or superstructure.
 """
 from __future__ import annotations
@@ -150,14 +152,21 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
 
 
-def _closest_approach(t: np.ndarray, rel: np.ndarray) -> float:
-    """Smallest |rel(t)| with rel linear between samples (rel: UAV minus aim point, (n, 3))."""
-    best = float(np.min(np.linalg.norm(rel, axis=1)))
+def _closest_approach(t: np.ndarray, rel: np.ndarray) -> tuple[float, np.ndarray, float]:
+    """(smallest |rel(t)|, rel there, t there) with rel linear between samples (rel: UAV minus aim point,
+    (n, 3))."""
+    i = int(np.argmin(np.linalg.norm(rel, axis=1)))
+    best, vec, t_best = float(np.linalg.norm(rel[i])), rel[i], float(t[i])
     d = np.diff(rel, axis=0)
-    dd = np.einsum("ij,ij->i", d, d)
-    s = np.clip(-np.einsum("ij,ij->i", rel[:-1], d) / np.maximum(dd, 1e-12), 0.0, 1.0)
-    seg = rel[:-1] + s[:, None] * d
-    return min(best, float(np.min(np.linalg.norm(seg, axis=1)))) if len(seg) else best
+    if len(d):
+        dd = np.einsum("ij,ij->i", d, d)
+        s = np.clip(-np.einsum("ij,ij->i", rel[:-1], d) / np.maximum(dd, 1e-12), 0.0, 1.0)
+        seg = rel[:-1] + s[:, None] * d
+        norms = np.linalg.norm(seg, axis=1)
+        j = int(np.argmin(norms))
+        if float(norms[j]) < best:
+            best, vec, t_best = float(norms[j]), seg[j], float(t[j] + s[j] * (t[j + 1] - t[j]))
+    return best, np.asarray(vec, dtype=float), t_best
 
 
 def _impact_metrics(log: RunLog, m: dict) -> None:
@@ -187,7 +196,9 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
         t = np.concatenate([t, t[-1] + ext])
         pos = np.concatenate([pos, pos[-1] + ext[:, None] * st["vel_enu_m_s"][-1]])
     aims = np.array([ship.aim_point_enu_m(float(ti)) for ti in t])
-    m["miss_distance_m"] = _closest_approach(t, pos - aims)
+    m["miss_distance_m"], miss, t_miss = _closest_approach(t, pos - aims)
+    _, R_miss = ship.pose(t_miss)  # the miss in the ship's frame (bow, port, up): where the UAV was going
+    m["miss_bow_m"], m["miss_port_m"], m["miss_up_m"] = (float(c) for c in R_miss.T @ miss)
     pos = st["pos_enu_m"]
     t = st["t_s"]
     hull = HullVolume(scenario.target)

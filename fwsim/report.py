@@ -1,0 +1,300 @@
+"""``fwsim report BATCH_OUT``: the statistics of a batch (a Monte Carlo study) as one self-contained HTML page.
+
+Reads ``summary.json`` of a ``fwsim batch`` output folder and writes
+``report.html`` beside it (figures embedded as PNG data, no network needed to
+view it). The headline, also printed:
+
+* runs, completed, failed;
+* hits, and the hit probability with its 95 % Wilson score interval;
+* CEP50 / CEP90: the 50th and 90th percentiles of the miss distance (the
+  closest approach to the aim point, ``fwsim.metrics``; the median and 90th
+  percentile radius, not a fitted distribution);
+* the impact flight-path and heading errors: mean, standard deviation and the
+  95th percentile of their magnitude;
+* the time in view after the lock, and the estimator's worst error after
+  convergence;
+* failures and non-hits by reason.
+
+Figures: the miss in the ship's frame, histograms, each metric against each
+dispersed input (``summary.json``'s ``batch.dispersed``), and the worst runs
+with the command that replays each one in Rerun.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["wilson_interval", "Report", "summarise", "write_report", "ReportError"]
+
+Z95 = 1.959963984540054  # the standard normal's 97.5th percentile
+
+
+class ReportError(ValueError):
+    """A folder that holds no batch summary to report on."""
+
+
+def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of a binomial proportion (95 % by default); (nan, nan) for n = 0."""
+    if n <= 0:
+        return math.nan, math.nan
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _finite(rows: list[dict], key: str) -> np.ndarray:
+    vals = [r.get(key) for r in rows]
+    return np.array([float(v) for v in vals if isinstance(v, (int, float)) and not isinstance(v, bool)
+                     and math.isfinite(v)], dtype=float)
+
+
+def _pct(x: np.ndarray, q: float) -> float:
+    return float(np.percentile(x, q)) if x.size else math.nan
+
+
+@dataclass
+class Report:
+    """The headline statistics of a batch (see the module text)."""
+
+    name: str
+    runs: int
+    completed: int
+    hits: int
+    hit_probability: float
+    hit_interval_95: tuple[float, float]
+    cep50_m: float
+    cep90_m: float
+    angle_errors: dict[str, dict[str, float]]  # fpa / heading -> mean, std, p95_abs
+    in_view_after_lock: dict[str, float]  # mean, min, share of runs >= 0.99
+    estimator_error_m: dict[str, float]  # median, p90, share of runs <= 8 m
+    outcomes: dict[str, int]  # failures and non-hits by reason
+    dispersed: list[str] = field(default_factory=list)
+
+    def headline(self) -> list[tuple[str, str]]:
+        """(name, value) rows of the headline table."""
+        lo, hi = self.hit_interval_95
+        rows = [("runs", f"{self.runs} ({self.completed} completed)"),
+                ("hits", f"{self.hits} of {self.runs}: P(hit) = {self.hit_probability:.3f} "
+                         f"(95 % Wilson interval {lo:.3f} to {hi:.3f})"),
+                ("miss distance CEP50 / CEP90", f"{self.cep50_m:.2f} m / {self.cep90_m:.2f} m")]
+        for name, s in self.angle_errors.items():
+            rows.append((f"impact {name} error", f"mean {s['mean']:+.2f} deg, std {s['std']:.2f} deg, "
+                                                 f"|error| p95 {s['p95_abs']:.2f} deg"))
+        v = self.in_view_after_lock
+        rows.append(("ship in view after lock", f"mean {100 * v['mean']:.1f} %, worst {100 * v['min']:.1f} %, "
+                                                f"{100 * v['share_99']:.0f} % of runs >= 99 %"))
+        e = self.estimator_error_m
+        rows.append(("estimator error after convergence (worst per run)",
+                     f"median {e['median']:.1f} m, p90 {e['p90']:.1f} m, {100 * e['share_8m']:.0f} % of runs <= 8 m"))
+        rows.append(("outcomes", ", ".join(f"{k}: {n}" for k, n in self.outcomes.items()) or "none"))
+        return rows
+
+
+def _outcome(row: dict) -> str:
+    if row.get("status") != "completed":
+        return f"{row.get('status')}: {str(row.get('error') or row.get('reason') or '')[:80]}"
+    if row.get("hit") == 1.0:
+        return "hit"
+    reason = str(row.get("reason") or "")
+    return "no hit: " + ("sea contact" if reason.startswith("sea contact") else reason[:80])
+
+
+def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = None) -> Report:
+    """The headline statistics of a batch's rows (``summary.json``'s ``rows``)."""
+    n = len(rows)
+    hits = sum(1 for r in rows if r.get("hit") == 1.0)
+    miss = _finite(rows, "miss_distance_m")
+    angles = {}
+    for label, key in (("flight-path", "impact_fpa_error_deg"), ("heading", "impact_heading_error_deg")):
+        x = _finite(rows, key)
+        angles[label] = {"mean": float(x.mean()) if x.size else math.nan,
+                         "std": float(x.std(ddof=1)) if x.size > 1 else math.nan,
+                         "p95_abs": _pct(np.abs(x), 95)}
+    view = _finite(rows, "target_in_fov_fraction_after_lock")
+    est = _finite(rows, "ukf_pos_err_max_after_convergence_m")
+    return Report(
+        name=name, runs=n, completed=sum(1 for r in rows if r.get("status") == "completed"), hits=hits,
+        hit_probability=hits / n if n else math.nan, hit_interval_95=wilson_interval(hits, n),
+        cep50_m=_pct(miss, 50), cep90_m=_pct(miss, 90), angle_errors=angles,
+        in_view_after_lock={"mean": float(view.mean()) if view.size else math.nan,
+                            "min": float(view.min()) if view.size else math.nan,
+                            "share_99": float(np.mean(view >= 0.99)) if view.size else math.nan},
+        estimator_error_m={"median": _pct(est, 50), "p90": _pct(est, 90),
+                           "share_8m": float(np.mean(est <= 8.0)) if est.size else math.nan},
+        outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []))
+
+
+# -- figures ------------------------------------------------------------------
+
+def _png(fig) -> str:
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _miss_scatter(rows: list[dict], rep: Report) -> str:
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.5, 5.0))
+    pts = [(r.get("miss_port_m"), r.get("miss_bow_m"), r.get("hit") == 1.0) for r in rows]
+    pts = [(x, y, h) for x, y, h in pts if isinstance(x, (int, float)) and isinstance(y, (int, float))
+           and math.isfinite(x) and math.isfinite(y)]
+    for hit, colour, label in ((True, "tab:blue", "hit"), (False, "tab:red", "no hit")):
+        sel = [(x, y) for x, y, h in pts if h == hit]
+        if sel:
+            ax.scatter([-p[0] for p in sel], [p[1] for p in sel], s=14, c=colour, label=label)
+    for r, style, label in ((rep.cep50_m, "-", "CEP50"), (rep.cep90_m, "--", "CEP90")):
+        if math.isfinite(r):
+            ax.add_patch(plt.Circle((0, 0), r, fill=False, ls=style, color="k", label=f"{label} {r:.2f} m"))
+    lim = max([3.0, *(abs(v) for x, y, _ in pts for v in (x, y))]) * 1.1
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="starboard (m)", ylabel="towards the bow (m)",
+           title="closest approach to the aim point, ship frame")
+    ax.axhline(0, color="0.8", lw=0.8)
+    ax.axvline(0, color="0.8", lw=0.8)
+    ax.legend(loc="upper right", fontsize=8)
+    return _png(fig)
+
+
+_HISTOGRAMS = (("miss_distance_m", "miss distance (m)"), ("impact_fpa_error_deg", "impact flight-path error (deg)"),
+               ("impact_heading_error_deg", "impact heading error (deg)"),
+               ("ukf_pos_err_max_after_convergence_m", "estimator error after convergence, worst (m)"))
+
+
+def _histograms(rows: list[dict]) -> str:
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(_HISTOGRAMS), figsize=(4.0 * len(_HISTOGRAMS), 3.0))
+    for ax, (key, label) in zip(axes, _HISTOGRAMS):
+        x = _finite(rows, key)
+        if x.size:
+            ax.hist(x, bins=min(30, max(5, x.size // 3)), color="tab:blue", alpha=0.8)
+        ax.set(xlabel=label, ylabel="runs")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _input_columns(rows: list[dict], dispersed: list[str]) -> list[tuple[str, list[float]]]:
+    """(label, value per row) of each dispersed input; a vector input gives one column per element."""
+    out = []
+    for path in dispersed:
+        vals = [r.get(f"set.{path}") for r in rows]
+        if all(isinstance(v, list) for v in vals) and vals:
+            for i in range(min(len(v) for v in vals)):
+                col = [float(v[i]) for v in vals]
+                if np.ptp(col) > 0:
+                    out.append((f"{path}[{i}]", col))
+        elif all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals) and vals:
+            out.append((path, [float(v) for v in vals]))
+    return out
+
+
+def _versus_inputs(rows: list[dict], dispersed: list[str]) -> str | None:
+    import matplotlib.pyplot as plt
+    inputs = _input_columns(rows, dispersed)
+    if not inputs:
+        return None
+    metrics = (("miss_distance_m", "miss (m)"), ("impact_fpa_error_deg", "fpa err (deg)"),
+               ("impact_heading_error_deg", "heading err (deg)"))
+    fig, axes = plt.subplots(len(metrics), len(inputs), figsize=(3.2 * len(inputs), 2.6 * len(metrics)),
+                             squeeze=False)
+    hit = np.array([r.get("hit") == 1.0 for r in rows])
+    for j, (label, x) in enumerate(inputs):
+        x = np.asarray(x)
+        for i, (key, ylabel) in enumerate(metrics):
+            y = np.array([float(r[key]) if isinstance(r.get(key), (int, float)) else math.nan for r in rows])
+            ax = axes[i][j]
+            ax.scatter(x[hit], y[hit], s=10, c="tab:blue")
+            ax.scatter(x[~hit], y[~hit], s=12, c="tab:red")
+            if i == len(metrics) - 1:
+                ax.set_xlabel(label, fontsize=8)
+            if j == 0:
+                ax.set_ylabel(ylabel)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def worst_runs(rows: list[dict], n: int = 10) -> list[dict]:
+    """The n worst runs: failed first, then no hit, then the largest misses."""
+    def badness(r: dict) -> tuple:
+        miss = r.get("miss_distance_m")
+        miss = float(miss) if isinstance(miss, (int, float)) and math.isfinite(miss) else math.inf
+        return (r.get("status") == "completed", r.get("hit") == 1.0, -miss)
+    return sorted(rows, key=badness)[:n]
+
+
+# -- the page -----------------------------------------------------------------
+
+_CSS = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;color:#222}"
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}"
+        "th{background:#f3f3f3}code{background:#f6f6f6;padding:1px 4px}img{max-width:100%}")
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _page(rep: Report, rows: list[dict], figures: list[tuple[str, str]], out_dir: Path) -> str:
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>fwsim report: {html.escape(rep.name)}"
+             f"</title><style>{_CSS}</style></head><body>",
+             f"<h1>fwsim report: {html.escape(rep.name)}</h1>",
+             _table(["", ""], [[html.escape(k), html.escape(v)] for k, v in rep.headline()])]
+    if rep.dispersed:
+        parts.append("<p>Dispersed inputs: " + ", ".join(f"<code>{html.escape(p)}</code>" for p in rep.dispersed)
+                     + "</p>")
+    for title, png in figures:
+        parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{png}'>")
+    worst = []
+    for r in worst_runs(rows):
+        log = str(r.get("log") or "")
+        rrd = str(Path(log).with_suffix(".rrd")) if log else ""
+        cmd = f"fwsim replay {log} --rrd {rrd} && rerun {rrd}" if log else ""
+        miss = r.get("miss_distance_m")
+        worst.append([html.escape(str(r.get("id"))), html.escape(_outcome(r)),
+                      f"{miss:.2f}" if isinstance(miss, (int, float)) and math.isfinite(miss) else "",
+                      f"<code>{html.escape(cmd)}</code>"])
+    parts.append("<h2>Worst runs</h2>" + _table(["run", "outcome", "miss (m)", "replay in Rerun"], worst))
+    parts.append(f"<p>From <code>{html.escape(str(out_dir / 'summary.json'))}</code>.</p></body></html>")
+    return "\n".join(parts)
+
+
+def load_summary(out_dir: str | Path) -> tuple[dict, list[dict]]:
+    """(batch info, rows) of a batch output folder; ReportError (one line) if it has no usable summary."""
+    path = Path(out_dir) / "summary.json"
+    if not path.is_file():
+        raise ReportError(f"{out_dir}: no summary.json (the output folder of `fwsim batch`)")
+    try:
+        data = json.loads(path.read_text())
+        info, rows = data.get("batch") or {}, data["rows"]
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ReportError(f"{path}: not a batch summary ({type(exc).__name__}: {str(exc)[:80]})") from None
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+        raise ReportError(f"{path}: holds no runs")
+    return info, rows
+
+
+def write_report(out_dir: str | Path) -> tuple[Report, Path]:
+    """Summarise the batch in ``out_dir`` and write ``out_dir/report.html``; (report, path)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    out_dir = Path(out_dir)
+    info, rows = load_summary(out_dir)
+    rep = summarise(rows, str(info.get("name") or out_dir.name), info.get("dispersed") or [])
+    figures = [("Where the misses go", _miss_scatter(rows, rep)), ("Distributions", _histograms(rows))]
+    versus = _versus_inputs(rows, rep.dispersed)
+    if versus is not None:
+        figures.append(("Each metric against each dispersed input (red: no hit)", versus))
+    path = out_dir / "report.html"
+    path.write_text(_page(rep, rows, figures, out_dir), encoding="utf-8")
+    return rep, path

@@ -1,0 +1,66 @@
+"""fwsim report: the statistics of a batch, checked against hand-computed cases."""
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from fwsim.cli import main
+from fwsim.report import ReportError, summarise, wilson_interval, worst_runs, write_report
+
+
+def test_wilson_interval_against_hand_computed_values():
+    # 8 of 10, z = 1.96: centre (0.8 + 1.96^2/20) / (1 + 1.96^2/10), half-width
+    # 1.96 sqrt(0.8 * 0.2 / 10 + 1.96^2 / 400) / (1 + 1.96^2/10)
+    lo, hi = wilson_interval(8, 10, z=1.96)
+    assert lo == pytest.approx(0.4902, abs=1e-4) and hi == pytest.approx(0.9433, abs=1e-4)
+    lo, hi = wilson_interval(10, 10)  # all hits: the interval still has width
+    assert hi == pytest.approx(1.0) and lo == pytest.approx(0.7225, abs=1e-4)
+    assert wilson_interval(0, 20)[0] == 0.0 and all(math.isnan(v) for v in wilson_interval(0, 0))
+
+
+def _rows():
+    rows = []
+    for i, miss in enumerate([0.5, 1.0, 2.0, 4.0]):
+        rows.append({"id": f"r{i}", "status": "completed", "reason": "hit the ship at t = 1 s", "hit": 1.0,
+                     "miss_distance_m": miss, "miss_bow_m": miss, "miss_port_m": 0.0,
+                     "impact_fpa_error_deg": [-1.0, 1.0, -2.0, 2.0][i], "impact_heading_error_deg": 0.5,
+                     "target_in_fov_fraction_after_lock": [1.0, 1.0, 0.98, 1.0][i],
+                     "ukf_pos_err_max_after_convergence_m": [3.0, 5.0, 9.0, 7.0][i],
+                     "set.target.speed_m_s": float(i), "log": f"/tmp/logs/r{i}.mcap"})
+    rows.append({"id": "r4", "status": "completed", "reason": "duration reached", "hit": 0.0,
+                 "miss_distance_m": 30.0, "target_in_fov_fraction_after_lock": 0.5,
+                 "set.target.speed_m_s": 9.0, "log": "/tmp/logs/r4.mcap"})
+    rows.append({"id": "r5", "status": "failed", "reason": "", "error": "AirframeError: trim failed",
+                 "set.target.speed_m_s": 2.0})
+    return rows
+
+
+def test_summary_statistics_by_hand():
+    rep = summarise(_rows(), "t", ["target.speed_m_s"])
+    assert (rep.runs, rep.completed, rep.hits) == (6, 5, 4)
+    assert rep.hit_probability == pytest.approx(4 / 6)
+    assert rep.hit_interval_95 == pytest.approx(wilson_interval(4, 6))
+    assert rep.cep50_m == pytest.approx(2.0)  # median of 0.5, 1, 2, 4, 30
+    assert rep.cep90_m == pytest.approx(4.0 + 0.6 * 26.0)  # numpy's linear percentile
+    fpa = rep.angle_errors["flight-path"]
+    assert fpa["mean"] == pytest.approx(0.0) and fpa["std"] == pytest.approx(math.sqrt(10 / 3))
+    assert rep.in_view_after_lock["share_99"] == pytest.approx(3 / 5) and rep.in_view_after_lock["min"] == 0.5
+    assert rep.estimator_error_m["share_8m"] == pytest.approx(3 / 4)
+    assert rep.outcomes == {"hit": 4, "no hit: duration reached": 1, "failed: AirframeError: trim failed": 1}
+    assert [r["id"] for r in worst_runs(_rows(), 3)] == ["r5", "r4", "r3"]
+
+
+def test_report_html_and_cli(tmp_path, capsys):
+    (tmp_path / "summary.json").write_text(json.dumps(
+        {"batch": {"name": "demo", "dispersed": ["target.speed_m_s"]}, "rows": _rows()}))
+    rep, path = write_report(tmp_path)
+    page = path.read_text()
+    assert page.count("data:image/png;base64,") == 3 and "Wilson" in page and "fwsim replay /tmp/logs/r4.mcap" in page
+    assert "http" not in page.replace("http-equiv", "")  # self-contained: nothing fetched
+    assert main(["report", str(tmp_path)]) == 0
+    assert "P(hit) = 0.667" in capsys.readouterr().out
+    with pytest.raises(ReportError):
+        write_report(tmp_path / "nothing")
+    assert main(["report", str(tmp_path / "nothing")]) == 2
