@@ -236,6 +236,22 @@ class Airframe:
             height_above_sea_m=float(pos[2]),
         )
 
+    def set_turbulence(self, turb_type: int, severity: int, wind_at_20ft_m_s: float, seed: int) -> None:
+        """Switch on JSBSim's own turbulence (FGWinds: 3 Milspec, 4 Tustin; severity = its probability-of-
+        exceedance curve 1..7) with its own random stream seeded by ``seed``. Call after the trim."""
+        fdm = self._fdm
+        fdm["atmosphere/randomseed"] = int(seed)
+        fdm["atmosphere/turb-type"] = int(turb_type)
+        fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = float(wind_at_20ft_m_s) / FT
+        fdm["atmosphere/turbulence/milspec/severity"] = int(severity)
+
+    def air(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the air's velocity: steady wind + gusts + turbulence, the turbulence alone), world ENU, m/s."""
+        fdm = self._fdm
+        total = [fdm[f"atmosphere/total-wind-{a}-fps"] for a in ("north", "east", "down")]
+        turb = [fdm[f"atmosphere/turb-{a}-fps"] for a in ("north", "east", "down")]
+        return enu_from_ned(np.array(total) * FT), enu_from_ned(np.array(turb) * FT)
+
     def property(self, name: str) -> float:
         """Read any JSBSim property (for diagnostics and tests)."""
         return self._fdm[name]

@@ -20,7 +20,8 @@ A batch spec (YAML) lists scenario files and what to sweep::
         samples: 100                     # sample k flies the scenario's seed + k
         dispersions: {target.speed_m_s: {uniform: [0, 10]}, target.heading_deg: {uniform_angle_deg: true}}
 
-The spec's top-level ``seed:`` seeds the dispersions' draws. Every run gets a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
+The spec's top-level ``seed:`` seeds the dispersions' draws. Every run gets
+a stable id ``<scenario name>-s<seed>-<hash>``, where the hash
 is the first 8 hex digits of the SHA-256 of its overrides (``set`` + one grid
 point, canonical JSON; for a generated scenario its arguments too), and writes
 its log to ``OUT/logs/<id>.mcap``. A generated run's arguments are columns

@@ -196,6 +196,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
             _log_truth(log, truth)
+            disturbed = world.disturbed
+            if disturbed:
+                log.write(topics.WORLD_AIR, world.air())
             last_det = None
             frame = None
 
@@ -226,6 +229,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     _log_truth(log, truth)
                     log.write(topics.AUTOPILOT_STATUS, ap_status)
                     log.write(topics.ACTUATORS, act)
+                    if disturbed:
+                        log.write(topics.WORLD_AIR, world.air())
                 if render_every and (tick + 1) % render_every == 0:
                     img = world.render(frame.bbox_px if frame is not None else None)
                     log.write_image(topics.CAMERA_IMAGE, sim_t, topics.CAMERA_FRAME_ID, world.camera.encode_jpeg(img))

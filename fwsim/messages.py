@@ -105,6 +105,15 @@ class AutopilotStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class AirState:
+    """The air the UAV flies in (truth, harness side): logged when the scenario has turbulence or gusts."""
+
+    t_s: float
+    wind_enu_m_s: np.ndarray  # (3,) the air's velocity at the UAV: steady wind + gusts + turbulence
+    turbulence_enu_m_s: np.ndarray  # (3,) the turbulence alone
+
+
+@dataclass(frozen=True, slots=True)
 class Measurements:
     """What the mission computer receives in one tick (flight software input).
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import copy
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -69,10 +69,47 @@ class Aircraft(_Strict):
         return self
 
 
+#: severity -> (JSBSim's probability-of-exceedance curve, MIL-F-8785C Fig. 7; wind at 20 ft, m/s): the
+#: handbook's light / moderate / severe reference values (15 / 30 / 45 kn at 20 ft)
+TURBULENCE_SEVERITY = {"light": (3, 7.716), "moderate": (4, 15.433), "severe": (6, 23.150)}
+
+
+class Turbulence(_Strict):
+    """Continuous turbulence from JSBSim's own MIL-F-8785C model (Dryden spectra; FGWinds), seeded from the
+    scenario's seed. Above 2000 ft its intensity follows the severity's probability-of-exceedance curve,
+    below 1000 ft the wind at 20 ft (sigma_w = 0.1 W20), blended between."""
+
+    model: Literal["dryden", "tustin"] = Field(
+        "dryden", description="JSBSim's Milspec (dryden) or Tustin discretisation of the Dryden filters")
+    severity: Literal["light", "moderate", "severe"] | None = Field(
+        None, description="the handbook's intensity (with its reference wind at 20 ft unless that is given)")
+    wind_at_20ft_m_s: float | None = Field(
+        None, ge=0.0, le=60.0, description="wind speed 20 ft above the sea (sets the low-altitude intensity; "
+                                           "without a severity it also picks the curve: light up to 15 kn, "
+                                           "moderate up to 30 kn, else severe)")
+
+    @model_validator(mode="after")
+    def _something(self):
+        if self.severity is None and self.wind_at_20ft_m_s is None:
+            raise ValueError("give a severity (light, moderate, severe) or wind_at_20ft_m_s")
+        return self
+
+    def jsbsim_settings(self) -> tuple[int, int, float]:
+        """(turb-type, severity index, wind at 20 ft in m/s) for JSBSim's FGWinds."""
+        kind = 3 if self.model == "dryden" else 4
+        if self.severity is not None:
+            index, w20 = TURBULENCE_SEVERITY[self.severity]
+            return kind, index, self.wind_at_20ft_m_s if self.wind_at_20ft_m_s is not None else w20
+        w20 = float(self.wind_at_20ft_m_s)
+        index = next((i for i, ref in TURBULENCE_SEVERITY.values() if w20 <= ref + 1e-9), 6)
+        return kind, index, w20
+
+
 class World(_Strict):
     origin_lat_deg: float = Field(0.0, ge=-85, le=85, description="geodetic latitude of the world origin")
     origin_lon_deg: float = Field(0.0, ge=-180, le=180, description="longitude of the world origin")
     wind_enu_m_s: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="constant wind")
+    turbulence: Turbulence | None = Field(None, description="JSBSim's continuous turbulence (none by default)")
 
 
 class Initial(_Strict):

@@ -19,6 +19,7 @@ AUTOPILOT_COMMAND = "/autopilot/command"  # RateCommand | AccelCommand from the 
 AUTOPILOT_STATUS = "/autopilot/status"  # the inner loops' set-points
 ACTUATORS = "/actuators"  # ActuatorCommand
 EVENTS = "/events"  # foxglove.Log: phase switches, lock, warnings, the end of the run
+WORLD_AIR = "/world/air"  # fwsim.messages.AirState: the air's velocity (wind, gusts, turbulence), when not still
 
 # -- the flight software (controllers/)
 FSW_STATUS = "/fsw/status"  # FlightSoftwareStatus, every tick

@@ -16,8 +16,9 @@ from fwsim.camera import Camera, FrameGeometry, Pose
 from fwsim.frames import GeoOrigin, dcm_enu_from_frd
 from fwsim.geometry import uav_mesh
 from fwsim.gimbal import Gimbal, GimbalState, camera_pose_world
-from fwsim.messages import ActuatorCommand, AirframeState, GimbalCommand
+from fwsim.messages import ActuatorCommand, AirframeState, AirState, GimbalCommand
 from fwsim.scenario import Scenario
+from fwsim.sensors import rng_for
 from fwsim.target import HullVolume, Ship, TargetState, r_enu_from_ship
 
 
@@ -72,7 +73,21 @@ class World:
         ini = self.scenario.initial
         uav = self.airframe.reset(ini.pos_enu_m, ini.airspeed_m_s, math.radians(ini.heading_deg),
                                   math.radians(ini.flight_path_deg), trim=ini.trim)
+        turb = self.scenario.world.turbulence
+        if turb is not None:  # after the trim, which wants still air; its own stream, from the scenario's seed
+            seed = int(rng_for(self.scenario.seed, "turbulence").integers(1, 2**31 - 1))
+            self.airframe.set_turbulence(*turb.jsbsim_settings(), seed=seed)
         return self._compose(uav, self.gimbal.reset())
+
+    @property
+    def disturbed(self) -> bool:
+        """The air moves other than the steady wind (turbulence or gusts): the log then has /world/air."""
+        return self.scenario.world.turbulence is not None
+
+    def air(self) -> AirState:
+        """The air at the UAV now (truth)."""
+        wind, turb = self.airframe.air()
+        return AirState(self.truth.uav.t_s, wind, turb)
 
     def step(self, act: ActuatorCommand, gimbal_cmd: GimbalCommand) -> Truth:
         uav = self.airframe.step(act)
