@@ -245,6 +245,22 @@ class Airframe:
         fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = float(wind_at_20ft_m_s) / FT
         fdm["atmosphere/turbulence/milspec/severity"] = int(severity)
 
+    def cosine_gust(self, velocity_enu_m_s, duration_s: float) -> None:
+        """Start JSBSim's 1 - cos gust in the local frame: up to ``velocity_enu_m_s`` at half ``duration_s``,
+        none again at its end."""
+        fdm = self._fdm
+        e, n, u = (float(v) for v in velocity_enu_m_s)
+        peak = math.sqrt(e * e + n * n + u * u)
+        fdm["atmosphere/cosine-gust/startup-duration-sec"] = 0.5 * duration_s
+        fdm["atmosphere/cosine-gust/steady-duration-sec"] = 0.0
+        fdm["atmosphere/cosine-gust/end-duration-sec"] = 0.5 * duration_s
+        fdm["atmosphere/cosine-gust/magnitude-ft_sec"] = peak / FT
+        fdm["atmosphere/cosine-gust/frame"] = 3  # local north-east-down
+        fdm["atmosphere/cosine-gust/X-velocity-ft_sec"] = n / peak
+        fdm["atmosphere/cosine-gust/Y-velocity-ft_sec"] = e / peak
+        fdm["atmosphere/cosine-gust/Z-velocity-ft_sec"] = -u / peak
+        fdm["atmosphere/cosine-gust/start"] = 1
+
     def air(self) -> tuple[np.ndarray, np.ndarray]:
         """(the air's velocity: steady wind + gusts + turbulence, the turbulence alone), world ENU, m/s."""
         fdm = self._fdm

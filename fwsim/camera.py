@@ -373,13 +373,18 @@ class Detector:
         self.size = (width_px, height_px)
         self._queue: list[Detection] = []
 
-    def observe(self, frame: FrameGeometry) -> None:
+    def observe(self, frame: FrameGeometry, blackout: bool = False, clutter: np.ndarray | None = None) -> None:
+        """One camera frame through the detector. ``blackout``: it reports nothing; ``clutter``: a false box
+        (u0, v0, u1, v1) it reports instead of what it saw (fwsim.events)."""
         c = self.cfg
         t_arrive = frame.t_s + c.latency_s
         # draw every random number each frame, so one frame's outcome never shifts the next's stream
         miss_draw = self.rng.random()
         noise = self.rng.normal(size=6)
-        if frame.visible_px < max(c.min_visible_px, 1e-9) or miss_draw < c.miss_probability:
+        if clutter is not None:
+            b = np.asarray(clutter, dtype=float)
+            det = Detection(t_arrive, frame.t_s, True, float(0.5 * (b[0] + b[2])), float(0.5 * (b[1] + b[3])), b)
+        elif blackout or frame.visible_px < max(c.min_visible_px, 1e-9) or miss_draw < c.miss_probability:
             det = Detection(t_arrive, frame.t_s, False, math.nan, math.nan, np.full(4, np.nan))
         else:
             b = frame.bbox_px + c.box_noise_px * noise[:4]

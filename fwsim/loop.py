@@ -35,9 +35,11 @@ from fwsim import topics
 from fwsim.airframe import aircraft_file, aircraft_hash
 from fwsim.autopilot import Autopilot, load_autopilot_params
 from fwsim.camera import Detector
+from fwsim.events import EventRunner
 from fwsim.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
+from fwsim.messages import GimbalCommand
 from fwsim.profiling import BlockTimer, time_flight_software, time_harness
 from fwsim.scenario import Scenario
 from fwsim.sensors import Sensors, rng_for
@@ -197,6 +199,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                                   world.camera.K.K)
             _log_truth(log, truth)
             disturbed = world.disturbed
+            events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None
+            phase = None
             if disturbed:
                 log.write(topics.WORLD_AIR, world.air())
             last_det = None
@@ -204,11 +208,15 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
 
             for tick in range(n_ticks):
                 t_now = truth.uav.t_s
+                if events is not None:
+                    events.step(t_now, phase, log.write_event, world.airframe.cosine_gust)
                 if tick % fsw_every == 0:
                     new_det = detector.arrived(t_now)
                     last_det = new_det or last_det
-                    meas = sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, last_det)
+                    meas = sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, last_det,
+                                          gnss_held=events is not None and events.gnss_held)
                     out = fsw.step(meas)
+                    phase = out.status.phase
                     log.write(topics.AUTOPILOT_COMMAND, out.command)
                     log.write(topics.FSW_GIMBAL_COMMAND, out.gimbal)
                     log.write(topics.FSW_STATUS, out.status)
@@ -219,11 +227,18 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     if new_det is not None:
                         log.write(topics.CAMERA_DETECTION, new_det)
                 act, ap_status = autopilot.step(out.command, truth.uav)
-                truth = world.step(act, out.gimbal)
+                gimbal_cmd = out.gimbal
+                if events is not None and events.gimbal_stuck:
+                    gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
+                truth = world.step(act, gimbal_cmd)
                 sim_t = truth.uav.t_s
                 if (tick + 1) % cam_every == 0:
                     frame = world.look()
-                    detector.observe(frame)
+                    if events is None:
+                        detector.observe(frame)
+                    else:
+                        detector.observe(frame, events.blackout, events.clutter_box(cam.rate_hz, cam.width_px,
+                                                                                    cam.height_px))
                     log.write(topics.CAMERA_FRAME, frame)
                 if (tick + 1) % log_every == 0:
                     _log_truth(log, truth)

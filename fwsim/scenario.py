@@ -20,6 +20,7 @@ from pydantic import Field, ValidationError, model_validator
 from controllers.config import Controllers
 from fwsim.camera import CameraConfig
 from fwsim.configbase import StrictModel
+from fwsim.events import Event
 from fwsim.sensors import SensorsConfig
 from fwsim.target import TargetConfig
 from fwsim.yamlfile import load_yaml_text, read_text, short
@@ -145,6 +146,7 @@ class Scenario(_Strict):
     camera: CameraConfig = Field(default_factory=CameraConfig)
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
     controllers: Controllers = Field(default_factory=Controllers)
+    events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.events)")
 
     @model_validator(mode="after")
     def _gimbal_limits_agree(self):

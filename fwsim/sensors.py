@@ -77,10 +77,11 @@ class Sensors:
         return self._rng[name].normal(0.0, sigma, size)
 
     def sample(self, uav: AirframeState, gimbal=None, cam_pos_enu_m=None, detection=None,
-               last_detection=None) -> Measurements:
-        """``detection``: the one arriving this tick (or None); ``last_detection``: the newest so far."""
+               last_detection=None, gnss_held: bool = False) -> Measurements:
+        """``detection``: the one arriving this tick (or None); ``last_detection``: the newest so far;
+        ``gnss_held``: a GNSS outage, no new fix (the last one stays, with its time)."""
         c, t = self.cfg, uav.t_s
-        if self._gnss.due(t):
+        if self._gnss.due(t) and not gnss_held:
             self._gnss.value = (uav.pos_enu_m + self._n("position", c.position_noise_m, 3),
                                 uav.vel_enu_m_s + self._n("velocity", c.velocity_noise_m_s, 3),
                                 uav.pos_enu_m, t)

@@ -82,7 +82,8 @@ class World:
     @property
     def disturbed(self) -> bool:
         """The air moves other than the steady wind (turbulence or gusts): the log then has /world/air."""
-        return self.scenario.world.turbulence is not None
+        return self.scenario.world.turbulence is not None or any(
+            ev.kind == "wind_gust" for ev in self.scenario.events)
 
     def air(self) -> AirState:
         """The air at the UAV now (truth)."""

@@ -1,0 +1,162 @@
+"""Timed faults and disturbances of a scenario (``events:``): the harness's side of a harsher world.
+
+Each event starts at ``t_s``, or ``delay_s`` after the flight software first
+enters phase ``after_phase``, and lasts ``duration_s``::
+
+    events:
+      - {kind: detector_blackout, t_s: 60, duration_s: 3}        # no detections
+      - {kind: false_detections, t_s: 70, duration_s: 5, rate_hz: 10}   # clutter boxes
+      - {kind: gnss_outage, after_phase: 2, delay_s: 5, duration_s: 10} # no new GNSS fix
+      - {kind: gimbal_stuck, t_s: 90, duration_s: 2}              # the joints do not move
+      - {kind: wind_gust, after_phase: 3, delay_s: 2, duration_s: 3, velocity_enu_m_s: [0, 6, 0]}
+
+Every event's start and end are lines on ``/events``. The flight software is
+never told: it sees only what its sensors then give it. Random parts (the
+clutter boxes) draw from their own stream of the scenario's seed.
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from fwsim.configbase import StrictModel
+
+__all__ = ["Event", "EventRunner", "EVENT_KINDS"]
+
+_Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class _Timed(StrictModel):
+    t_s: float | None = Field(None, ge=0.0, le=1e5, description="start time (s); or after_phase")
+    after_phase: Literal[1, 2, 3] | None = Field(
+        None, description="start when the flight software first enters this phase (plus delay_s)")
+    delay_s: float = Field(0.0, ge=0.0, le=1e5, description="with after_phase: how long after it")
+    duration_s: float = Field(gt=0.0, le=1e5, description="how long the event lasts")
+
+    @model_validator(mode="after")
+    def _one_start(self):
+        if (self.t_s is None) == (self.after_phase is None):
+            raise ValueError("give the start as t_s or as after_phase (with delay_s), not both or neither")
+        if self.t_s is not None and self.delay_s:
+            raise ValueError("delay_s goes with after_phase")
+        return self
+
+
+class DetectorBlackout(_Timed):
+    """The detector reports nothing (its frames still run, its noise stream unchanged)."""
+
+    kind: Literal["detector_blackout"]
+
+
+class FalseDetections(_Timed):
+    """Clutter: at ``rate_hz`` (on average) a frame's detection is a box somewhere else in the image."""
+
+    kind: Literal["false_detections"]
+    rate_hz: float = Field(gt=0.0, le=240.0, description="clutter boxes per second, on average")
+    box_px: tuple[float, float] = Field((12.0, 120.0), description="range of the boxes' side, px")
+
+    @model_validator(mode="after")
+    def _box(self):
+        if not 1.0 <= self.box_px[0] <= self.box_px[1]:
+            raise ValueError(f"box_px: expected [smallest, largest] side >= 1 px (got {list(self.box_px)})")
+        return self
+
+
+class GnssOutage(_Timed):
+    """The receiver gives no new fix: the last one is held (with its time), the flight software dead-reckons."""
+
+    kind: Literal["gnss_outage"]
+
+
+class GimbalStuck(_Timed):
+    """The gimbal's joints stay where they are, whatever is commanded."""
+
+    kind: Literal["gimbal_stuck"]
+
+
+class WindGust(_Timed):
+    """A 1 - cos gust (JSBSim's cosine gust, local frame): up to ``velocity_enu_m_s`` at mid-duration, back
+    to nothing at the end."""
+
+    kind: Literal["wind_gust"]
+    velocity_enu_m_s: _Vec3 = Field(description="the gust's peak air velocity, world ENU (m/s)")
+
+    @model_validator(mode="after")
+    def _strength(self):
+        if not 0.0 < math.hypot(*self.velocity_enu_m_s) <= 40.0:
+            raise ValueError("velocity_enu_m_s: the gust's peak must be between 0 and 40 m/s")
+        return self
+
+
+Event = Annotated[Union[DetectorBlackout, FalseDetections, GnssOutage, GimbalStuck, WindGust],
+                  Field(discriminator="kind")]
+EVENT_KINDS = ("detector_blackout", "false_detections", "gnss_outage", "gimbal_stuck", "wind_gust")
+
+
+def _describe(ev) -> str:
+    extra = {"false_detections": lambda e: f", {e.rate_hz:g} boxes/s",
+             "wind_gust": lambda e: f", peak {math.hypot(*e.velocity_enu_m_s):.1f} m/s"}.get(ev.kind)
+    return f"{ev.kind} ({ev.duration_s:g} s{extra(ev) if extra else ''})"
+
+
+class EventRunner:
+    """Which events are on at each tick; starts and ends them and says so in the log.
+
+    The loop asks it each tick (``step``) and reads its flags: ``blackout``,
+    ``clutter_rate_hz``, ``gnss_held`` and ``gimbal_stuck``; a gust is handed to
+    the airframe once, at its start.
+    """
+
+    def __init__(self, events: list, rng: np.random.Generator):
+        self.events = list(events)
+        self.rng = rng
+        self._start = [ev.t_s for ev in self.events]  # None until an after_phase event's phase comes
+        self._state = ["pending"] * len(self.events)  # pending | on | over
+        self._phase_seen: dict[int, float] = {}
+        self.blackout = False
+        self.clutter_rate_hz = 0.0
+        self.gnss_held = False
+        self.gimbal_stuck = False
+
+    def step(self, t_s: float, phase: int | None, log_event, gust) -> None:
+        """Advance to ``t_s`` (the flight software's phase now, if known): start and end events,
+        ``log_event(t, text)`` for each, ``gust(velocity_enu_m_s, duration_s)`` at a gust's start."""
+        if phase is not None and phase not in self._phase_seen:
+            self._phase_seen[phase] = t_s
+        for i, ev in enumerate(self.events):
+            if self._start[i] is None and ev.after_phase in self._phase_seen:
+                self._start[i] = self._phase_seen[ev.after_phase] + ev.delay_s
+            start = self._start[i]
+            if start is None or self._state[i] == "over":
+                continue
+            if self._state[i] == "pending" and t_s >= start - 1e-9:
+                self._state[i] = "on"
+                log_event(t_s, f"event started: {_describe(ev)}")
+                if ev.kind == "wind_gust":
+                    gust(ev.velocity_enu_m_s, ev.duration_s)
+            if self._state[i] == "on" and t_s >= start + ev.duration_s - 1e-9:
+                self._state[i] = "over"
+                log_event(t_s, f"event ended: {ev.kind}")
+        on = [ev for ev, s in zip(self.events, self._state) if s == "on"]
+        self.blackout = any(ev.kind == "detector_blackout" for ev in on)
+        self.clutter_rate_hz = sum(ev.rate_hz for ev in on if ev.kind == "false_detections")
+        self.gnss_held = any(ev.kind == "gnss_outage" for ev in on)
+        self.gimbal_stuck = any(ev.kind == "gimbal_stuck" for ev in on)
+
+    def clutter_box(self, frame_rate_hz: float, width_px: int, height_px: int) -> np.ndarray | None:
+        """During false detections: a clutter box (u0, v0, u1, v1) for this frame, or None. Draws the same
+        numbers every frame of the window, so one frame's outcome never shifts the next's."""
+        if self.clutter_rate_hz <= 0.0:
+            return None
+        draw = self.rng.random(4)
+        sizes = [ev.box_px for ev, s in zip(self.events, self._state) if s == "on" and ev.kind == "false_detections"]
+        lo, hi = sizes[0]
+        if draw[0] >= min(1.0, self.clutter_rate_hz / frame_rate_hz):
+            return None
+        side = lo + draw[1] * (hi - lo)
+        u0 = draw[2] * max(width_px - side, 1.0)
+        v0 = draw[3] * max(height_px - side, 1.0)
+        return np.array([u0, v0, min(u0 + side, width_px - 1.0), min(v0 + side, height_px - 1.0)])
