@@ -271,7 +271,7 @@ def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, A
     if overrides:
         data = copy.deepcopy(data)
         for path, value in overrides.items():
-            set_path(data, path, value)
+            set_path(data, path, copy.deepcopy(value))  # a later path may edit inside it
     dirs = [Path(source).resolve().parent] if Path(source).is_file() else []
     context = {"check_plugins": check_plugins, "search_dirs": dirs + [Path.cwd()]}
     try:

@@ -323,3 +323,19 @@ def test_dispersion_errors_are_one_line(tmp_path, body, message):
     with pytest.raises(BatchSpecError, match=message) as exc:
         load_spec(spec, tmp_path)
     assert "\n" not in str(exc.value)
+
+
+def test_dispersing_inside_a_set_list_leaves_the_spec_alone(tmp_path):
+    spec = write_spec(tmp_path, f"""
+runs:
+  - scenario: {CHECKOUT}
+    samples: 3
+    set:
+      events: [{{kind: detector_blackout, t_s: 5.0, duration_s: 1.0}}]
+    dispersions:
+      events.0.t_s: {{uniform: [1.0, 2.0]}}
+""")
+    jobs = load_spec(spec, tmp_path)[1]
+    assert all(j.overrides["events"][0]["t_s"] == 5.0 for j in jobs)
+    drawn = [j.load()[0].events[0].t_s for j in jobs]
+    assert drawn == [j.overrides["events.0.t_s"] for j in jobs] and all(1.0 <= t <= 2.0 for t in drawn)
