@@ -144,20 +144,32 @@ def _png(fig) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
+def _view_limit(values: np.ndarray, floor: float) -> float:
+    """A plotting range that shows the bulk of ``values`` (3x their 90th percentile of magnitude, at least
+    ``floor``): the outliers go to the border, marked, instead of squeezing the rest into a dot."""
+    v = np.abs(values[np.isfinite(values)])
+    return max(floor, 3.0 * float(np.percentile(v, 90))) if v.size else floor
+
+
 def _miss_scatter(rows: list[dict], rep: Report) -> str:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(5.5, 5.0))
     pts = [(r.get("miss_port_m"), r.get("miss_bow_m"), r.get("hit") == 1.0) for r in rows]
-    pts = [(x, y, h) for x, y, h in pts if isinstance(x, (int, float)) and isinstance(y, (int, float))
-           and math.isfinite(x) and math.isfinite(y)]
-    for hit, colour, label in ((True, "tab:blue", "hit"), (False, "tab:red", "no hit")):
-        sel = [(x, y) for x, y, h in pts if h == hit]
-        if sel:
-            ax.scatter([-p[0] for p in sel], [p[1] for p in sel], s=14, c=colour, label=label)
+    pts = np.array([(-x, y, h) for x, y, h in pts if isinstance(x, (int, float)) and isinstance(y, (int, float))
+                    and math.isfinite(x) and math.isfinite(y)], dtype=float).reshape(-1, 3)
+    lim = 1.1 * max(_view_limit(np.hypot(pts[:, 0], pts[:, 1]), 3.0), rep.cep90_m if math.isfinite(rep.cep90_m)
+                    else 0.0)
+    off = np.maximum(np.abs(pts[:, 0]), np.abs(pts[:, 1])) > lim
+    for hit, colour, label in ((1.0, "tab:blue", "hit"), (0.0, "tab:red", "no hit")):
+        sel = (pts[:, 2] == hit) & ~off
+        if sel.any():
+            ax.scatter(pts[sel, 0], pts[sel, 1], s=14, c=colour, label=label)
     for r, style, label in ((rep.cep50_m, "-", "CEP50"), (rep.cep90_m, "--", "CEP90")):
         if math.isfinite(r):
             ax.add_patch(plt.Circle((0, 0), r, fill=False, ls=style, color="k", label=f"{label} {r:.2f} m"))
-    lim = max([3.0, *(abs(v) for x, y, _ in pts for v in (x, y))]) * 1.1
+    if off.any():
+        edge = np.clip(pts[off, :2], -lim * 0.97, lim * 0.97)
+        ax.scatter(edge[:, 0], edge[:, 1], marker="x", c="tab:red", label=f"{int(off.sum())} beyond the frame")
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="starboard (m)", ylabel="towards the bow (m)",
            title="closest approach to the aim point, ship frame")
     ax.axhline(0, color="0.8", lw=0.8)
@@ -177,7 +189,11 @@ def _histograms(rows: list[dict]) -> str:
     for ax, (key, label) in zip(axes, _HISTOGRAMS):
         x = _finite(rows, key)
         if x.size:
-            ax.hist(x, bins=min(30, max(5, x.size // 3)), color="tab:blue", alpha=0.8)
+            lim = _view_limit(x, 1.0)
+            inside = x[np.abs(x) <= lim]
+            ax.hist(inside, bins=min(30, max(5, inside.size // 3)), color="tab:blue", alpha=0.8)
+            if inside.size < x.size:
+                ax.set_title(f"{x.size - inside.size} beyond {lim:.3g}", fontsize=8)
         ax.set(xlabel=label, ylabel="runs")
     fig.tight_layout()
     return _png(fig)
@@ -212,9 +228,13 @@ def _versus_inputs(rows: list[dict], dispersed: list[str]) -> str | None:
         x = np.asarray(x)
         for i, (key, ylabel) in enumerate(metrics):
             y = np.array([float(r[key]) if isinstance(r.get(key), (int, float)) else math.nan for r in rows])
+            lim = _view_limit(y, 1.0)
+            off = np.abs(y) > lim
+            y = np.clip(y, -lim, lim)  # outliers at the border, marked x
             ax = axes[i][j]
-            ax.scatter(x[hit], y[hit], s=10, c="tab:blue")
-            ax.scatter(x[~hit], y[~hit], s=12, c="tab:red")
+            ax.scatter(x[hit & ~off], y[hit & ~off], s=10, c="tab:blue")
+            ax.scatter(x[~hit & ~off], y[~hit & ~off], s=12, c="tab:red")
+            ax.scatter(x[off], y[off], s=14, marker="x", c="tab:red" if (~hit[off]).any() else "tab:blue")
             if i == len(metrics) - 1:
                 ax.set_xlabel(label, fontsize=8)
             if j == 0:
