@@ -82,6 +82,8 @@ class AutopilotParams(StrictModel):
     max_pitch_rate_rad_s: Gain
     max_load_factor: Gain
     min_load_factor: Gain
+    stall_alpha_rad: Gain
+    stall_pitch_rate_gain: Gain
 
     def v(self, name: str) -> float:
         return getattr(self, name).value
@@ -246,6 +248,9 @@ class Autopilot:
         dp = pv("max_roll_accel_rad_s2") * dt  # the roll-rate set-point slews: a step asks what no aileron gives
         p_sp = self._p_sp = _clip(p_sp, self._p_sp - dp, self._p_sp + dp)
         q_sp = _clip(q_sp, -pv("max_pitch_rate_rad_s"), pv("max_pitch_rate_rad_s"))
+        excess = st.alpha_rad - pv("stall_alpha_rad")
+        if excess > 0.0:  # near the stall: no pitch-up, and nose down in proportion (both modes)
+            q_sp = min(q_sp, -pv("stall_pitch_rate_gain") * excess)
         p, q, r = st.body_rates_frd_rad_s.tolist()
 
         aileron = self.aileron_from_roll_rate.step(p_sp - p, dt, ff=pv("roll_rate_ff") * ff * p_sp, scale=fb)

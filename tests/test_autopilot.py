@@ -6,7 +6,7 @@ import pytest
 from flight import Flight, flight_path_rad
 
 from controllers.script import perpendicular_axes
-from fwsim.autopilot import bank_from_specific_force, load_autopilot_params
+from fwsim.autopilot import Autopilot, bank_from_specific_force, load_autopilot_params
 from fwsim.messages import AccelCommand, RateCommand
 
 DEG = math.pi / 180.0
@@ -162,3 +162,20 @@ def test_accel_mode_left_and_down_in_a_steep_dive_rolls_past_90_deg():
     err = np.linalg.norm(tr.sp("accel_enu_m_s2")[w] - tr.sp("accel_sp_enu_m_s2")[w], axis=1)
     assert np.max(err) < 0.3 * math.hypot(8.0, 12.0), np.max(err)
     assert flight_path_rad(tr.states[-1]) < gamma0 - math.radians(10.0)
+
+
+@pytest.mark.parametrize("protected", [True, False])
+def test_stall_protection_holds_alpha_below_the_stall(protected):
+    """A sustained pull-up at idle power (the loiter's stall: the NMPC asked to climb, the aircraft could not)
+    stalls the wing without the protection; with it the angle of attack stays near stall_alpha_rad."""
+    f = Flight(airspeed_m_s=20.0)
+    overrides = {} if protected else {"stall_pitch_rate_gain": 0.0}
+    f.autopilot = Autopilot(load_autopilot_params("fwuav", overrides=overrides), f.airframe.dt_s,
+                            f.airframe.trim.throttle_norm)
+    tr = f.fly(25.0, lambda st: RateCommand(st.t_s, 12.0, 0.0, 0.3))  # airspeed 12 m/s wanted: throttle to idle
+    alpha = np.degrees(tr.arr("alpha_rad"))
+    limit = math.degrees(f.autopilot.p.v("stall_alpha_rad"))
+    if protected:
+        assert alpha.max() < limit + 2.5 and alpha[tr.window(10, 25)].mean() > limit - 2.0  # held, not avoided
+    else:
+        assert alpha.max() > 11.0  # past CLmax: the case the protection is for
