@@ -1,7 +1,8 @@
 """Timed faults and disturbances of a scenario (``events:``): the harness's side of a harsher world.
 
 Each event starts at ``t_s``, or ``delay_s`` after the flight software first
-enters phase ``after_phase``, and lasts ``duration_s``::
+enters phase ``after_phase``, and lasts ``duration_s`` (a ship manoeuvre: until
+its new course and speed are reached)::
 
     events:
       - {kind: detector_blackout, t_s: 60, duration_s: 3}        # no detections
@@ -9,6 +10,7 @@ enters phase ``after_phase``, and lasts ``duration_s``::
       - {kind: gnss_outage, after_phase: 2, delay_s: 5, duration_s: 10} # no new GNSS fix
       - {kind: gimbal_stuck, t_s: 90, duration_s: 2}              # the joints do not move
       - {kind: wind_gust, after_phase: 3, delay_s: 2, duration_s: 3, velocity_enu_m_s: [0, 6, 0]}
+      - {kind: target_manoeuvre, after_phase: 3, course_deg: 90, speed_m_s: 8}   # 1.5 deg/s, 0.5 m/s^2
 
 Every event's start and end are lines on ``/events``. The flight software is
 never told: it sees only what its sensors then give it. Random parts (the
@@ -29,12 +31,11 @@ __all__ = ["Event", "EventRunner", "EVENT_KINDS"]
 _Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-class _Timed(StrictModel):
+class _Start(StrictModel):
     t_s: float | None = Field(None, ge=0.0, le=1e5, description="start time (s); or after_phase")
     after_phase: Literal[1, 2, 3] | None = Field(
         None, description="start when the flight software first enters this phase (plus delay_s)")
     delay_s: float = Field(0.0, ge=0.0, le=1e5, description="with after_phase: how long after it")
-    duration_s: float = Field(gt=0.0, le=1e5, description="how long the event lasts")
 
     @model_validator(mode="after")
     def _one_start(self):
@@ -43,6 +44,10 @@ class _Timed(StrictModel):
         if self.t_s is not None and self.delay_s:
             raise ValueError("delay_s goes with after_phase")
         return self
+
+
+class _Timed(_Start):
+    duration_s: float = Field(gt=0.0, le=1e5, description="how long the event lasts")
 
 
 class DetectorBlackout(_Timed):
@@ -91,15 +96,37 @@ class WindGust(_Timed):
         return self
 
 
-Event = Annotated[Union[DetectorBlackout, FalseDetections, GnssOutage, GimbalStuck, WindGust],
+class TargetManoeuvre(_Start):
+    """The ship leaves its motion model: it turns the short way to ``course_deg`` at ``turn_rate_deg_s`` and
+    changes to ``speed_m_s`` at ``accel_m_s2`` (either may be left out), then holds them. The event ends
+    when both are reached."""
+
+    kind: Literal["target_manoeuvre"]
+    course_deg: float | None = Field(None, ge=-360.0, le=360.0, description="new course, clockwise from North")
+    speed_m_s: float | None = Field(None, ge=0.0, le=25.0, description="new speed over ground")
+    turn_rate_deg_s: float = Field(1.5, gt=0.0, le=10.0, description="rate of the turn")
+    accel_m_s2: float = Field(0.5, gt=0.0, le=5.0, description="magnitude of the speed change's acceleration")
+
+    @model_validator(mode="after")
+    def _something(self):
+        if self.course_deg is None and self.speed_m_s is None:
+            raise ValueError("give course_deg, speed_m_s or both")
+        return self
+
+
+Event = Annotated[Union[DetectorBlackout, FalseDetections, GnssOutage, GimbalStuck, WindGust, TargetManoeuvre],
                   Field(discriminator="kind")]
-EVENT_KINDS = ("detector_blackout", "false_detections", "gnss_outage", "gimbal_stuck", "wind_gust")
+EVENT_KINDS = ("detector_blackout", "false_detections", "gnss_outage", "gimbal_stuck", "wind_gust",
+               "target_manoeuvre")
 
 
-def _describe(ev) -> str:
+def _describe(ev, duration_s: float) -> str:
     extra = {"false_detections": lambda e: f", {e.rate_hz:g} boxes/s",
-             "wind_gust": lambda e: f", peak {math.hypot(*e.velocity_enu_m_s):.1f} m/s"}.get(ev.kind)
-    return f"{ev.kind} ({ev.duration_s:g} s{extra(ev) if extra else ''})"
+             "wind_gust": lambda e: f", peak {math.hypot(*e.velocity_enu_m_s):.1f} m/s",
+             "target_manoeuvre": lambda e: "".join(
+                 ([f", course {e.course_deg:g} deg"] if e.course_deg is not None else [])
+                 + ([f", speed {e.speed_m_s:g} m/s"] if e.speed_m_s is not None else []))}.get(ev.kind)
+    return f"{ev.kind} ({duration_s:g} s{extra(ev) if extra else ''})"
 
 
 class EventRunner:
@@ -116,14 +143,16 @@ class EventRunner:
         self._start = [ev.t_s for ev in self.events]  # None until an after_phase event's phase comes
         self._state = ["pending"] * len(self.events)  # pending | on | over
         self._phase_seen: dict[int, float] = {}
+        self._duration = [getattr(ev, "duration_s", 0.0) for ev in self.events]  # a manoeuvre's: at its start
         self.blackout = False
         self.clutter_rate_hz = 0.0
         self.gnss_held = False
         self.gimbal_stuck = False
 
-    def step(self, t_s: float, phase: int | None, log_event, gust) -> None:
+    def step(self, t_s: float, phase: int | None, log_event, gust=None, manoeuvre=None) -> None:
         """Advance to ``t_s`` (the flight software's phase now, if known): start and end events,
-        ``log_event(t, text)`` for each, ``gust(velocity_enu_m_s, duration_s)`` at a gust's start."""
+        ``log_event(t, text)`` for each, ``gust(velocity_enu_m_s, duration_s)`` at a gust's start,
+        ``manoeuvre(t, event) -> duration_s`` at a ship manoeuvre's start."""
         if phase is not None and phase not in self._phase_seen:
             self._phase_seen[phase] = t_s
         for i, ev in enumerate(self.events):
@@ -134,10 +163,12 @@ class EventRunner:
                 continue
             if self._state[i] == "pending" and t_s >= start - 1e-9:
                 self._state[i] = "on"
-                log_event(t_s, f"event started: {_describe(ev)}")
+                if ev.kind == "target_manoeuvre":
+                    self._duration[i] = manoeuvre(t_s, ev)
+                log_event(t_s, f"event started: {_describe(ev, self._duration[i])}")
                 if ev.kind == "wind_gust":
                     gust(ev.velocity_enu_m_s, ev.duration_s)
-            if self._state[i] == "on" and t_s >= start + ev.duration_s - 1e-9:
+            if self._state[i] == "on" and t_s >= start + self._duration[i] - 1e-9:
                 self._state[i] = "over"
                 log_event(t_s, f"event ended: {ev.kind}")
         on = [ev for ev, s in zip(self.events, self._state) if s == "on"]

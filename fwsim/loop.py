@@ -209,7 +209,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             for tick in range(n_ticks):
                 t_now = truth.uav.t_s
                 if events is not None:
-                    events.step(t_now, phase, log.write_event, world.airframe.cosine_gust)
+                    events.step(t_now, phase, log.write_event, world.airframe.cosine_gust, world.manoeuvre_ship)
                 if tick % fsw_every == 0:
                     new_det = detector.arrived(t_now)
                     last_det = new_det or last_det

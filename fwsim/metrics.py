@@ -18,7 +18,8 @@ final velocity for ``MISS_EXTENSION_S`` past an impact: a run ends when the
 UAV reaches the hull or the sea, and the miss distance should measure where
 the guidance was taking it; ``miss_bow_m``, ``miss_port_m`` and ``miss_up_m``
 are that closest approach's offset in the ship's frame (towards the bow, to
-port, up). ``hit`` is 1 when the run's last state is
+port, up). The ship's aim point comes from the logged ship states
+(/target/state), so a ship moved by an event scores where it really was. ``hit`` is 1 when the run's last state is
 inside the hull or superstructure.
 """
 from __future__ import annotations
@@ -152,6 +153,32 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
 
 
+class _LoggedShip:
+    """The ship as the log recorded it (/target/state: whatever moved it, a model or an event's manoeuvre):
+    its pose and aim point at a logged time, or carried on at its last velocity past the log's end."""
+
+    def __init__(self, log: RunLog, scenario):
+        from fwsim.target import aim_point_ship_m
+        tg = log.table(topics.TARGET_STATE)
+        self._t = tg["t_s"]
+        self._pos, self._vel, self._heading = tg["pos_enu_m"], tg["vel_enu_m_s"], tg["heading_ned_rad"]
+        self._index = {float(ti): i for i, ti in enumerate(self._t)}
+        self._aim = aim_point_ship_m(scenario.target)
+
+    def pose(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        from fwsim.target import r_enu_from_ship
+        i = self._index.get(float(t_s))
+        if i is None:  # between or past the logged states
+            i = max(int(np.searchsorted(self._t, t_s, side="right")) - 1, 0)
+            pos = self._pos[i] + self._vel[i] * (float(t_s) - float(self._t[i]))
+            return pos, r_enu_from_ship(float(self._heading[i]))
+        return self._pos[i], r_enu_from_ship(float(self._heading[i]))
+
+    def aim_point_enu_m(self, t_s: float) -> np.ndarray:
+        pos, R = self.pose(t_s)
+        return pos + R @ self._aim
+
+
 def _closest_approach(t: np.ndarray, rel: np.ndarray) -> tuple[float, np.ndarray, float]:
     """(smallest |rel(t)|, rel there, t there) with rel linear between samples (rel: UAV minus aim point,
     (n, 3))."""
@@ -185,7 +212,7 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
     except Exception:  # a log written by another version: no geometry to score against
         return
-    ship = Ship(scenario.target)
+    ship = _LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
     t = st["t_s"]
     pos = st["pos_enu_m"]
     if ended:

@@ -224,6 +224,7 @@ class Ship:
             self._nodes_n = [0.0]
         elif m.model == "speed_changes":
             self._knot_t, self._knot_v, self._knot_d = _speed_knots(self._v, m.times_s, m.speeds_m_s, m.accel_m_s2)
+        self._manoeuvres: list[_Manoeuvre] = []  # fwsim.events target_manoeuvre, oldest first
 
     # ------------------------------------------------------------------ truth
 
@@ -232,6 +233,25 @@ class Ship:
         t = float(t_s)
         if not t >= 0.0:
             raise ValueError(f"ship motion is defined for t_s >= 0 (got {t_s!r})")
+        if self._manoeuvres and t >= self._manoeuvres[0].t0:
+            return self._manoeuvred(t)
+        return self._base_state(t)
+
+    def manoeuvre(self, t_s: float, course_deg: float | None, speed_m_s: float | None,
+                  turn_rate_deg_s: float, accel_m_s2: float) -> float:
+        """From ``t_s`` on, leave the motion model: turn at ``turn_rate_deg_s`` the short way to
+        ``course_deg`` and ramp at ``accel_m_s2`` to ``speed_m_s`` (None: keep it), then hold both. Times
+        before ``t_s`` keep their states (a manoeuvre never rewrites the past); returns how long it takes."""
+        start = self.state(t_s)
+        m = _Manoeuvre(float(t_s), start, course_deg, speed_m_s, turn_rate_deg_s, accel_m_s2)
+        self._manoeuvres = [mm for mm in self._manoeuvres if mm.t0 < m.t0] + [m]
+        return m.duration
+
+    def _manoeuvred(self, t: float) -> TargetState:
+        m = next(mm for mm in reversed(self._manoeuvres) if t >= mm.t0)
+        return m.state(t)
+
+    def _base_state(self, t: float) -> TargetState:
         model = self._model
         if model == "constant_velocity":
             v = self._v
@@ -336,6 +356,61 @@ class Ship:
         tau = t - kt[i]
         v = v0 + (v1 - v0) * tau / (kt[i + 1] - kt[i])
         return v, self._knot_d[i] + 0.5 * (v0 + v) * tau
+
+
+class _Manoeuvre:
+    """A course and speed change from a ship state: heading at a constant rate the short way to the new
+    course, speed at a constant acceleration to the new one (both from ``t0``), then constant. Positions
+    are integrated (3-point Gauss-Legendre) from stored nodes every INTEGRATION_STEP_S."""
+
+    def __init__(self, t0: float, start: TargetState, course_deg, speed_m_s, turn_rate_deg_s: float,
+                 accel_m_s2: float):
+        self.t0 = t0
+        self.p0 = np.asarray(start.pos_enu_m, dtype=float).copy()
+        self.psi0, self.v0 = float(start.heading_ned_rad), float(start.speed_m_s)
+        dpsi = 0.0 if course_deg is None else wrap_pi(math.radians(course_deg) - self.psi0)
+        dv = 0.0 if speed_m_s is None else float(speed_m_s) - self.v0
+        self.rate = math.copysign(math.radians(turn_rate_deg_s), dpsi)
+        self.t_turn = abs(dpsi) / math.radians(turn_rate_deg_s)
+        self.acc = math.copysign(accel_m_s2, dv)
+        self.t_speed = abs(dv) / accel_m_s2
+        self.duration = max(self.t_turn, self.t_speed)
+        self._nodes = [(0.0, 0.0)]  # displacement (east, north) at tau = k * INTEGRATION_STEP_S
+
+    def _heading_speed(self, tau: float) -> tuple[float, float]:
+        return (self.psi0 + self.rate * min(tau, self.t_turn), self.v0 + self.acc * min(tau, self.t_speed))
+
+    def _integral(self, a: float, b: float) -> tuple[float, float]:
+        h = b - a
+        de = dn = 0.0
+        for x, w in zip(_GL_X, _GL_W):
+            psi, v = self._heading_speed(a + x * h)
+            de += w * v * math.sin(psi)
+            dn += w * v * math.cos(psi)
+        return h * de, h * dn
+
+    def _offset(self, tau: float) -> tuple[float, float]:
+        dt = INTEGRATION_STEP_S
+        if tau > self.duration:  # past the manoeuvre: a straight line from its end
+            e, n = self._offset(self.duration)
+            psi, v = self._heading_speed(self.duration)
+            return e + v * math.sin(psi) * (tau - self.duration), n + v * math.cos(psi) * (tau - self.duration)
+        k = int(tau / dt)
+        nodes = self._nodes
+        while len(nodes) <= k:
+            j = len(nodes) - 1
+            b = min((j + 1) * dt, self.duration)
+            de, dn = self._integral(j * dt, b)
+            nodes.append((nodes[j][0] + de, nodes[j][1] + dn))
+        de, dn = self._integral(k * dt, tau) if tau > k * dt else (0.0, 0.0)
+        return nodes[k][0] + de, nodes[k][1] + dn
+
+    def state(self, t: float) -> TargetState:
+        tau = t - self.t0
+        e, n = self._offset(tau)
+        psi, v = self._heading_speed(tau)
+        return TargetState(t, np.array([self.p0[0] + e, self.p0[1] + n, 0.0]),
+                           np.array([v * math.sin(psi), v * math.cos(psi), 0.0]), wrap_pi(psi), v)
 
 
 def _speed_knots(v0: float, times: list[float], speeds: list[float], accel: float):

@@ -79,6 +79,10 @@ class World:
             self.airframe.set_turbulence(*turb.jsbsim_settings(), seed=seed)
         return self._compose(uav, self.gimbal.reset())
 
+    def manoeuvre_ship(self, t_s: float, ev) -> float:
+        """Start a target_manoeuvre event (fwsim.events) at ``t_s``; how long it takes."""
+        return self.ship.manoeuvre(t_s, ev.course_deg, ev.speed_m_s, ev.turn_rate_deg_s, ev.accel_m_s2)
+
     @property
     def disturbed(self) -> bool:
         """The air moves other than the steady wind (turbulence or gusts): the log then has /world/air."""

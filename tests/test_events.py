@@ -17,6 +17,7 @@ EVENTS = [
     {"kind": "detector_blackout", "t_s": 22, "duration_s": 3},
     {"kind": "wind_gust", "t_s": 28, "duration_s": 4, "velocity_enu_m_s": [0, 6, 0]},
     {"kind": "false_detections", "t_s": 34, "duration_s": 4, "rate_hz": 10},
+    {"kind": "target_manoeuvre", "t_s": 15, "course_deg": 30, "speed_m_s": 7},
 ]
 
 
@@ -38,7 +39,8 @@ def test_every_event_starts_and_ends_in_the_log(flight):
     lock = next(t for t, _, m in flight.events() if m.startswith("phase 1 -> 2"))
     t0, t1 = _window(flight, "gimbal_stuck")
     assert t0 == pytest.approx(lock + 3, abs=0.01) and t1 == pytest.approx(t0 + 2, abs=0.01)
-    for kind, (a, b) in (("detector_blackout", (22, 25)), ("wind_gust", (28, 32)), ("false_detections", (34, 38))):
+    for kind, (a, b) in (("detector_blackout", (22, 25)), ("wind_gust", (28, 32)), ("false_detections", (34, 38)),
+                         ("target_manoeuvre", (15, 35))):
         t0, t1 = _window(flight, kind)
         assert (t0, t1) == (pytest.approx(a, abs=0.01), pytest.approx(b, abs=0.01))
 
@@ -80,6 +82,19 @@ def test_false_detections_are_boxes_away_from_the_ship(flight):
     assert far[~inside & (d["exposure_t_s"] > 14)].sum() == 0
 
 
+def test_target_manoeuvre_turns_the_ship(flight):
+    t0, t1 = _window(flight, "target_manoeuvre")
+    assert t0 == pytest.approx(15.0, abs=0.01) and t1 == pytest.approx(35.0, abs=0.05)  # 30 deg at 1.5 deg/s
+    tg = flight.table(topics.TARGET_STATE)
+    heading = np.degrees(tg["heading_ned_rad"])
+    assert np.all(np.abs(heading[tg["t_s"] < 15.0]) < 1e-9)
+    assert heading[np.argmin(np.abs(tg["t_s"] - 25.0))] == pytest.approx(15.0, abs=0.1)
+    assert np.all(np.abs(heading[tg["t_s"] > 35.1] - 30.0) < 1e-6)
+    assert tg["speed_m_s"][np.argmin(np.abs(tg["t_s"] - 19.5))] == pytest.approx(7.0)
+    step = np.linalg.norm(np.diff(tg["pos_enu_m"], axis=0), axis=1)
+    assert step.max() < 7.0 / 30.0 * 1.05  # no jump: the path is continuous
+
+
 def test_gnss_outage_holds_the_last_fix():
     from fwsim.messages import AirframeState
     from fwsim.sensors import SensorsConfig
@@ -112,6 +127,7 @@ def test_after_phase_waits_for_the_phase():
     ({"kind": "false_detections", "t_s": 1, "duration_s": 1}, "rate_hz"),
     ({"kind": "wind_gust", "t_s": 1, "duration_s": 1, "velocity_enu_m_s": [0, 0, 0]}, "between 0 and 40"),
     ({"kind": "detector_blackout", "t_s": 1, "duration_s": 1, "delay_s": 2}, "delay_s goes with after_phase"),
+    ({"kind": "target_manoeuvre", "t_s": 1}, "give course_deg, speed_m_s or both"),
 ])
 def test_bad_events_are_one_line(event, words):
     with pytest.raises(ScenarioError, match=words) as exc:

@@ -284,3 +284,34 @@ def test_hull_volume_agrees_with_trimesh_point_in_mesh():
         ref |= part.contains(pts)
     assert 0.1 < ours.mean() < 0.9
     assert (ours == ref).mean() > 0.999
+
+
+def test_manoeuvre_turns_at_its_rate_and_keeps_the_past():
+    from fwsim.target import Ship, TargetConfig
+    ship = Ship(TargetConfig.model_validate({"heading_deg": 0.0, "speed_m_s": 5.0}))
+    before = ship.state(5.0)
+    duration = ship.manoeuvre(10.0, course_deg=90.0, speed_m_s=None, turn_rate_deg_s=1.5, accel_m_s2=0.5)
+    assert duration == pytest.approx(60.0)
+    assert np.array_equal(ship.state(5.0).pos_enu_m, before.pos_enu_m)  # the past is not rewritten
+    start = ship.state(10.0).pos_enu_m
+    np.testing.assert_allclose(start, [0.0, 50.0, 0.0], atol=1e-12)
+    assert math.degrees(ship.state(40.0).heading_ned_rad) == pytest.approx(45.0)
+    R = 5.0 / math.radians(1.5)  # the arc of a constant-speed, constant-rate turn
+    for tau in (10.0, 30.0, 60.0):
+        a = math.radians(1.5) * tau
+        np.testing.assert_allclose(ship.state(10.0 + tau).pos_enu_m - start,
+                                   [R * (1 - math.cos(a)), R * math.sin(a), 0.0], atol=1e-6)
+    end = ship.state(70.0)
+    np.testing.assert_allclose(ship.state(80.0).pos_enu_m - end.pos_enu_m, [50.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_manoeuvre_changes_speed_and_turns_the_short_way():
+    from fwsim.target import Ship, TargetConfig
+    ship = Ship(TargetConfig.model_validate({"heading_deg": 10.0, "speed_m_s": 4.0}))
+    duration = ship.manoeuvre(0.0, course_deg=340.0, speed_m_s=8.0, turn_rate_deg_s=2.0, accel_m_s2=0.5)
+    assert duration == pytest.approx(max(30.0 / 2.0, 4.0 / 0.5))
+    assert math.degrees(ship.state(5.0).heading_ned_rad) == pytest.approx(0.0, abs=1e-9)  # port, 30 deg away
+    assert ship.state(4.0).speed_m_s == pytest.approx(6.0) and ship.state(20.0).speed_m_s == pytest.approx(8.0)
+    # distance along the path: 4 t + t^2 / 4 over the 8 s ramp
+    s = sum(ship.state(k * 0.01 + 0.01).speed_m_s * 0.01 for k in range(800))
+    assert s == pytest.approx(4 * 8 + 64 / 4, rel=1e-3)
