@@ -64,6 +64,7 @@ class Pointing:
         self.tilt_limits_rad = tuple(tilt_limits_rad)
         self._record = recorder
         self._lost_reported = False
+        self._lost_t = 0.0  # when the loss was reported
 
     def step(self, nav: Measurements, cam: CameraMotion | None, target: TargetState,
              fix: DetectionFix) -> GimbalCommand:
@@ -78,8 +79,11 @@ class Pointing:
         if fix.locked and lost_s > rq.after_s and not self._lost_reported:
             self._record.event(f"target lost at t = {nav.t_s:.2f} s (no detection for {lost_s:.1f} s): "
                                "pointing at the estimate")
-            self._lost_reported = True
+            self._lost_reported, self._lost_t = True, nav.t_s
         elif lost_s <= rq.after_s:
+            if self._lost_reported:
+                self._record.event(f"target reacquired at t = {nav.t_s:.2f} s (a detection after "
+                                   f"{nav.t_s - self._lost_t:.1f} s of pointing at the estimate)")
             self._lost_reported = False
         return gimbal
 

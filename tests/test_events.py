@@ -51,6 +51,7 @@ def test_blackout_no_detections_and_the_target_is_lost(flight):
     assert inside.sum() >= 80 and not d["detected"][inside].any()
     assert d["detected"][(d["exposure_t_s"] > 25.5) & (d["exposure_t_s"] < 28)].mean() > 0.9  # back after it
     assert any(22 < t < 25 and m.startswith("target lost") for t, _, m in flight.events())
+    assert any(25 < t < 26 and m.startswith("target reacquired") for t, _, m in flight.events())
 
 
 def test_stuck_gimbal_does_not_move(flight):
