@@ -259,17 +259,17 @@ _CSS = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;color:#222
         "th{background:#f3f3f3}code{background:#f6f6f6;padding:1px 4px}img{max-width:100%}")
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+def _table(header: list[str] | None, rows: list[list[str]]) -> str:
+    head = "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>" if header else ""
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    return f"<table>{head}{body}</table>"
 
 
 def _page(rep: Report, rows: list[dict], figures: list[tuple[str, str]], out_dir: Path) -> str:
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>fwsim report: {html.escape(rep.name)}"
              f"</title><style>{_CSS}</style></head><body>",
              f"<h1>fwsim report: {html.escape(rep.name)}</h1>",
-             _table(["", ""], [[html.escape(k), html.escape(v)] for k, v in rep.headline()])]
+             _table(None, [[f"<b>{html.escape(k)}</b>", html.escape(v)] for k, v in rep.headline()])]
     if rep.dispersed:
         parts.append("<p>Dispersed inputs: " + ", ".join(f"<code>{html.escape(p)}</code>" for p in rep.dispersed)
                      + "</p>")
@@ -278,6 +278,8 @@ def _page(rep: Report, rows: list[dict], figures: list[tuple[str, str]], out_dir
     worst = []
     for r in worst_runs(rows):
         log = str(r.get("log") or "")
+        if log and not Path(log).is_absolute():  # the summary's paths are relative to its folder
+            log = str((out_dir / log).resolve())
         rrd = str(Path(log).with_suffix(".rrd")) if log else ""
         cmd = f"fwsim replay {log} --rrd {rrd} && rerun {rrd}" if log else ""
         miss = r.get("miss_distance_m")
