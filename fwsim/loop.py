@@ -27,6 +27,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable
 
+import numpy as np
 import yaml
 
 import fwsim
@@ -107,6 +108,21 @@ class _StopOnSigint:
         return False
 
 
+def _log_render(log: LogWriter, world: World, t_s: float, frame, detection) -> None:
+    """A rendered camera image, and over it (foxglove.ImageAnnotations, same time stamp) the box of the ship's
+    visible pixels (truth, green) and the detector's latest box (orange), in the render's pixels."""
+    cam = world.camera
+    log.write_image(topics.CAMERA_IMAGE, t_s, topics.CAMERA_FRAME_ID, cam.encode_jpeg(world.render(None)))
+    rc, full = cam.cfg.render, cam.cfg
+    scale = np.array([rc.width_px / full.width_px, rc.height_px / full.height_px] * 2)
+    boxes = []
+    if frame is not None and np.all(np.isfinite(frame.bbox_px)):
+        boxes.append((frame.bbox_px * scale, (0.0, 1.0, 0.0), "ship (truth)"))
+    if detection is not None and detection.detected and np.all(np.isfinite(detection.bbox_px)):
+        boxes.append((detection.bbox_px * scale, (1.0, 0.55, 0.0), f"detection t = {detection.exposure_t_s:.2f} s"))
+    log.write_image_annotations(topics.CAMERA_ANNOTATIONS, t_s, boxes)
+
+
 def default_log_path(scenario: Scenario, out_dir: Path) -> Path:
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     return Path(out_dir) / f"{scenario.name}-seed{scenario.seed}-{stamp}.mcap"
@@ -132,10 +148,14 @@ def run_metadata(scenario: Scenario) -> dict[str, str]:
     }
 
 
-def _log_truth(log: LogWriter, truth) -> None:
-    """Truth at one tick: UAV state and pose, ship, gimbal, and the camera and ship frames."""
+def _log_truth(log: LogWriter, truth, origin=None) -> None:
+    """Truth at one tick: UAV state, pose and (with the world's ``origin``) geodetic fix, ship, gimbal, and the
+    camera and ship frames."""
     t = truth.uav.t_s
     log.write_state(truth.uav)
+    if origin is not None:
+        lat, lon, alt = origin.geodetic_from_enu(truth.uav.pos_enu_m)
+        log.write_location(t, topics.UAV_FRAME, math.degrees(lat), math.degrees(lon), alt)
     log.write(topics.TARGET_STATE, truth.target)
     log.write(topics.GIMBAL_STATE, truth.gimbal)
     log.write_transform(t, topics.CAMERA_FRAME_ID, truth.cam_pos_enu_m, quat_from_dcm(truth.R_enu_from_cam))
@@ -181,6 +201,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                            "application/yaml")
         try:
             world = World(scenario)
+            origin = world.airframe.origin
             truth = world.reset()
             trim = world.airframe.trim
             log.write_event(0.0, f"trim: throttle {trim.throttle_norm:.3f}, elevator {trim.elevator_norm:.3f}, "
@@ -197,7 +218,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                 time_flight_software(profile, fsw)
             log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
-            _log_truth(log, truth)
+            _log_truth(log, truth, origin)
             disturbed = world.disturbed
             events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None
             phase = None
@@ -241,30 +262,29 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                                                                                     cam.height_px))
                     log.write(topics.CAMERA_FRAME, frame)
                 if (tick + 1) % log_every == 0:
-                    _log_truth(log, truth)
+                    _log_truth(log, truth, origin)
                     log.write(topics.AUTOPILOT_STATUS, ap_status)
                     log.write(topics.ACTUATORS, act)
                     if disturbed:
                         log.write(topics.WORLD_AIR, world.air())
                 if render_every and (tick + 1) % render_every == 0:
-                    img = world.render(frame.bbox_px if frame is not None else None)
-                    log.write_image(topics.CAMERA_IMAGE, sim_t, topics.CAMERA_FRAME_ID, world.camera.encode_jpeg(img))
+                    _log_render(log, world, sim_t, frame, last_det)
                 if world.uav_inside_ship():
-                    _log_truth(log, truth)
+                    _log_truth(log, truth, origin)
                     status, reason = "completed", f"hit the ship at t = {sim_t:.2f} s"
                     break
                 if truth.uav.height_above_sea_m <= scenario.stop.min_height_m:
-                    _log_truth(log, truth)
+                    _log_truth(log, truth, origin)
                     status, reason = "completed", f"sea contact at t = {sim_t:.2f} s"
                     break
                 if truth.uav.airspeed_m_s > scenario.stop.max_airspeed_m_s:
-                    _log_truth(log, truth)
+                    _log_truth(log, truth, origin)
                     raise RunStopped(f"airspeed {truth.uav.airspeed_m_s:.1f} m/s above the limit "
                                      f"{scenario.stop.max_airspeed_m_s:g} m/s at t = {sim_t:.2f} s")
                 if progress is not None and tick % progress_every == 0:
                     progress(sim_t, scenario.duration_s)
                 if sigint.requested:
-                    _log_truth(log, truth)
+                    _log_truth(log, truth, origin)
                     log.close("interrupted", f"interrupted ({sigint.description}) at t = {sim_t:.2f} s")
                     raise Interrupted(sigint.signum)
         except RunStopped as exc:

@@ -9,12 +9,14 @@ from __future__ import annotations
 UAV_STATE = "/uav/state"  # fwsim.messages.AirframeState (JSON)
 TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames in the world
 UAV_POSE = "/uav/pose"  # foxglove.PoseInFrame
+UAV_FIX = "/uav/fix"  # foxglove.LocationFix: the UAV's latitude, longitude, altitude (Foxglove's map)
 TARGET_STATE = "/target/state"  # fwsim.target.TargetState
 GIMBAL_STATE = "/gimbal/state"  # fwsim.gimbal.GimbalState
 CAMERA_FRAME = "/camera/frame"  # fwsim.camera.FrameGeometry: what one frame shows of the ship (truth)
 CAMERA_DETECTION = "/camera/detection"  # fwsim.camera.Detection: the detector's output
 CAMERA_IMAGE = "/camera/image"  # foxglove.CompressedImage: rendered frames
 CAMERA_CALIBRATION = "/camera/calibration"  # foxglove.CameraCalibration
+CAMERA_ANNOTATIONS = "/camera/annotations"  # foxglove.ImageAnnotations: boxes over each /camera/image
 AUTOPILOT_COMMAND = "/autopilot/command"  # RateCommand | AccelCommand from the flight software
 AUTOPILOT_STATUS = "/autopilot/status"  # the inner loops' set-points
 ACTUATORS = "/actuators"  # ActuatorCommand

@@ -34,14 +34,15 @@ def test_checkout_log_has_every_topic_and_metadata(checkout_log):
     assert result.status == "completed" and log.status == "completed"
     for topic in ("/uav/state", "/tf", "/uav/pose", "/events", "/autopilot/command", "/autopilot/status",
                   "/actuators", "/fsw/status", "/target/state", "/gimbal/state", "/camera/frame",
-                  "/camera/image", "/camera/calibration", "/fsw/gimbal_command"):
+                  "/camera/image", "/camera/calibration", "/fsw/gimbal_command", "/uav/fix", "/camera/annotations"):
         assert log.topics.get(topic, 0) > 0, topic
+    assert log.topics["/camera/annotations"] == log.topics["/camera/image"]  # one set of boxes per image
     meta = log.metadata["fwsim"]
     assert meta["seed"] == "1" and meta["aircraft"] == "fwuav"
     assert len(meta["aircraft_sha256"]) == 64 and meta["jsbsim_version"]
     assert "autopilot_checkout" in log.scenario_text
     # 60 s at 30 Hz, plus the initial state
-    assert log.topics["/uav/state"] == 60 * 30 + 1
+    assert log.topics["/uav/state"] == 60 * 30 + 1 == log.topics["/uav/fix"]
 
 
 def test_checkout_metrics_within_bounds(checkout_log):

@@ -13,6 +13,8 @@ from typing import Any, Callable, Iterable
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from mcap.data_stream import RecordBuilder
@@ -265,6 +267,7 @@ class LogWriter:
         # Reused protobuf messages (set fields, serialise; no per-call allocation).
         self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
         self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
+        self._fix = None  # the LocationFix reused by write_location
         self._log = Log()
 
     # -- registration -----------------------------------------------------
@@ -403,6 +406,35 @@ class LogWriter:
         r = msg.rotation
         r.w, r.x, r.y, r.z = (float(c) for c in quat_wxyz)
         self._write_proto(topics.TF, msg, ns)
+
+    def write_location(self, t_s: float, frame_id: str, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        """A foxglove.LocationFix on /uav/fix (Foxglove's map panel)."""
+        ns = _ns(t_s)
+        msg = self._fix
+        if msg is None:
+            msg = self._fix = LocationFix(frame_id=frame_id, position_covariance_type=LocationFix.UNKNOWN)
+        msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
+        msg.latitude, msg.longitude, msg.altitude = float(lat_deg), float(lon_deg), float(alt_m)
+        self._write_proto(topics.UAV_FIX, msg, ns)
+
+    def write_image_annotations(self, topic: str, t_s: float, boxes) -> None:
+        """A foxglove.ImageAnnotations: ``boxes`` of (u0, v0, u1, v1) in the image's pixels, (r, g, b) in [0, 1],
+        and a label, drawn as outlined rectangles with their labels (stamped like the image they go on)."""
+        from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+        ns = _ns(t_s)
+        sec, nanos = divmod(ns, 1_000_000_000)
+        msg = ImageAnnotations()
+        for (u0, v0, u1, v1), (r, g, b), label in boxes:
+            pa = msg.points.add(type=PointsAnnotation.LINE_LOOP, thickness=1.0)
+            pa.timestamp.seconds, pa.timestamp.nanos = sec, nanos
+            pa.outline_color.r, pa.outline_color.g, pa.outline_color.b, pa.outline_color.a = r, g, b, 1.0
+            for u, v in ((u0, v0), (u1, v0), (u1, v1), (u0, v1)):
+                pa.points.add(x=float(u), y=float(v))
+            text = msg.texts.add(text=label, font_size=10.0)
+            text.timestamp.seconds, text.timestamp.nanos = sec, nanos
+            text.position.x, text.position.y = float(u0), max(float(v0) - 2.0, 0.0)
+            text.text_color.r, text.text_color.g, text.text_color.b, text.text_color.a = r, g, b, 1.0
+        self._write_proto(topic, msg, ns)
 
     def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
         """A foxglove.CompressedImage (e.g. a rendered camera frame)."""
