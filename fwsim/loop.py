@@ -218,6 +218,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                 time_flight_software(profile, fsw)
             log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                                   world.camera.K.K)
+            log.write_scene_models(topics.SCENE, 0.0, [
+                ("uav", topics.UAV_FRAME, world.camera.caster.uav_mesh, (0.85, 0.2, 0.2, 1.0)),
+                ("ship", topics.SHIP_FRAME_ID, world.ship.mesh, (0.55, 0.6, 0.65, 1.0))])
             _log_truth(log, truth, origin)
             disturbed = world.disturbed
             events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None

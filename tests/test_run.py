@@ -37,6 +37,7 @@ def test_checkout_log_has_every_topic_and_metadata(checkout_log):
                   "/camera/image", "/camera/calibration", "/fsw/gimbal_command", "/uav/fix", "/camera/annotations"):
         assert log.topics.get(topic, 0) > 0, topic
     assert log.topics["/camera/annotations"] == log.topics["/camera/image"]  # one set of boxes per image
+    assert log.topics["/scene"] == 1  # the models, once, locked to their frames
     meta = log.metadata["fwsim"]
     assert meta["seed"] == "1" and meta["aircraft"] == "fwuav"
     assert len(meta["aircraft_sha256"]) == 64 and meta["jsbsim_version"]

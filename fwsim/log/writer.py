@@ -436,6 +436,26 @@ class LogWriter:
             text.text_color.r, text.text_color.g, text.text_color.b, text.text_color.a = r, g, b, 1.0
         self._write_proto(topic, msg, ns)
 
+    def write_scene_models(self, topic: str, t_s: float, models) -> None:
+        """A foxglove.SceneUpdate of frame-locked triangle meshes that live for the whole log: ``models`` of
+        (entity id, frame id, mesh with ``vertices`` and ``faces`` in that frame, (r, g, b, a)) (Foxglove's 3D
+        panel then draws them wherever /tf puts their frames)."""
+        from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+        ns = _ns(t_s)
+        msg = SceneUpdate()
+        for entity_id, frame_id, mesh, (r, g, b, a) in models:
+            ent = msg.entities.add(id=entity_id, frame_id=frame_id, frame_locked=True)
+            ent.timestamp.seconds, ent.timestamp.nanos = divmod(ns, 1_000_000_000)
+            tri = ent.triangles.add()
+            tri.pose.orientation.w = 1.0
+            tri.color.r, tri.color.g, tri.color.b, tri.color.a = r, g, b, a
+            verts = mesh.vertices.tolist()
+            for face in mesh.faces.tolist():
+                for i in face:
+                    x, y, z = verts[i]
+                    tri.points.add(x=float(x), y=float(y), z=float(z))
+        self._write_proto(topic, msg, ns)
+
     def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
         """A foxglove.CompressedImage (e.g. a rendered camera frame)."""
         ns = _ns(t_s)
