@@ -29,9 +29,6 @@ _TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-_Strict = StrictModel
-
-
 # --------------------------------------------------------------------------- navigation and acquisition
 
 
@@ -217,14 +214,14 @@ class UkfConfig(StrictModel):
 # --------------------------------------------------------------------------- guidance and pointing
 
 
-class InitialPath(_Strict):
+class InitialPath(StrictModel):
     airspeed_m_s: float = Field(22.0, gt=0, le=60)
     waypoints_enu_m: list[Vec3] = Field(default_factory=list,
                                         description="empty: hold the initial heading and altitude")
     max_bank_deg: float = Field(35.0, gt=0, le=60)
 
 
-class Orbit(_Strict):
+class Orbit(StrictModel):
     """Circle around the estimated target after lock (a stand-in until the NMPC loiter)."""
 
     airspeed_m_s: float = Field(22.0, gt=0, le=60)
@@ -434,19 +431,19 @@ class IbvsConfig(StrictModel):
 # --------------------------------------------------------------------------- scripted commands
 
 
-class RatesStep(_Strict):
+class RatesStep(StrictModel):
     airspeed_m_s: float = Field(gt=0, le=60)
     roll_rate_deg_s: float = Field(0.0, ge=-200, le=200)
     pitch_rate_deg_s: float = Field(0.0, ge=-200, le=200)
 
 
-class AccelStep(_Strict):
+class AccelStep(StrictModel):
     airspeed_m_s: float = Field(gt=0, le=60)
     right_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, to the right")
     up_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, upward")
 
 
-class ScriptStep(_Strict):
+class ScriptStep(StrictModel):
     t_s: float = Field(ge=0, description="time from which this command holds")
     rates: RatesStep | None = None
     accel: AccelStep | None = None
@@ -463,7 +460,7 @@ class ScriptStep(_Strict):
 # --------------------------------------------------------------------------- swappable blocks
 
 
-class BlockChoice(_Strict):
+class BlockChoice(StrictModel):
     """Which block flies a part of the mission: a built-in name, or a user's class and its options.
 
     Written as a name (``estimator: ukf``) or as a mapping (``estimator: {use: pkg.mod:Class, options:
@@ -516,7 +513,7 @@ PointingChoice = Annotated[BlockChoice, _checked("pointing", "ibvs")]
 # --------------------------------------------------------------------------- the whole flight software
 
 
-class Controllers(_Strict):
+class Controllers(StrictModel):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
     navigation: NavigationConfig = Field(default_factory=NavigationConfig)
     script: list[ScriptStep] = Field(default_factory=list)

@@ -38,10 +38,7 @@ _AIRFRAME = np.array([60.0, 60.0, 60.0], np.float32)
 _SUN = np.array([0.4, 0.3, 0.86]) / np.linalg.norm([0.4, 0.3, 0.86])
 
 
-_Strict = StrictModel
-
-
-class DetectorConfig(_Strict):
+class DetectorConfig(StrictModel):
     """Noise model standing in for YOLO (every draw from the scenario's seed)."""
 
     pixel_noise_px: float = Field(1.5, ge=0, le=50, description="std. dev. of the box centre noise, px")
@@ -51,14 +48,14 @@ class DetectorConfig(_Strict):
     latency_s: float = Field(0.0, ge=0, le=2, description="delay from exposure to the detection's arrival")
 
 
-class RenderConfig(_Strict):
+class RenderConfig(StrictModel):
     rate_hz: float = Field(1.0, ge=0, le=30, description="full-frame renders per second in the log (0: none)")
     width_px: int = Field(320, ge=16, le=1920)
     height_px: int = Field(180, ge=16, le=1080)
     jpeg_quality: int = Field(85, ge=10, le=100)
 
 
-class CameraConfig(_Strict):
+class CameraConfig(StrictModel):
     width_px: int = Field(1280, ge=16, le=4096)
     height_px: int = Field(720, ge=16, le=4096)
     hfov_deg: float = Field(60.0, gt=1, lt=170, description="horizontal field of view; square pixels")

@@ -148,6 +148,7 @@ class EventRunner:
         self.clutter_rate_hz = 0.0
         self.gnss_held = False
         self.gimbal_stuck = False
+        self._clutter_box_px = None  # box size range of the first false_detections event on
 
     def step(self, t_s: float, phase: int | None, log_event, gust=None, manoeuvre=None) -> None:
         """Advance to ``t_s`` (the flight software's phase now, if known): start and end events,
@@ -155,6 +156,7 @@ class EventRunner:
         ``manoeuvre(t, event) -> duration_s`` at a ship manoeuvre's start."""
         if phase is not None and phase not in self._phase_seen:
             self._phase_seen[phase] = t_s
+        changed = False
         for i, ev in enumerate(self.events):
             if self._start[i] is None and ev.after_phase in self._phase_seen:
                 self._start[i] = self._phase_seen[ev.after_phase] + ev.delay_s
@@ -162,20 +164,26 @@ class EventRunner:
             if start is None or self._state[i] == "over":
                 continue
             if self._state[i] == "pending" and t_s >= start - 1e-9:
-                self._state[i] = "on"
+                self._state[i], changed = "on", True
                 if ev.kind == "target_manoeuvre":
                     self._duration[i] = manoeuvre(t_s, ev)
                 log_event(t_s, f"event started: {_describe(ev, self._duration[i])}")
                 if ev.kind == "wind_gust":
                     gust(ev.velocity_enu_m_s, ev.duration_s)
             if self._state[i] == "on" and t_s >= start + self._duration[i] - 1e-9:
-                self._state[i] = "over"
+                self._state[i], changed = "over", True
                 log_event(t_s, f"event ended: {ev.kind}")
+        if changed:
+            self._flags()
+
+    def _flags(self) -> None:
+        """The loop's flags from the events that are on (recomputed when one starts or ends)."""
         on = [ev for ev, s in zip(self.events, self._state) if s == "on"]
         self.blackout = any(ev.kind == "detector_blackout" for ev in on)
         self.clutter_rate_hz = sum(ev.rate_hz for ev in on if ev.kind == "false_detections")
         self.gnss_held = any(ev.kind == "gnss_outage" for ev in on)
         self.gimbal_stuck = any(ev.kind == "gimbal_stuck" for ev in on)
+        self._clutter_box_px = next((ev.box_px for ev in on if ev.kind == "false_detections"), None)
 
     def clutter_box(self, frame_rate_hz: float, width_px: int, height_px: int) -> np.ndarray | None:
         """During false detections: a clutter box (u0, v0, u1, v1) for this frame, or None. Draws the same
@@ -183,8 +191,7 @@ class EventRunner:
         if self.clutter_rate_hz <= 0.0:
             return None
         draw = self.rng.random(4)
-        sizes = [ev.box_px for ev, s in zip(self.events, self._state) if s == "on" and ev.kind == "false_detections"]
-        lo, hi = sizes[0]
+        lo, hi = self._clutter_box_px
         if draw[0] >= min(1.0, self.clutter_rate_hz / frame_rate_hz):
             return None
         side = lo + draw[1] * (hi - lo)

@@ -112,7 +112,7 @@ def _log_render(log: LogWriter, world: World, t_s: float, frame, detection) -> N
     """A rendered camera image, and over it (foxglove.ImageAnnotations, same time stamp) the box of the ship's
     visible pixels (truth, green) and the detector's latest box (orange), in the render's pixels."""
     cam = world.camera
-    log.write_image(topics.CAMERA_IMAGE, t_s, topics.CAMERA_FRAME_ID, cam.encode_jpeg(world.render(None)))
+    log.write_image(topics.CAMERA_IMAGE, t_s, topics.CAMERA_FRAME_ID, cam.encode_jpeg(world.render()))
     rc, full = cam.cfg.render, cam.cfg
     scale = np.array([rc.width_px / full.width_px, rc.height_px / full.height_px] * 2)
     boxes = []
@@ -148,14 +148,13 @@ def run_metadata(scenario: Scenario) -> dict[str, str]:
     }
 
 
-def _log_truth(log: LogWriter, truth, origin=None) -> None:
-    """Truth at one tick: UAV state, pose and (with the world's ``origin``) geodetic fix, ship, gimbal, and the
-    camera and ship frames."""
+def _log_truth(log: LogWriter, truth, origin) -> None:
+    """Truth at one tick: UAV state, pose and geodetic fix (through the world's ``origin``), ship, gimbal, and
+    the camera and ship frames."""
     t = truth.uav.t_s
     log.write_state(truth.uav)
-    if origin is not None:
-        lat, lon, alt = origin.geodetic_from_enu(truth.uav.pos_enu_m)
-        log.write_location(t, topics.UAV_FRAME, math.degrees(lat), math.degrees(lon), alt)
+    lat, lon, alt = origin.geodetic_from_enu(truth.uav.pos_enu_m)
+    log.write_location(t, topics.UAV_FRAME, math.degrees(lat), math.degrees(lon), alt)
     log.write(topics.TARGET_STATE, truth.target)
     log.write(topics.GIMBAL_STATE, truth.gimbal)
     log.write_transform(t, topics.CAMERA_FRAME_ID, truth.cam_pos_enu_m, quat_from_dcm(truth.R_enu_from_cam))

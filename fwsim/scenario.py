@@ -28,14 +28,11 @@ from fwsim.yamlfile import load_yaml_text, read_text, short
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-_Strict = StrictModel
-
-
 #: how far from the world origin a run may start (see Scenario._within_the_flat_earth_mapping)
 MAX_RANGE_FROM_ORIGIN_M = 20_000.0
 
 
-class Rates(_Strict):
+class Rates(StrictModel):
     sim_hz: float = Field(120.0, gt=0, le=2000, description="JSBSim and autopilot rate")
     flight_software_hz: float = Field(30.0, gt=0, le=1000, description="rate of the flight software step")
     log_hz: float = Field(30.0, gt=0, le=2000, description="rate of the state and command topics in the log")
@@ -49,7 +46,7 @@ class Rates(_Strict):
         return self
 
 
-class Aircraft(_Strict):
+class Aircraft(StrictModel):
     name: str = Field("fwuav", description="folder under aircraft/")
     autopilot_gains: dict[str, float] = Field(default_factory=dict,
                                               description="overrides of aircraft/<name>/autopilot.yaml values")
@@ -75,7 +72,7 @@ class Aircraft(_Strict):
 TURBULENCE_SEVERITY = {"light": (3, 7.716), "moderate": (4, 15.433), "severe": (6, 23.150)}
 
 
-class Turbulence(_Strict):
+class Turbulence(StrictModel):
     """Continuous turbulence from JSBSim's own MIL-F-8785C model (Dryden spectra; FGWinds), seeded from the
     scenario's seed. Above 2000 ft its intensity follows the severity's probability-of-exceedance curve,
     below 1000 ft the wind at 20 ft (sigma_w = 0.1 W20), blended between."""
@@ -106,14 +103,14 @@ class Turbulence(_Strict):
         return kind, index, w20
 
 
-class World(_Strict):
+class World(StrictModel):
     origin_lat_deg: float = Field(0.0, ge=-85, le=85, description="geodetic latitude of the world origin")
     origin_lon_deg: float = Field(0.0, ge=-180, le=180, description="longitude of the world origin")
     wind_enu_m_s: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="constant wind")
     turbulence: Turbulence | None = Field(None, description="JSBSim's continuous turbulence (none by default)")
 
 
-class Initial(_Strict):
+class Initial(StrictModel):
     pos_enu_m: Vec3 = Field(description="UAV position in the world ENU frame")
     airspeed_m_s: float = Field(gt=0, le=60)
     heading_deg: float = Field(ge=-360, le=360, description="clockwise from North")
@@ -127,12 +124,12 @@ class Initial(_Strict):
         return self
 
 
-class Stop(_Strict):
+class Stop(StrictModel):
     min_height_m: float = Field(0.0, ge=0, description="end the run below this height above the sea")
     max_airspeed_m_s: float = Field(80.0, gt=0, description="end the run (failed) above this airspeed")
 
 
-class Scenario(_Strict):
+class Scenario(StrictModel):
     name: str
     description: str = ""
     seed: int = Field(0, ge=0)

@@ -90,16 +90,13 @@ INTEGRATION_STEP_S = 0.05
 _Coord = Annotated[float, Field(ge=-1e6, le=1e6, allow_inf_nan=False)]
 
 
-_Strict = StrictModel
-
-
-class ConstantVelocity(_Strict):
+class ConstantVelocity(StrictModel):
     """Straight line at constant speed (the paper's target)."""
 
     model: Literal["constant_velocity"] = Field("constant_velocity", description="motion model")
 
 
-class ConstantTurn(_Strict):
+class ConstantTurn(StrictModel):
     """Steady turn: constant speed and heading rate, the path is a circle of radius v / |omega|."""
 
     model: Literal["constant_turn"] = Field(description="motion model")
@@ -108,7 +105,7 @@ class ConstantTurn(_Strict):
                                                "(heading increases), 0 is a straight line")
 
 
-class Zigzag(_Strict):
+class Zigzag(StrictModel):
     """Sinusoidal weave: heading = heading_deg + amplitude_deg * sin(2 pi t / period_s), constant speed."""
 
     model: Literal["zigzag"] = Field(description="motion model")
@@ -118,7 +115,7 @@ class Zigzag(_Strict):
     period_s: float = Field(ge=2, le=3600, description="period of the heading oscillation")
 
 
-class SpeedChanges(_Strict):
+class SpeedChanges(StrictModel):
     """Straight line with commanded speed steps, each reached at a finite acceleration."""
 
     model: Literal["speed_changes"] = Field(description="motion model")
@@ -147,7 +144,7 @@ class SpeedChanges(_Strict):
 Motion = Annotated[ConstantVelocity | ConstantTurn | Zigzag | SpeedChanges, Field(discriminator="model")]
 
 
-class TargetConfig(_Strict):
+class TargetConfig(StrictModel):
     """The ship (scenario section ``target:``); ``TargetConfig.model_validate({})`` is the paper's ship."""
 
     kind: Literal["ship"] = Field("ship", description="target type")

@@ -15,17 +15,13 @@ machine at hand; they belong in notes, not in tests.
 from __future__ import annotations
 
 import argparse
-import resource
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 from fwsim import SCENARIO_DIR
-
-
-def _peak_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+from fwsim.bench import peak_memory_mb
 
 
 def batch(out: Path) -> int:
@@ -54,17 +50,17 @@ def loiter(minutes: float) -> int:
     def progress(t_s: float, _total: float) -> None:
         for m in (10, 30, 60):
             if t_s >= 60.0 * m and m not in marks:
-                marks[m] = _peak_mb()
+                marks[m] = peak_memory_mb()
                 print(f"  {m:3d} min simulated: peak memory {marks[m]:.0f} MB", flush=True)
 
-    start_mb = _peak_mb()
+    start_mb = peak_memory_mb()
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "loiter.mcap"
         r = run(scenario, text, log, progress=progress)
         size_mb = log.stat().st_size / 1e6
     print(f"{r.status}: {r.reason}; {r.sim_time_s / 60:.1f} min simulated in {r.wall_time_s:.0f} s "
           f"({r.real_time_factor:.1f}x real time)")
-    print(f"peak memory: {start_mb:.0f} MB before the run, {_peak_mb():.0f} MB at the end")
+    print(f"peak memory: {start_mb:.0f} MB before the run, {peak_memory_mb():.0f} MB at the end")
     print(f"log: {size_mb:.1f} MB, {size_mb / (r.sim_time_s / 60):.2f} MB per simulated minute")
     return 0
 
