@@ -25,7 +25,15 @@ from rich.table import Table
 from fwsim.scenario import ScenarioError, load_scenario, parse_sets
 from fwsim.yamlfile import short
 
-console = Console(stderr=True)
+
+def _console(**kwargs) -> Console:
+    """A rich console; off a terminal (a pipe, a file, CI) lines are not wrapped at 80 columns, so paths stay
+    whole and copyable."""
+    con = Console(**kwargs)
+    return con if con.is_terminal else Console(width=200, soft_wrap=True, **kwargs)
+
+
+console = _console(stderr=True)
 
 
 def _fmt(v) -> str:
@@ -61,7 +69,7 @@ def _print_table(title: str, rows: dict) -> None:
     table.add_column("value", justify="right")
     for k, v in rows.items():
         table.add_row(k, _fmt(v))
-    Console().print(table)
+    _console().print(table)
 
 
 def cmd_run(args) -> int:
@@ -116,6 +124,8 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
             bar.stop()
             console.print(f"[red]run failed[/]: {type(exc).__name__}: {exc}\nthe log says why: {log_path}")
             return 1
+        # A run that ends early (the ship hit, sea contact) ends the bar at 100 %, not at its share of duration_s.
+        bar.update(task, total=max(result.sim_time_s, 1e-9), completed=result.sim_time_s, refresh=True)
     colour = "green" if result.status == "completed" else "red"
     console.print(f"[{colour}]{result.status}[/]: {result.reason}")
     console.print(f"sim time {result.sim_time_s:.1f} s, wall time {result.wall_time_s:.2f} s, "
@@ -136,7 +146,7 @@ def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
     for b in blocks:
         per_call = f"{1e6 * b.seconds / b.calls:.1f}" if b.calls else ""
         table.add_row(b.name, f"{100 * b.share:.1f} %", f"{b.ms_per_sim_s:.2f}", str(b.calls or ""), per_call)
-    Console().print(table)
+    _console().print(table)
 
 
 def cmd_metrics(args) -> int:
@@ -241,9 +251,7 @@ def cmd_compare(args) -> int:
     except (ValueError, KeyError) as exc:  # a file that is not a readable log, metrics file or baseline
         print(f"error: {short(exc, 300)}", file=sys.stderr)
         return 2
-    out = Console()
-    if not out.is_terminal:
-        out = Console(width=200)
+    out = _console()
     table = Table(title=f"baseline {cmp.baseline_label}\nrun {cmp.run_label}")
     for name, justify in (("metric", "left"), ("baseline", "right"), ("run", "right"), ("diff", "right"),
                           ("tolerance", "left"), ("verdict", "left")):

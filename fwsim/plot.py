@@ -107,6 +107,31 @@ def figure_names() -> list[str]:
 
 # -- helpers ----------------------------------------------------------------
 
+def _with_breaks(t: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(t, heading deg) with NaN inserted at the wraps (see _heading_deg)."""
+    deg = np.mod(np.degrees(np.asarray(rad, float)), 360.0)
+    if deg.size < 2:
+        return t, deg
+    at = np.nonzero(np.abs(np.diff(deg)) > 180.0)[0] + 1
+    return np.insert(np.asarray(t, float), at, np.nan), np.insert(deg, at, np.nan)
+
+
+def _clip_transient(ax, *series: np.ndarray, margin: float = 0.3) -> None:
+    """Y limits from the 1st-99th percentile of the series (the lock transient, whose 2-sigma bound can reach
+    hundreds of metres, would otherwise flatten the converged error); says so on the axis when it clips."""
+    vals = np.concatenate([np.ravel(np.asarray(s, float)) for s in series]) if series else np.zeros(0)
+    vals = vals[np.isfinite(vals)]
+    if vals.size < 10:
+        return
+    lo, hi = np.percentile(vals, [1.0, 99.0])
+    pad = margin * max(hi - lo, 1e-6)
+    lo, hi = lo - pad, hi + pad
+    if vals.min() < lo or vals.max() > hi:
+        ax.set_ylim(lo, hi)
+        ax.text(0.99, 0.97, f"axis clipped (extremes {vals.min():.3g} .. {vals.max():.3g})", transform=ax.transAxes,
+                ha="right", va="top", fontsize=7, color="0.4")
+
+
 def _run_label(log: RunLog) -> str:
     meta = log.metadata.get("fwsim", {})
     return f"{meta.get('scenario', log.path.stem)} (seed {meta.get('seed', '?')}, {log.status})"
@@ -220,9 +245,12 @@ def _attitude(log: RunLog) -> Figure:
     st = log.table(topics.UAV_STATE)
     t, eul = st["t_s"], np.degrees(st["euler_ned_rad"])
     fig, axes = _figure(3)
-    for ax, k, name in zip(axes, range(3), ("roll φ", "pitch θ", "yaw ψ")):
+    for ax, k, name in zip(axes, range(2), ("roll φ", "pitch θ")):
         ax.plot(t, eul[:, k])
         ax.set_ylabel(f"{name} [deg]")
+    axes[2].plot(*_with_breaks(t, st["euler_ned_rad"][:, 2]))  # wrapped as the course is: [0, 360)
+    axes[2].set_ylabel("yaw ψ [deg]")
+    axes[2].set_ylim(0.0, 360.0)
     axes[-1].set_xlabel("sim time [s]")
     return fig
 
@@ -271,12 +299,12 @@ def _velocity_direction(log: RunLog) -> Figure:
     st = log.table(topics.UAV_STATE)
     t, v = st["t_s"], st["vel_enu_m_s"]
     gamma = np.degrees(np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1])))  # positive climbing
-    course = np.degrees(np.arctan2(v[:, 0], v[:, 1]))  # clockwise from North
     fig, (a1, a2) = _figure(2)
     a1.plot(t, gamma)
     a1.set_ylabel("flight path γ [deg]")
-    a2.plot(t, course)
+    a2.plot(*_with_breaks(t, np.arctan2(v[:, 0], v[:, 1])))  # clockwise from North, [0, 360) as the yaw
     a2.set_ylabel("course χ [deg]")
+    a2.set_ylim(0.0, 360.0)
     a2.set_xlabel("sim time [s]")
     return fig
 
@@ -368,6 +396,7 @@ def _target_estimate(log: RunLog) -> Figure:
             if std is not None:
                 lo, hi = est[fld][:, row] - 2 * std[:, row], est[fld][:, row] + 2 * std[:, row]
                 ax.fill_between(t, lo, hi, alpha=0.25, lw=0, label="±2σ")
+            _clip_transient(ax, est[fld][:, row], interp_at(t, tg["t_s"], tg[fld][:, row]))
             ax.set_ylabel(f"{what} {axis} [{unit}]", fontsize=9)
     for ax in axes[-1]:
         ax.set_xlabel("sim time [s]")
@@ -392,11 +421,13 @@ def _target_estimate_error(log: RunLog) -> Figure:
     if "pos_std_m" in est:
         a1.plot(t, 2 * np.linalg.norm(est["pos_std_m"][:, :2], axis=1), "--", label="2σ (norm)")
     a1.set_ylabel("position error [m]")
+    _clip_transient(a1, err, np.linalg.norm(err, axis=1))
     a1.legend(fontsize=8)
     if "vel_enu_m_s" in est:
         verr = (est["vel_enu_m_s"] - interp_at(t, tg["t_s"], tg["vel_enu_m_s"]))[:, :2]
         a2.plot(t, verr[:, 0], label="x (East)")
         a2.plot(t, verr[:, 1], label="y (North)")
+        _clip_transient(a2, verr)
         a2.legend(fontsize=8)
     a2.set_ylabel("velocity error [m/s]")
     a2.set_xlabel("sim time [s]")

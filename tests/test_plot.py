@@ -88,3 +88,30 @@ def test_phase_colouring_uses_fsw_status(mission_log):
     assert len(index) == len(st["t_s"]) and index[0] == 0
     last = pairs.index((int(fsw["phase"][-1]), fsw["phase_name"][-1]))
     assert index[-1] == last
+
+
+def test_headings_wrap_the_same_way_and_break_at_the_wrap():
+    from fwsim.plot import _with_breaks
+    t = np.arange(6.0)
+    rad = np.radians([350.0, 355.0, -1.0, 5.0, 10.0, -100.0])  # yaw from JSBSim or atan2: either sign
+    tt, deg = _with_breaks(t, rad)
+    finite = deg[np.isfinite(deg)]
+    assert np.all((finite >= 0) & (finite < 360))
+    assert deg[2] == pytest.approx(359.0) and np.isnan(deg[3]) and np.isnan(tt[3])  # broken, not a drop to 0
+    assert np.isnan(deg[6]) and deg[7] == pytest.approx(260.0) and len(deg) == 8
+    assert np.nanmax(np.abs(np.diff(deg))) < 180.0
+
+
+def test_estimate_axes_clip_the_lock_transient():
+    from matplotlib.figure import Figure
+
+    from fwsim.plot import _clip_transient
+    ax = Figure().subplots()
+    err = np.concatenate([np.full(3, 175.0), np.random.default_rng(0).normal(0.0, 2.0, 500)])
+    ax.plot(err)
+    _clip_transient(ax, err)
+    lo, hi = ax.get_ylim()
+    assert hi < 20.0 and lo > -20.0 and any("clipped" in t.get_text() for t in ax.texts)
+    ax2 = Figure().subplots()
+    _clip_transient(ax2, np.linspace(-1.0, 1.0, 100))  # nothing to clip: the axis is left alone
+    assert not ax2.texts
