@@ -46,6 +46,7 @@ import math
 import multiprocessing
 import os
 import re
+import signal
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -438,7 +439,10 @@ def _run_pool(jobs: list[RunJob], workers: int, on_row: RowCallback, run_fn: Cal
                 casualties.append(job)
             except Exception as exc:  # noqa: BLE001 - e.g. a result that does not pickle
                 on_row(failed_row(job, f"worker error: {_describe(exc)}"))
-    finally:  # on Ctrl-C: start nothing new (the runs in flight log 'interrupted')
+    except KeyboardInterrupt as exc:  # Ctrl-C reaches the workers by itself; SIGTERM and SIGHUP are passed on
+        _pass_on(exc, pool)
+        raise
+    finally:  # on a stop: start nothing new (the runs in flight log 'interrupted')
         pool.shutdown(wait=True, cancel_futures=True)
     for job in casualties:  # one process per run: a crash takes down only itself
         with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_pool_worker_init) as pool:
@@ -448,6 +452,21 @@ def _run_pool(jobs: list[RunJob], workers: int, on_row: RowCallback, run_fn: Cal
                 on_row(failed_row(job, "worker process died (crashed twice; see its log if any)"))
             except Exception as exc:  # noqa: BLE001
                 on_row(failed_row(job, f"worker error: {_describe(exc)}"))
+
+
+def _pass_on(exc: KeyboardInterrupt, pool: ProcessPoolExecutor) -> None:
+    """Send the signal that stopped the batch (SIGTERM from a scheduler, SIGHUP) to the pool's workers, so the
+    runs in flight close their logs as 'interrupted' with the signal named. Ctrl-C (SIGINT) already went to
+    the whole process group."""
+    signum = getattr(exc, "signum", signal.SIGINT)
+    if signum == signal.SIGINT:
+        return
+    procs = getattr(pool, "_processes", None) or {}  # the executor's workers, {pid: Process}
+    for proc in list(procs.values()):
+        try:
+            os.kill(proc.pid, signum)
+        except (OSError, AttributeError):  # already gone
+            pass
 
 
 def ray_connect(address: str, workers: int) -> bool:
@@ -483,14 +502,19 @@ def _run_ray(jobs: list[RunJob], on_row: RowCallback, run_fn: Callable) -> None:
     remote = ray.remote(num_cpus=1, max_retries=1)(run_fn)
     refs = {remote.remote(j): j for j in jobs}
     pending = list(refs)
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        for ref in done:
-            try:
-                row = ray.get(ref)
-            except Exception as exc:  # noqa: BLE001 - a lost worker or node: a failed row
-                row = failed_row(refs[ref], f"ray task failed: {type(exc).__name__}: {exc}")
-            on_row(row)
+    try:
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                try:
+                    row = ray.get(ref)
+                except Exception as exc:  # noqa: BLE001 - a lost worker or node: a failed row
+                    row = failed_row(refs[ref], f"ray task failed: {type(exc).__name__}: {exc}")
+                on_row(row)
+    except KeyboardInterrupt:  # a stopped batch stops its tasks: each one's run logs 'interrupted'
+        for ref in pending:
+            ray.cancel(ref)
+        raise
 
 
 # -- the batch --------------------------------------------------------------

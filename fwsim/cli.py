@@ -220,11 +220,12 @@ def cmd_batch(args) -> int:
         try:
             result = run_batch(args.spec, out, workers=args.workers, resume=args.resume, ray_address=args.ray,
                                on_start=on_start, on_row=on_row)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
+            from fwsim._entry import exit_code
             bar.stop()
             console.print(f"[yellow]interrupted[/]: the summary of the finished runs is in {out}; "
                           "continue with --resume")
-            return 130
+            return exit_code(exc)
     bad = result.failed
     if bad:
         table = Table(title=f"{len(bad)} of {len(result.rows)} runs did not complete")
@@ -390,9 +391,10 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # before a run started (a run's own interrupt is handled where it flies)
+    except KeyboardInterrupt as exc:  # before a run started (a run's own interrupt is handled where it flies)
+        from fwsim._entry import exit_code
         print("interrupted", file=sys.stderr)
-        return 130
+        return exit_code(exc)
 
 
 if __name__ == "__main__":

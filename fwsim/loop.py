@@ -33,6 +33,7 @@ import yaml
 import fwsim
 from controllers.mission import flight_software
 from fwsim import topics
+from fwsim._entry import STOP_SIGNALS, Signalled
 from fwsim.airframe import aircraft_file, aircraft_hash
 from fwsim.autopilot import Autopilot, load_autopilot_params
 from fwsim.camera import Detector
@@ -65,13 +66,9 @@ class RunStopped(Exception):
     """The run ended early for a reason the scenario defines (sea contact, ...)."""
 
 
-class Interrupted(KeyboardInterrupt):
-    """The run was stopped by a signal (``signum``: SIGINT for Ctrl-C, SIGTERM from a scheduler); the log is
-    complete and says so."""
-
-    def __init__(self, signum: int):
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
+class Interrupted(Signalled):
+    """The run was stopped by a signal (``signum``: SIGINT for Ctrl-C, SIGTERM from a scheduler, SIGHUP from a
+    closed terminal); the log is complete and says so."""
 
 
 class _StopOnSigint:
@@ -79,7 +76,7 @@ class _StopOnSigint:
     loop checks once per tick, so a signal never lands in the middle of writing the log; a second one
     interrupts at once. Main thread only."""
 
-    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    _SIGNALS = STOP_SIGNALS  # SIGINT, SIGTERM and (where there is one) SIGHUP
 
     def __init__(self):
         self.requested = False

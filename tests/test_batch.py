@@ -339,3 +339,24 @@ runs:
     assert all(j.overrides["events"][0]["t_s"] == 5.0 for j in jobs)
     drawn = [j.load()[0].events[0].t_s for j in jobs]
     assert drawn == [j.overrides["events.0.t_s"] for j in jobs] and all(1.0 <= t <= 2.0 for t in drawn)
+
+
+def test_sigterm_to_a_batch_reaches_the_runs_in_flight(tmp_path):
+    """A scheduler's SIGTERM stops the batch (exit 143) and its workers' runs: each log in flight closes as
+    interrupted with the signal named."""
+    import signal
+    import time
+    spec = write_spec(tmp_path, f"runs:\n  - scenario: {CHECKOUT}\n    seeds: [1, 2]\n    set: {{duration_s: 3000}}\n")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "fwsim._entry", "batch", str(spec), "--out", str(out),
+                             "--workers", "2", "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and sum(p.stat().st_size > 20_000 for p in out.glob("logs/*.mcap")) < 2:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    logs = [read_log(p) for p in sorted(out.glob("logs/*.mcap"))]
+    assert len(logs) == 2
+    for log in logs:
+        assert log.status == "interrupted" and "SIGTERM" in log.reason and not log.truncated, log.reason

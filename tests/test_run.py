@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from fwsim import SCENARIO_DIR
+from fwsim.cli import main as main_cli
 from fwsim.log import read_log
 from fwsim.loop import run
 from fwsim.metrics import compute_metrics
@@ -123,10 +124,11 @@ def test_sea_contact_ends_the_run(tmp_path):
     assert result.sim_time_s < 30
 
 
-@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM"),
+                                             (signal.SIGHUP, 129, "SIGHUP")])
 def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
     log_path = tmp_path / "int.mcap"
-    proc = subprocess.Popen([sys.executable, "-m", "fwsim.cli", "run", str(CHECKOUT), "--quiet",
+    proc = subprocess.Popen([sys.executable, "-m", "fwsim._entry", "run", str(CHECKOUT), "--quiet",
                              "--log", str(log_path), "--set", "duration_s=3000"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 60
@@ -139,6 +141,60 @@ def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
     log = read_log(log_path)
     assert log.status == "interrupted" and not log.truncated and word in log.reason
     assert log.topics["/uav/state"] > 30
+    from mcap.stream_reader import StreamReader  # mcap's own reader opens it too
+    with open(log_path, "rb") as f:
+        assert any(type(r).__name__ == "Footer" for r in StreamReader(f).records)
+
+
+def test_after_sigkill_the_log_reads_to_its_last_chunk(tmp_path):
+    """A hard kill leaves no footer: fwsim and mcap's non-seeking reader still read every complete chunk."""
+    from mcap.exceptions import EndOfFile
+    from mcap.reader import NonSeekingReader
+    log_path = tmp_path / "killed.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "fwsim._entry", "run", str(CHECKOUT), "--quiet",
+                             "--log", str(log_path), "--set", "duration_s=3000"], stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline and (not log_path.exists() or log_path.stat().st_size < 400_000):
+        time.sleep(0.1)
+    proc.kill()
+    proc.wait(timeout=30)
+    log = read_log(log_path)
+    assert log.truncated and not log.corrupted and log.status == "unknown"
+    n_state = log.topics["/uav/state"]
+    assert n_state > 100
+    seen = 0
+    with open(log_path, "rb") as f:
+        try:
+            for _, channel, _ in NonSeekingReader(f).iter_messages(log_time_order=False):
+                seen += channel.topic == "/uav/state"
+        except EndOfFile:  # the cut: everything before it has been read
+            pass
+    assert seen == n_state
+    assert main_cli(["metrics", str(log_path)]) == 0
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """True once the process has a handler for ``sig`` (Linux: SigCgt in /proc/PID/status)."""
+    try:
+        text = open(f"/proc/{pid}/status").read()
+    except OSError:
+        return False
+    caught = int(next(line.split()[1] for line in text.splitlines() if line.startswith("SigCgt:")), 16)
+    return bool(caught >> (sig - 1) & 1)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc to see the handler installed")
+def test_sigterm_during_start_up_exits_cleanly(tmp_path):
+    """The signal lands while the command is still importing: one line, exit 143, no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "fwsim._entry", "run", str(CHECKOUT), "--quiet",
+                             "--log", str(tmp_path / "early.mcap")], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 30
+    while time.time() < deadline and not _catches(proc.pid, signal.SIGTERM):
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and "interrupted" in err and len(err.strip().splitlines()) <= 2, err
 
 
 def test_cli_run_and_metrics_json(tmp_path):
