@@ -305,10 +305,12 @@ def cmd_replay(args) -> int:
     if log is None:
         return 2
     rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
+    from google.protobuf.message import DecodeError
     try:
         res = export_rrd(log, rrd, ReplayOptions(marker_scale=args.marker_scale))
-    except ValueError as exc:
-        console.print(f"[red]error[/]: {exc}")
+    except (ValueError, KeyError, IndexError, DecodeError) as exc:  # bad options, or damage inside a message
+        damage = "" if type(exc) is ValueError else f"{path}: corrupted: a message does not decode: "
+        print(f"error: {damage}{short(f'{type(exc).__name__}: {exc}' if damage else exc, 300)}", file=sys.stderr)
         return 2
     console.print(f"logged: {', '.join(res.layers)}")
     for name, why in res.skipped:

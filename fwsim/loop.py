@@ -43,7 +43,7 @@ from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
 from fwsim.messages import GimbalCommand
 from fwsim.profiling import BlockTimer, time_flight_software, time_harness
-from fwsim.scenario import Scenario
+from fwsim.scenario import Scenario, start_epoch_ns
 from fwsim.sensors import Sensors, rng_for
 from fwsim.world import World
 
@@ -190,7 +190,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     wall0 = time.perf_counter()
     sim_t = 0.0
     status, reason = "completed", "duration reached"
-    with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario),
+    epoch_ns = start_epoch_ns(scenario.start_time) if scenario.start_time else time.time_ns() // 1_000_000 * 1_000_000
+    with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario), epoch_ns=epoch_ns,
                                               scenario_text=scenario_text, listeners=listeners) as log:
         log.add_attachment("scenario_effective.yaml",
                            yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),

@@ -15,7 +15,7 @@ import copy
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from controllers.config import Controllers
 from fwsim.camera import CameraConfig
@@ -129,6 +129,21 @@ class Stop(StrictModel):
     max_airspeed_m_s: float = Field(80.0, gt=0, description="end the run (failed) above this airspeed")
 
 
+def start_epoch_ns(text: str) -> int:
+    """ISO 8601 date-time text (``2026-05-01T09:30:00Z``; no offset = UTC) -> ns since 1970-01-01 UTC."""
+    from datetime import datetime, timezone
+    try:
+        when = datetime.fromisoformat(str(text).strip())
+    except ValueError:
+        raise ValueError(f"{short(repr(text), 60)} is not an ISO 8601 date and time "
+                         "(e.g. 2026-05-01T09:30:00Z)") from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone.utc)
+    if not 1970 <= when.astimezone(timezone.utc).year <= 2200:
+        raise ValueError(f"{short(repr(text), 60)} lies outside 1970-2200")
+    return int(round(when.timestamp() * 1e6)) * 1000
+
+
 class Scenario(StrictModel):
     name: str
     description: str = ""
@@ -144,6 +159,17 @@ class Scenario(StrictModel):
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
     controllers: Controllers = Field(default_factory=Controllers)
     events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.events)")
+    start_time: str | None = Field(None, description=(
+        "the date and time (ISO 8601; UTC unless it names an offset) at which the log's clock starts, so Foxglove "
+        "shows real dates; sim time stays in the messages. Default: the run's wall-clock start. Set it for logs "
+        "that are the same byte for byte run after run"))
+
+    @field_validator("start_time")
+    @classmethod
+    def _iso_start_time(cls, v):
+        if v is not None:
+            start_epoch_ns(v)  # raises ValueError with the reason
+        return v
 
     @model_validator(mode="after")
     def _gimbal_limits_agree(self):
@@ -195,10 +221,16 @@ class ScenarioError(ValueError):
     """A scenario file that cannot be used; ``str()`` is one line per problem."""
 
 
+#: problems listed one per line at most; the rest are counted
+MAX_PROBLEMS = 10
+
+
 def _format_errors(source: str, exc: ValidationError) -> str:
     lines = []
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+    errors = exc.errors()
+    for err in errors[:MAX_PROBLEMS]:
+        loc = short(".".join(str(p) for p in err["loc"]
+                             if not (isinstance(p, str) and p.startswith("function-"))), 100)
         msg = short(err["msg"].removeprefix("Value error, "), 200)
         got = ""
         if err["type"] not in ("missing", "extra_forbidden") and "input" in err and not isinstance(err["input"], dict):
@@ -206,6 +238,8 @@ def _format_errors(source: str, exc: ValidationError) -> str:
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         lines.append(f"{source}: {loc}: {msg}{got}" if loc else f"{source}: {msg}{got}")
+    if len(errors) > MAX_PROBLEMS:
+        lines.append(f"{source}: ... and {len(errors) - MAX_PROBLEMS} more problems")
     return "\n".join(lines)
 
 
@@ -214,7 +248,7 @@ def parse_sets(items: list[str]) -> dict[str, Any]:
     out = {}
     for item in items:
         if "=" not in item:
-            raise ScenarioError(f"--set {item}: expected PATH=VALUE (e.g. initial.airspeed_m_s=24)")
+            raise ScenarioError(f"--set {short(item)}: expected PATH=VALUE (e.g. initial.airspeed_m_s=24)")
         key, value = item.split("=", 1)
         key = key.strip()
         if not key or any(not part for part in key.split(".")):

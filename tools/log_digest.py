@@ -34,18 +34,57 @@ def _first_difference(a: bytes, b: bytes, encoding: str) -> str:
     return "; ".join(f"{k}: {da.get(k)!r} vs {db.get(k)!r}" for k in keys[:3]) + (" ..." if len(keys) > 3 else "")
 
 
-def _normalised(topic: str, data: bytes, encoding: str, keep: set[str] | None) -> bytes:
-    """JSON messages on the fields both logs have, less wall-clock fields; other encodings as they are."""
+def _absent(v) -> bool:
+    """A value that stands for NaN: null, or an array holding one (logs before NaN fields were left out)."""
+    return v is None or (type(v) is list and None in v)
+
+
+def _unstamped(msg, epoch_ns: int):
+    """A protobuf message with every google.protobuf.Timestamp in it counted from ``epoch_ns`` (sim time)."""
+    for fd, value in msg.ListFields():
+        if fd.message_type is None:
+            continue
+        items = [value] if hasattr(value, "ListFields") else value  # one message, or a repeated field
+        for item in items:
+            if fd.message_type.full_name == "google.protobuf.Timestamp":
+                ns = item.seconds * 1_000_000_000 + item.nanos - epoch_ns
+                item.seconds, item.nanos = divmod(ns, 1_000_000_000)
+            elif hasattr(item, "ListFields"):
+                _unstamped(item, epoch_ns)
+    return msg
+
+
+def _proto_class(schema_name: str):
+    """The Foxglove protobuf class of a schema name (foxglove.FrameTransform), or None."""
+    import importlib
+    if not schema_name.startswith("foxglove."):
+        return None
+    name = schema_name.split(".", 1)[1]
+    try:
+        return getattr(importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2"), name)
+    except (ImportError, AttributeError):
+        return None
+
+
+def _normalised(topic: str, data: bytes, encoding: str, keep: set[str] | None, proto=None,
+                epoch_ns: int = 0) -> bytes:
+    """JSON messages on the fields both logs have, less wall-clock fields and NaN fields (left out or null);
+    Foxglove messages with their stamps in sim time (logs start at different epochs); others as they are."""
     if encoding != "json":
-        return data
+        if proto is None or not epoch_ns:
+            return data
+        return _unstamped(proto.FromString(data), epoch_ns).SerializeToString(deterministic=True)
     d = json.loads(data)
     drop = set(WALL_CLOCK_FIELDS.get(topic, ()))
-    return json.dumps({k: v for k, v in d.items() if k not in drop and (keep is None or k in keep)},
-                      sort_keys=True).encode()
+    return json.dumps({k: v for k, v in d.items() if k not in drop and (keep is None or k in keep)
+                       and not _absent(v)}, sort_keys=True).encode()
 
 
-def _fields(raw: list, encoding: str) -> set[str] | None:
-    return set(json.loads(raw[0][1])) if raw and encoding == "json" else None
+def _fields(log, topic: str, raw: list, encoding: str) -> set[str] | None:
+    if encoding != "json":
+        return None
+    declared = set(log.fields(topic))
+    return declared | (set(json.loads(raw[0][1])) if raw else set())
 
 
 def compare_logs(path_a: Path, path_b: Path, topics: list[str] | None = None, out=sys.stdout) -> bool:
@@ -61,13 +100,15 @@ def compare_logs(path_a: Path, path_b: Path, topics: list[str] | None = None, ou
     for t in shared:
         ra, rb = a.raw(t), b.raw(t)
         enc = a.encoding(t)
-        fa, fb = _fields(ra, enc), _fields(rb, enc)
+        fa, fb = _fields(a, t, ra, enc), _fields(b, t, rb, enc)
         keep = fa & fb if fa is not None and fb is not None else None
         extra = "" if keep is None or fa == fb else \
             f" [fields only in A: {sorted(fa - fb)}, only in B: {sorted(fb - fa)}]"
         n = min(len(ra), len(rb))
+        proto = _proto_class(a.schema_name(t)) if enc == "protobuf" and a.epoch_ns != b.epoch_ns else None
         k = next((i for i in range(n) if ra[i][0] != rb[i][0]
-                  or _normalised(t, ra[i][1], enc, keep) != _normalised(t, rb[i][1], enc, keep)), None)
+                  or _normalised(t, ra[i][1], enc, keep, proto, a.epoch_ns)
+                  != _normalised(t, rb[i][1], enc, keep, proto, b.epoch_ns)), None)
         if k is None and len(ra) == len(rb):
             print(f"  same     {t} ({len(ra)} messages){extra}", file=out)
             continue

@@ -19,7 +19,7 @@ from mcap.records import Attachment, Channel, Chunk, Metadata, Schema
 from mcap.writer import MCAP0_MAGIC
 
 from fwsim import topics
-from fwsim.log.writer import SCENARIO_ATTACHMENT, STATUS_METADATA_NAME
+from fwsim.log.writer import EPOCH_KEY, METADATA_NAME, SCENARIO_ATTACHMENT, STATUS_METADATA_NAME
 
 _LEVEL_NAMES = {value: name for name, value in Log.Level.items()}
 _MISSING = object()
@@ -53,7 +53,8 @@ class RunLog:
         self.scenario_text = ""
         self.effective_scenario_text = ""  # the scenario actually flown (overrides applied); "" if absent
         self.topics: dict[str, int] = {}
-        # topic -> list of (log_time_ns, data, channel_id)
+        self.epoch_ns = 0  # log times and Foxglove stamps = epoch + sim time (metadata fwsim.log_time_epoch_ns)
+        # topic -> list of (sim time ns, data, channel_id)
         self._messages: dict[str, list[tuple[int, bytes, int]]] = defaultdict(list)
         self._channels: dict[int, Channel] = {}
         self._schemas: dict[int, Schema] = {}
@@ -71,8 +72,13 @@ class RunLog:
         self._check_topic(topic)
         return next(c.message_encoding for c in self._channels.values() if c.topic == topic)
 
+    def sim_time(self, stamp) -> float:
+        """Sim time in seconds of a Foxglove message's ``timestamp`` (stamps count from the log's epoch)."""
+        return (stamp.seconds * 1_000_000_000 + stamp.nanos - self.epoch_ns) * 1e-9
+
     def raw(self, topic: str) -> list[tuple[int, bytes]]:
-        """(log_time_ns, message bytes) of every message on ``topic``, in file order."""
+        """(sim time ns, message bytes) of every message on ``topic``, in file order (the log time less the
+        log's epoch)."""
         self._check_topic(topic)
         return [(t, d) for t, d, _ in self._messages[topic]]
 
@@ -81,13 +87,52 @@ class RunLog:
             raise KeyError(f"no topic {topic!r} in {self.path}; topics: {list(self.topics)}")
 
     # -- JSON topics ------------------------------------------------------
+    def _declared(self, channel_id: int) -> dict[str, tuple[str, int]]:
+        """{field: (JSON type, array length or 0)} of the numbers and arrays a JSON channel's schema declares
+        (a field left out of a message because it was NaN reads back as NaN)."""
+        ch = self._channels.get(channel_id)
+        sc = self._schemas.get(ch.schema_id) if ch is not None else None
+        try:
+            props = json.loads(sc.data).get("properties", {}) if sc is not None else {}
+            return {k: (p.get("type"), int(p.get("maxItems", 0))) for k, p in props.items()
+                    if p.get("type") in ("number", "array")}
+        except (ValueError, TypeError, AttributeError):
+            return {}
+
+    def fields(self, topic: str) -> list[str]:
+        """The fields of a JSON topic's messages as their schemas declare them (a number or array field may be
+        absent from a message where it was NaN)."""
+        self._check_topic(topic)
+        out: dict[str, None] = {}
+        for cid, ch in self._channels.items():
+            sc = self._schemas.get(ch.schema_id) if ch.topic == topic else None
+            if sc is not None and sc.encoding == "jsonschema":
+                try:
+                    out.update(dict.fromkeys(json.loads(sc.data).get("properties", {})))
+                except (ValueError, AttributeError):
+                    pass
+        return list(out)
+
+    def schema_name(self, topic: str) -> str:
+        """The schema name of ``topic``'s first channel (e.g. ``foxglove.FrameTransform``)."""
+        self._check_topic(topic)
+        ch = next(c for c in self._channels.values() if c.topic == topic)
+        sc = self._schemas.get(ch.schema_id)
+        return sc.name if sc is not None else ""
+
     def rows(self, topic: str) -> list[dict[str, Any]]:
-        """The messages of a JSON topic as dicts (null -> NaN, arrays stay lists)."""
+        """The messages of a JSON topic as dicts (a number left out or null -> NaN, arrays stay lists)."""
         if self.encoding(topic) != "json":
             raise ValueError(f"{topic} is not a JSON topic")
         out = []
-        for _, data, _ in self._messages[topic]:
+        declared: dict[int, dict] = {}
+        for _, data, cid in self._messages[topic]:
             d = json.loads(data)
+            if cid not in declared:
+                declared[cid] = self._declared(cid)
+            for k, (typ, width) in declared[cid].items():
+                if k not in d:
+                    d[k] = np.nan if typ == "number" else [np.nan] * width
             for k, v in d.items():
                 if v is None:
                     d[k] = np.nan
@@ -113,16 +158,19 @@ class RunLog:
             raise ValueError(f"{topic} is not a JSON topic; see events()/poses()/raw()")
         msgs = self._messages[topic]
         rows = json.loads(b"[" + b",".join(m[1] for m in msgs) + b"]")
-        first_of_channel: dict[int, int] = {}  # one key set per channel (message type)
-        for i, m in enumerate(msgs):
-            first_of_channel.setdefault(m[2], i)
         keys: dict[str, None] = {}
-        for i in first_of_channel.values():
-            keys.update(dict.fromkeys(rows[i]))
+        for r in rows:  # a field left out of some messages (NaN there) is still a column
+            keys.update(r)
+        declared: dict[str, tuple[str, int]] = {}
+        for cid in dict.fromkeys(m[2] for m in msgs):
+            declared.update(self._declared(cid))
         columns = {k: [r.get(k, _MISSING) for r in rows] for k in keys}
         if "t_s" not in columns:
             columns["t_s"] = [m[0] * 1e-9 for m in msgs]
         table = {k: _to_array(v) for k, v in columns.items()}
+        for k, (typ, width) in declared.items():  # declared but NaN in every message
+            if k not in table:
+                table[k] = np.full(len(msgs), np.nan) if typ == "number" else np.full((len(msgs), width), np.nan)
         self._tables[topic] = table
         return table
 
@@ -134,7 +182,7 @@ class RunLog:
         out = []
         for _, data, _ in self._messages[topics.EVENTS]:
             m = Log.FromString(data)
-            t_s = m.timestamp.seconds + m.timestamp.nanos * 1e-9
+            t_s = self.sim_time(m.timestamp)
             out.append((t_s, _LEVEL_NAMES.get(m.level, str(m.level)), m.message))
         return out
 
@@ -147,7 +195,7 @@ class RunLog:
         quat = np.empty((n, 4))
         for i, (_, data, _) in enumerate(msgs):
             m = PoseInFrame.FromString(data)
-            t[i] = m.timestamp.seconds + m.timestamp.nanos * 1e-9
+            t[i] = self.sim_time(m.timestamp)
             p, q = m.pose.position, m.pose.orientation
             pos[i] = (p.x, p.y, p.z)
             quat[i] = (q.w, q.x, q.y, q.z)
@@ -300,6 +348,14 @@ def read_log(path: str | os.PathLike) -> RunLog:
     # Channels whose messages were all lost in the cut still show (count 0).
     for topic in log.topics:
         log.topics[topic] = len(log._messages.get(topic, ()))
+    try:
+        log.epoch_ns = int(log.metadata.get(METADATA_NAME, {}).get(EPOCH_KEY, 0))
+    except ValueError:
+        log.epoch_ns = 0
+    if log.epoch_ns:  # sim time from here on
+        e = log.epoch_ns
+        for topic, msgs in log._messages.items():
+            log._messages[topic] = [(t - e, d, c) for t, d, c in msgs]
     status = log.metadata.get(STATUS_METADATA_NAME)
     if status is not None:
         log.status = status.get("status", "unknown")

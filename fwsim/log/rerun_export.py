@@ -220,7 +220,7 @@ def _tf(log: RunLog, child: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | 
         m = FrameTransform.FromString(data)
         if m.child_frame_id != child:
             continue
-        t.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
+        t.append(log.sim_time(m.timestamp))
         pos.append((m.translation.x, m.translation.y, m.translation.z))
         quat.append((m.rotation.x, m.rotation.y, m.rotation.z, m.rotation.w))
     if not t:
@@ -304,7 +304,7 @@ def _camera(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
         times, blobs = [], []
         for _, data in log.raw(topics.CAMERA_IMAGE):
             m = CompressedImage.FromString(data)
-            times.append(m.timestamp.seconds + m.timestamp.nanos * 1e-9)
+            times.append(log.sim_time(m.timestamp))
             blobs.append(bytes(m.data))
         width = jpeg_width(blobs[0])
         scale = width / cal.width if width else 1.0

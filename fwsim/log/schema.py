@@ -5,10 +5,17 @@ once per dataclass type and cached; a message is encoded by ``orjson`` (the
 dataclass and its numpy arrays in C); ``as_dict`` is the same encoding in
 Python, for readers of one message.
 
-Non-finite floats (NaN, and also +-inf) are written as JSON ``null``, which
-the reader turns back into NaN. The schema still declares such fields as
-``"type": "number"`` because Foxglove's JSON Schema parser accepts only one
-type per property (it rejects ``["number", "null"]``).
+A number field whose value is not finite (NaN, +-inf), or an array field
+whose elements all are, is left out of that message, so every message
+validates against its schema: the schema declares ``"type": "number"`` (one
+type per property, which Foxglove's parser needs; it rejects ``["number",
+"null"]``) and lists only the fields that are always there as ``required``.
+Foxglove then shows a gap in a plot where the value was NaN; the reader turns
+an absent field back into NaN. An array that is only partly NaN keeps its
+numbers and writes the NaN elements as null: such a message does not validate
+(no message of the project's own is like that). Arrays carry their length in the schema
+(``minItems`` = ``maxItems``, from the first message of the type), so even a
+field that is NaN in every message reads back with its width.
 """
 from __future__ import annotations
 
@@ -127,7 +134,7 @@ def _classify(cls: type, name: str, tp: Any) -> tuple[int, dict]:
 class MessageSpec:
     """What the writer needs to know about one dataclass type (computed once)."""
 
-    __slots__ = ("cls", "names", "kinds", "getter", "schema_name", "schema_json")
+    __slots__ = ("cls", "names", "kinds", "getter", "schema_name", "schema_json", "_schema")
 
     def __init__(self, cls: type):
         if not dataclasses.is_dataclass(cls):
@@ -138,15 +145,20 @@ class MessageSpec:
             raise TypeError(f"fwsim.log: first field of {cls.__name__} must be t_s")
         props: dict[str, dict] = {}
         kinds = []
+        required = []
         for f in flds:
-            kind, prop = _classify(cls, f.name, hints.get(f.name, f.type))
+            tp = hints.get(f.name, f.type)
+            kind, prop = _classify(cls, f.name, tp)
+            if f.name == "t_s" or (kind not in (FLOAT, VECTOR) and _strip_optional(tp) is tp):
+                required.append(f.name)  # never left out (numbers may be NaN, Optional fields None)
             prop["description"] = describe_field(f.name)
             props[f.name] = prop
             kinds.append(kind)
         doc = inspect.cleandoc(cls.__doc__ or "")
         if doc.startswith(cls.__name__ + "("):  # dataclass' generated signature
             doc = ""
-        desc = (doc + "\n\n" if doc else "") + "Non-finite numbers (NaN) are encoded as null."
+        desc = (doc + "\n\n" if doc else "") + ("A number that is not finite (NaN), or an array of them, is "
+                                                 "left out of the message.")
         self.cls = cls
         self.names = tuple(f.name for f in flds)
         self.kinds = tuple(kinds)
@@ -160,29 +172,46 @@ class MessageSpec:
             "description": desc,
             "type": "object",
             "properties": props,
-            "required": list(self.names),
+            "required": required,
         }
+        self._schema = schema
         self.schema_json = json.dumps(schema, indent=1).encode()
 
+    def schema_json_for(self, first: Any) -> bytes:
+        """The schema with each array's length (``minItems`` = ``maxItems``) taken from ``first``, a message of
+        the type (the project's arrays have a fixed length per field)."""
+        schema = json.loads(self.schema_json)
+        for name, kind, v in zip(self.names, self.kinds, self.getter(first)):
+            if kind == VECTOR and v is not None:
+                schema["properties"][name]["minItems"] = schema["properties"][name]["maxItems"] = len(v)
+        return json.dumps(schema, indent=1).encode()
+
     def encode(self, msg: Any) -> bytes:
-        """One message as compact UTF-8 JSON, NaN/inf -> null (orjson: dataclasses and numpy arrays natively,
-        the same text as :meth:`as_dict` through ``json`` for the project's messages)."""
-        return _orjson_dumps(msg, option=_ORJSON_OPTIONS, default=_json_default)
+        """One message as compact UTF-8 JSON (orjson: dataclasses and numpy arrays natively); a number that is
+        not finite, an array of them, or an Optional field that is None is left out (orjson writes them as
+        null: only then is the message encoded again without them)."""
+        data = _orjson_dumps(msg, option=_ORJSON_OPTIONS, default=_json_default)
+        if b"null" not in data:
+            return data
+        return _orjson_dumps(self.as_dict(msg), option=_ORJSON_OPTIONS, default=_json_default)
 
     def as_dict(self, msg: Any) -> dict:
-        """One message as a JSON-ready dict (arrays -> lists, NaN/inf -> None)."""
+        """One message as a JSON-ready dict (arrays -> lists) without the fields that are left out: a number
+        that is not finite, an array whose elements all are, a None (a partly NaN array: NaN -> None)."""
         out = {}
         for name, kind, v in zip(self.names, self.kinds, self.getter(msg)):
             if v is None:
-                pass
+                continue
             elif kind == FLOAT:
                 v = float(v)
                 if v - v != 0.0:  # NaN or inf
-                    v = None
+                    continue
             elif kind == VECTOR:
                 if isinstance(v, np.ndarray):
                     v = v.tolist()
                 v = [x if x - x == 0.0 else None for x in v]
+                if v and all(x is None for x in v):
+                    continue  # NaN as a whole: left out (a partly NaN array keeps its numbers, NaN as null)
             elif kind == INT:
                 v = int(v)
             elif kind == BOOL:

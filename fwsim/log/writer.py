@@ -54,6 +54,15 @@ def _level_value(level: str | int) -> int:
         raise ValueError(f"unknown log level {level!r}; use one of {sorted(_LEVELS)}") from None
 
 
+#: the fwsim metadata key holding the log's epoch: every log time and Foxglove stamp is this + sim time (ns)
+EPOCH_KEY = "log_time_epoch_ns"
+
+
+def _utc_text(epoch_ns: int) -> str:
+    from datetime import datetime, timezone
+    return datetime.fromtimestamp(epoch_ns * 1e-9, tz=timezone.utc).isoformat(timespec="milliseconds")
+
+
 def _ns(t_s: float) -> int:
     """Sim time in seconds -> MCAP nanoseconds (MCAP times are unsigned)."""
     ns = int(t_s * 1e9)
@@ -231,8 +240,11 @@ class LogWriter:
         scenario_text: str,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         listeners: Iterable[Listener] = (),
+        epoch_ns: int = 0,
     ):
         self.path = Path(path)
+        self._t0 = int(epoch_ns)  # log times and stamps = epoch + sim time (Foxglove shows a real date)
+        metadata = {**metadata, EPOCH_KEY: str(self._t0), "log_time_epoch_utc": _utc_text(self._t0)}
         self._listeners: list[Listener] = list(listeners)
         self._file = open(self.path, "wb")
         self._closed = False
@@ -248,7 +260,7 @@ class LogWriter:
             self._mcap.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
             self._mcap.add_attachment(
                 create_time=time.time_ns(),
-                log_time=0,
+                log_time=self._t0,
                 name=SCENARIO_ATTACHMENT,
                 media_type="application/yaml",
                 data=scenario_text.encode("utf-8"),
@@ -271,12 +283,12 @@ class LogWriter:
         self._log = Log()
 
     # -- registration -----------------------------------------------------
-    def _json_channel(self, topic: str, cls: type) -> list:
+    def _json_channel(self, topic: str, cls: type, first: Any) -> list:
         spec = spec_for(cls)
         schema_id = self._json_schemas.get(cls)
-        if schema_id is None:
+        if schema_id is None:  # the schema gives each array the length of the type's first message
             schema_id = self._mcap.register_schema(
-                name=spec.schema_name, encoding="jsonschema", data=spec.schema_json
+                name=spec.schema_name, encoding="jsonschema", data=spec.schema_json_for(first)
             )
             self._json_schemas[cls] = schema_id
         channel_id = self._mcap.register_channel(
@@ -313,7 +325,7 @@ class LogWriter:
             sequence=entry[1],
         )
         if self._listeners:
-            self._notify(topic, log_time * 1e-9, msg)
+            self._notify(topic, (log_time - self._t0) * 1e-9, msg)
 
     # -- listeners --------------------------------------------------------
     def add_listener(self, fn: Listener) -> None:
@@ -344,12 +356,12 @@ class LogWriter:
             raise ValueError(f"LogWriter for {self.path} is closed")
         entry = self._json_channels.get((topic, type(msg)))
         if entry is None:
-            entry = self._json_channel(topic, type(msg))
+            entry = self._json_channel(topic, type(msg), msg)
         entry[2] += 1
         t_s = msg.t_s
         if t_s > self.last_t_s:
             self.last_t_s = t_s
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         self._mcap.add_message(
             channel_id=entry[0],
             log_time=ns,
@@ -370,7 +382,7 @@ class LogWriter:
             quat = self._quat = quat_enu_from_frd
         w, x, y, z = (float(c) for c in quat(state.euler_ned_rad))
         px, py, pz = (float(c) for c in state.pos_enu_m)
-        ns = _ns(state.t_s)
+        ns = self._t0 + _ns(state.t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
 
         tf = self._tf
@@ -393,13 +405,13 @@ class LogWriter:
         """Attach a file (e.g. the effective scenario) to the log."""
         if self._closed:
             raise ValueError(f"LogWriter for {self.path} is closed")
-        self._mcap.add_attachment(create_time=time.time_ns(), log_time=0, name=name, media_type=media_type,
+        self._mcap.add_attachment(create_time=time.time_ns(), log_time=self._t0, name=name, media_type=media_type,
                                   data=data)
 
     def write_transform(self, t_s: float, child_frame_id: str, pos, quat_wxyz,
                         parent_frame_id: str = topics.WORLD_FRAME) -> None:
         """A foxglove.FrameTransform on /tf: ``child`` posed in ``parent`` (e.g. the camera, the ship)."""
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         msg = FrameTransform(parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
         msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
         msg.translation.x, msg.translation.y, msg.translation.z = (float(c) for c in pos)
@@ -409,7 +421,7 @@ class LogWriter:
 
     def write_location(self, t_s: float, frame_id: str, lat_deg: float, lon_deg: float, alt_m: float) -> None:
         """A foxglove.LocationFix on /uav/fix (Foxglove's map panel)."""
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         msg = self._fix
         if msg is None:
             msg = self._fix = LocationFix(frame_id=frame_id, position_covariance_type=LocationFix.UNKNOWN)
@@ -421,7 +433,7 @@ class LogWriter:
         """A foxglove.ImageAnnotations: ``boxes`` of (u0, v0, u1, v1) in the image's pixels, (r, g, b) in [0, 1],
         and a label, drawn as outlined rectangles with their labels (stamped like the image they go on)."""
         from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
         msg = ImageAnnotations()
         for (u0, v0, u1, v1), (r, g, b), label in boxes:
@@ -441,7 +453,7 @@ class LogWriter:
         (entity id, frame id, mesh with ``vertices`` and ``faces`` in that frame, (r, g, b, a)) (Foxglove's 3D
         panel then draws them wherever /tf puts their frames)."""
         from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         msg = SceneUpdate()
         for entity_id, frame_id, mesh, (r, g, b, a) in models:
             ent = msg.entities.add(id=entity_id, frame_id=frame_id, frame_locked=True)
@@ -458,14 +470,14 @@ class LogWriter:
 
     def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
         """A foxglove.CompressedImage (e.g. a rendered camera frame)."""
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         msg = CompressedImage(frame_id=frame_id, data=data, format=fmt)
         msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
         self._write_proto(topic, msg, ns)
 
     def write_calibration(self, topic: str, t_s: float, frame_id: str, width: int, height: int, K) -> None:
         """A foxglove.CameraCalibration (pinhole, no distortion) so viewers can draw the frustum."""
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         K = [float(k) for k in (K.ravel() if hasattr(K, "ravel") else K)]
         P = [K[0], K[1], K[2], 0.0, K[3], K[4], K[5], 0.0, K[6], K[7], K[8], 0.0]
         msg = CameraCalibration(frame_id=frame_id, width=width, height=height, distortion_model="plumb_bob",
@@ -489,7 +501,7 @@ class LogWriter:
             t_s = self.last_t_s
         elif t_s > self.last_t_s:
             self.last_t_s = t_s
-        ns = _ns(t_s)
+        ns = self._t0 + _ns(t_s)
         log = self._log
         log.timestamp.seconds, log.timestamp.nanos = divmod(ns, 1_000_000_000)
         log.level = _level_value(level)
