@@ -145,10 +145,39 @@ def run_metadata(scenario: Scenario) -> dict[str, str]:
     }
 
 
-def _log_truth(log: LogWriter, truth, origin) -> None:
-    """Truth at one tick: UAV state, pose and geodetic fix (through the world's ``origin``), ship, gimbal, and
-    the camera and ship frames."""
+class _Trails:
+    """The flown paths of the UAV and the ship for Foxglove's 3D panel (/scene/paths): the logged positions,
+    sent as one line-strip entity per path and second, each segment starting where the last one ended."""
+
+    EVERY_S = 1.0
+    COLOURS = {"uav": (0.95, 0.35, 0.2, 1.0), "ship": (0.25, 0.55, 0.95, 1.0)}
+
+    def __init__(self):
+        self.points: dict[str, list] = {"uav": [], "ship": []}
+        self.t_sent = 0.0
+        self.count = 0
+
+    def add(self, log: LogWriter, t_s: float, uav_pos, ship_pos) -> None:
+        self.points["uav"].append(tuple(float(c) for c in uav_pos))
+        self.points["ship"].append(tuple(float(c) for c in ship_pos))
+        if t_s - self.t_sent >= self.EVERY_S:
+            self.flush(log, t_s)
+
+    def flush(self, log: LogWriter, t_s: float) -> None:
+        if len(self.points["uav"]) < 2:
+            return
+        log.write_scene_lines(topics.SCENE_PATHS, t_s, [
+            (f"{name}_path_{self.count}", topics.WORLD_FRAME, pts, self.COLOURS[name], 2.0)
+            for name, pts in self.points.items()])
+        self.points = {name: pts[-1:] for name, pts in self.points.items()}
+        self.t_sent, self.count = t_s, self.count + 1
+
+
+def _log_truth(log: LogWriter, truth, origin, trails: _Trails) -> None:
+    """Truth at one tick: UAV state, pose and geodetic fix (through the world's ``origin``), ship, gimbal, the
+    camera and ship frames, and the paths' next points."""
     t = truth.uav.t_s
+    trails.add(log, t, truth.uav.pos_enu_m, truth.target.pos_enu_m)
     log.write_state(truth.uav)
     lat, lon, alt = origin.geodetic_from_enu(truth.uav.pos_enu_m)
     log.write_location(t, topics.UAV_FRAME, math.degrees(lat), math.degrees(lon), alt)
@@ -218,7 +247,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             log.write_scene_models(topics.SCENE, 0.0, [
                 ("uav", topics.UAV_FRAME, world.camera.caster.uav_mesh, (0.85, 0.2, 0.2, 1.0)),
                 ("ship", topics.SHIP_FRAME_ID, world.ship.mesh, (0.55, 0.6, 0.65, 1.0))])
-            _log_truth(log, truth, origin)
+            trails = _Trails()
+            _log_truth(log, truth, origin, trails)
             disturbed = world.disturbed
             events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None
             phase = None
@@ -262,7 +292,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                                                                                     cam.height_px))
                     log.write(topics.CAMERA_FRAME, frame)
                 if (tick + 1) % log_every == 0:
-                    _log_truth(log, truth, origin)
+                    _log_truth(log, truth, origin, trails)
                     log.write(topics.AUTOPILOT_STATUS, ap_status)
                     log.write(topics.ACTUATORS, act)
                     if disturbed:
@@ -270,23 +300,25 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                 if render_every and (tick + 1) % render_every == 0:
                     _log_render(log, world, sim_t, frame, last_det)
                 if world.uav_inside_ship():
-                    _log_truth(log, truth, origin)
+                    _log_truth(log, truth, origin, trails)
                     status, reason = "completed", f"hit the ship at t = {sim_t:.2f} s"
                     break
                 if truth.uav.height_above_sea_m <= scenario.stop.min_height_m:
-                    _log_truth(log, truth, origin)
+                    _log_truth(log, truth, origin, trails)
                     status, reason = "completed", f"sea contact at t = {sim_t:.2f} s"
                     break
                 if truth.uav.airspeed_m_s > scenario.stop.max_airspeed_m_s:
-                    _log_truth(log, truth, origin)
+                    _log_truth(log, truth, origin, trails)
                     raise RunStopped(f"airspeed {truth.uav.airspeed_m_s:.1f} m/s above the limit "
                                      f"{scenario.stop.max_airspeed_m_s:g} m/s at t = {sim_t:.2f} s")
                 if progress is not None and tick % progress_every == 0:
                     progress(sim_t, scenario.duration_s)
                 if sigint.requested:
-                    _log_truth(log, truth, origin)
+                    _log_truth(log, truth, origin, trails)
+                    trails.flush(log, sim_t)
                     log.close("interrupted", f"interrupted ({sigint.description}) at t = {sim_t:.2f} s")
                     raise Interrupted(sigint.signum)
+            trails.flush(log, sim_t)  # the last part of the paths
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too

@@ -10,6 +10,7 @@ UAV_STATE = "/uav/state"  # fwsim.messages.AirframeState (JSON)
 TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames in the world
 UAV_POSE = "/uav/pose"  # foxglove.PoseInFrame
 SCENE = "/scene"  # foxglove.SceneUpdate: the UAV and ship models, frame-locked (Foxglove's 3D panel)
+SCENE_PATHS = "/scene/paths"  # foxglove.SceneUpdate: the flown paths of the UAV and the ship, a segment a second
 UAV_FIX = "/uav/fix"  # foxglove.LocationFix: the UAV's latitude, longitude, altitude (Foxglove's map)
 TARGET_STATE = "/target/state"  # fwsim.target.TargetState
 GIMBAL_STATE = "/gimbal/state"  # fwsim.gimbal.GimbalState

@@ -18,10 +18,12 @@ import yaml
 from yaml.constructor import ConstructorError
 from yaml.nodes import MappingNode, ScalarNode
 
-__all__ = ["load_yaml_text", "load_yaml_file", "read_text", "MAX_VALUES", "short"]
+__all__ = ["load_yaml_text", "load_yaml_file", "read_text", "MAX_VALUES", "MAX_FILE_BYTES", "short"]
 
 #: the most values (mappings, lists and scalars, aliases expanded) one file may hold
 MAX_VALUES = 200_000
+#: the largest scenario or batch file read (the project's are a few KiB)
+MAX_FILE_BYTES = 4 * 1024 * 1024
 _TIMESTAMP = "tag:yaml.org,2002:timestamp"
 _MERGE = "tag:yaml.org,2002:merge"
 
@@ -83,6 +85,8 @@ def _count_values(data: Any, limit: int) -> int:
 
 def load_yaml_text(text: str, source: str, error: type[Exception]) -> Any:
     """The data of YAML ``text``; ``error("<source>[:line:col]: ...")`` on any problem (see the module text)."""
+    if len(text) > MAX_FILE_BYTES:
+        raise error(f"{source}: too large ({len(text):,} characters; at most {MAX_FILE_BYTES:,})")
     try:
         data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
         too_large = _count_values(data, MAX_VALUES) > MAX_VALUES
@@ -109,6 +113,9 @@ def read_text(path: str | Path, what: str, error: type[Exception]) -> str:
     if not path.is_file():
         raise error(f"{path}: no such {what}")
     try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise error(f"{path}: too large for a {what} ({size:,} bytes; at most {MAX_FILE_BYTES:,})")
         return path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
         raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None

@@ -236,3 +236,21 @@ def test_write_baseline_metrics_round_trips(tmp_path):
     assert path.read_text().count(REFRESH_MARKER) == 1
     assert b.metrics["a"] == 1e-10 and b.metrics["b"] == 59.999999999997236 and b.metrics["d"] == 1e20
     assert math.isnan(b.metrics["c"]) and b.metrics["status"] == "completed"
+
+
+def test_the_readmes_compare_example_works_as_written(tmp_path, monkeypatch, capsys):
+    """README 'Using it': fly the checkout as the first line does, then compare its log with the baseline the
+    compare line names; a healthy run passes (exit 0)."""
+    import re
+
+    from fwsim import PROJECT_ROOT
+    from fwsim.cli import main
+    text = (PROJECT_ROOT / "README.md").read_text()
+    run_cmd = re.search(r"^fwsim run (scenarios/autopilot_checkout\.yaml)\s", text, re.M)
+    cmp_cmd = re.search(r"^fwsim compare (\S+) runs/<log>\.mcap", text, re.M)
+    assert run_cmd and cmp_cmd, "the README's run and compare examples moved"
+    monkeypatch.chdir(PROJECT_ROOT)
+    log = tmp_path / "checkout.mcap"
+    assert main(["run", run_cmd.group(1), "--log", str(log), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["compare", cmp_cmd.group(1), str(log)]) == 0, capsys.readouterr()

@@ -65,8 +65,10 @@ def test_log_times_start_at_the_scenario_start_time_and_messages_keep_sim_time(p
 
 def test_foxglove_types_are_there(paper_log):
     log = read_log(paper_log)
-    names = {t: log.schema_name(t) for t in ("/scene", "/uav/fix", "/camera/annotations", "/camera/image", "/tf")}
-    assert names == {"/scene": "foxglove.SceneUpdate", "/uav/fix": "foxglove.LocationFix",
+    names = {t: log.schema_name(t) for t in ("/scene", "/scene/paths", "/uav/fix", "/camera/annotations",
+                                             "/camera/image", "/tf")}
+    assert names == {"/scene": "foxglove.SceneUpdate", "/scene/paths": "foxglove.SceneUpdate",
+                     "/uav/fix": "foxglove.LocationFix",
                      "/camera/annotations": "foxglove.ImageAnnotations", "/camera/image": "foxglove.CompressedImage",
                      "/tf": "foxglove.FrameTransform"}
 
@@ -83,3 +85,46 @@ def test_without_start_time_the_log_starts_at_the_wall_clock(tmp_path):
     before = time.time_ns()
     log = read_log(run(scenario, text, tmp_path / "now.mcap").log_path)
     assert before - 10**6 <= log.epoch_ns <= time.time_ns()
+
+
+def test_the_flown_paths_are_line_strips_that_join_up(paper_log):
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    log = read_log(paper_log)
+    updates = [SceneUpdate.FromString(d) for _, d in log.raw("/scene/paths")]
+    assert len(updates) >= 13  # a segment a second, and the last part at the end
+    uav = [next(e for e in u.entities if e.id.startswith("uav_path_")) for u in updates]
+    assert len({e.id for e in uav}) == len(uav) and all(e.frame_id == "world" for e in uav)
+    for a, b in zip(uav, uav[1:]):
+        end, start = a.lines[0].points[-1], b.lines[0].points[0]
+        assert (end.x, end.y, end.z) == (start.x, start.y, start.z)
+    st = log.table("/uav/state")
+    first, last = uav[0].lines[0].points[0], uav[-1].lines[0].points[-1]
+    np.testing.assert_allclose([first.x, first.y, first.z], st["pos_enu_m"][0])
+    np.testing.assert_allclose([last.x, last.y, last.z], st["pos_enu_m"][-1])
+
+
+def test_what_rerun_makes_of_the_mcap_directly(paper_log, tmp_path):
+    """docs/LOGS.md 'Opening the MCAP in Rerun': Rerun's own MCAP loader turns the Foxglove topics into its
+    archetypes; the JSON topics stay raw message blobs (the plots come through `fwsim replay`)."""
+    import re
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    assert rerun, "the rerun command comes with rerun-sdk"
+    rrd = tmp_path / "direct.rrd"
+    subprocess.run([rerun, "mcap", "convert", str(paper_log), "-o", str(rrd)], check=True, capture_output=True,
+                   timeout=300)
+    out = subprocess.run([rerun, "rrd", "print", str(rrd)], check=True, capture_output=True, text=True,
+                         timeout=300).stdout
+    columns: dict[str, set] = {}
+    for entity, cols in re.findall(r" - (/[\w/]+) - data columns: \[([^\]]*)\]", out):
+        columns.setdefault(entity, set()).update(cols.split())
+    expected = {"/tf": "Transform3D:translation", "/uav/pose": "InstancePoses3D:translations",
+                "/uav/fix": "GeoPoints:positions", "/camera/image": "EncodedImage:blob",
+                "/camera/calibration": "Pinhole:image_from_camera", "/events": "TextLog:text",
+                "/uav/state": "McapMessage:data", "/fsw/status": "McapMessage:data",
+                "/scene": "foxglove.SceneUpdate:message", "/camera/annotations": "foxglove.ImageAnnotations:message"}
+    for entity, column in expected.items():
+        assert column in columns.get(entity, set()), (entity, sorted(columns.get(entity, ())))

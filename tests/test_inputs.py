@@ -57,6 +57,14 @@ def test_aliases_below_the_limit_load():
     assert len(data["d"]) == 9 and 9 ** 5 < MAX_VALUES
 
 
+def test_a_huge_file_is_refused_before_it_is_read(tmp_path):
+    from fwsim.yamlfile import MAX_FILE_BYTES
+    p = tmp_path / "huge.yaml"
+    p.write_bytes(b"# " + b"x" * MAX_FILE_BYTES + b"\nname: a\n")
+    with pytest.raises(ScenarioError, match="too large for a scenario file"):
+        load_scenario(p)
+
+
 def test_non_utf8_file(tmp_path):
     p = tmp_path / "latin.yaml"
     p.write_bytes(b"name: caf\xe9\n")

@@ -27,7 +27,8 @@ DURATION_S = 4.0
 
 
 def checkout(**overrides):
-    return load_scenario(CHECKOUT, {"duration_s": DURATION_S, **overrides})
+    """The checkout, short, with a fixed log epoch so that two runs' logs can be compared byte for byte."""
+    return load_scenario(CHECKOUT, {"duration_s": DURATION_S, "start_time": "2026-01-01T00:00:00Z", **overrides})
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +38,7 @@ def live_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("live")
     log, rrd = tmp / "run.mcap", tmp / "live.rrd"
     code = main(["run", str(CHECKOUT), "--log", str(log), "--set", f"duration_s={DURATION_S:g}", "--quiet",
+                 "--set", "start_time=2026-01-01T00:00:00Z",
                  "--rerun", f"save={rrd}"])
     assert code == 0
     replay = tmp / "replay.rrd"

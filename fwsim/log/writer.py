@@ -10,6 +10,7 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
@@ -466,6 +467,24 @@ class LogWriter:
                 for i in face:
                     x, y, z = verts[i]
                     tri.points.add(x=float(x), y=float(y), z=float(z))
+        self._write_proto(topic, msg, ns)
+
+    def write_scene_lines(self, topic: str, t_s: float, lines) -> None:
+        """A foxglove.SceneUpdate of line strips that stay for the rest of the log: ``lines`` of (entity id,
+        frame id, points (n, 3) in that frame, (r, g, b, a), thickness in pixels). A path sent as one new
+        entity per segment costs each point once (Foxglove keeps every entity until the log ends)."""
+        from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+        from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+        ns = self._t0 + _ns(t_s)
+        msg = SceneUpdate()
+        for entity_id, frame_id, points, (r, g, b, a), thickness in lines:
+            ent = msg.entities.add(id=entity_id, frame_id=frame_id)
+            ent.timestamp.seconds, ent.timestamp.nanos = divmod(ns, 1_000_000_000)
+            line = ent.lines.add(type=LinePrimitive.LINE_STRIP, thickness=float(thickness), scale_invariant=True)
+            line.pose.orientation.w = 1.0
+            line.color.r, line.color.g, line.color.b, line.color.a = r, g, b, a
+            for x, y, z in np.asarray(points, float).tolist():
+                line.points.add(x=x, y=y, z=z)
         self._write_proto(topic, msg, ns)
 
     def write_image(self, topic: str, t_s: float, frame_id: str, data: bytes, fmt: str = "jpeg") -> None:
