@@ -255,7 +255,8 @@ class NmpcConfig(StrictModel):
     altitude_m: float = Field(500.0, gt=10.0, le=5000.0, description="H, loiter altitude (world z), m")
     w1_radius: float = Field(1e-4, ge=0.0, le=1e6, description="w1, per m^2 of radius error, per stage")
     w2_altitude: float = Field(1e-4, ge=0.0, le=1e6, description="w2, per m^2 of altitude error, per stage")
-    w3_attitude: tuple[float, float, float] = Field(
+    w3_attitude: tuple[Annotated[float, Field(ge=0.0, le=1e6)], Annotated[float, Field(ge=0.0, le=1e6)],
+                       Annotated[float, Field(ge=0.0, le=1e6)]] = Field(
         (30.0, 30.0, 1.0), description="W3 diagonal: per rad^2 of change of [phi, theta, psi] per step")
     w4_continuity: float = Field(0.1, ge=0.0, le=1e6,
                                  description="w4, per (rad/s)^2 of [u_p, u_q] change from the previous input")
