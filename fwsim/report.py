@@ -79,6 +79,7 @@ class Report:
     estimator_error_m: dict[str, float]  # median, p90, share of runs <= 8 m
     outcomes: dict[str, int]  # failures and non-hits by reason
     dispersed: list[str] = field(default_factory=list)
+    within_3m_3deg: float = math.nan  # share of runs that hit within 3 m of the aim point and 3 deg of both angles
 
     def headline(self) -> list[tuple[str, str]]:
         """(name, value) rows of the headline table."""
@@ -86,7 +87,9 @@ class Report:
         rows = [("runs", f"{self.runs} ({self.completed} completed)"),
                 ("hits", f"{self.hits} of {self.runs}: P(hit) = {self.hit_probability:.3f} "
                          f"(95 % Wilson interval {lo:.3f} to {hi:.3f})"),
-                ("miss distance CEP50 / CEP90", f"{self.cep50_m:.2f} m / {self.cep90_m:.2f} m")]
+                ("miss distance CEP50 / CEP90", f"{self.cep50_m:.2f} m / {self.cep90_m:.2f} m"),
+                ("hits within 3 m and 3 deg of both impact angles",
+                 f"{100 * self.within_3m_3deg:.0f} % of runs ({round(self.within_3m_3deg * self.runs)} of {self.runs})")]
         for name, s in self.angle_errors.items():
             rows.append((f"impact {name} error", f"mean {s['mean']:+.2f} deg, std {s['std']:.2f} deg, "
                                                  f"|error| p95 {s['p95_abs']:.2f} deg"))
@@ -131,7 +134,18 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                             "share_99": float(np.mean(view >= 0.99)) if view.size else math.nan},
         estimator_error_m={"median": _pct(est, 50), "p90": _pct(est, 90),
                            "share_8m": float(np.mean(est <= 8.0)) if est.size else math.nan},
-        outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []))
+        outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []),
+        within_3m_3deg=sum(1 for r in rows if _within(r, 3.0, 3.0)) / n if n else math.nan)
+
+
+def _within(row: dict, miss_m: float, angle_deg: float) -> bool:
+    """A hit within ``miss_m`` of the aim point and ``angle_deg`` of both commanded impact angles."""
+    try:
+        return (row.get("hit") == 1.0 and float(row["miss_distance_m"]) <= miss_m
+                and abs(float(row["impact_fpa_error_deg"])) <= angle_deg
+                and abs(float(row["impact_heading_error_deg"])) <= angle_deg)
+    except (KeyError, TypeError, ValueError):
+        return False
 
 
 # -- figures ------------------------------------------------------------------

@@ -71,6 +71,7 @@ __all__ = [
     "ConstantVelocity",
     "INTEGRATION_STEP_S",
     "Motion",
+    "SHIP_TYPES",
     "Ship",
     "SpeedChanges",
     "TargetConfig",
@@ -143,11 +144,19 @@ class SpeedChanges(StrictModel):
 
 Motion = Annotated[ConstantVelocity | ConstantTurn | Zigzag | SpeedChanges, Field(discriminator="model")]
 
+#: the ship layouts (:func:`ship_mesh_parts`)
+ShipType = Literal["bridge_aft", "bridge_forward", "patrol_boat", "ferry"]
+SHIP_TYPES: tuple[str, ...] = ("bridge_aft", "bridge_forward", "patrol_boat", "ferry")
+
 
 class TargetConfig(StrictModel):
     """The ship (scenario section ``target:``); ``TargetConfig.model_validate({})`` is the paper's ship."""
 
     kind: Literal["ship"] = Field("ship", description="target type")
+    type: ShipType = Field("bridge_aft", description=(
+        "the ship's layout, scaled to length_m, width_m, height_m: bridge_aft (the paper's ship: deckhouse, "
+        "wheelhouse and funnel aft of midships), bridge_forward (a supply vessel: superstructure forward, open "
+        "deck aft), patrol_boat (a low hull, a cabin amidships, a mast), ferry (decks over most of the length)"))
     length_m: float = Field(55.0, gt=0, le=500, description="overall length (bow to stern)")
     width_m: float = Field(25.0, gt=0, le=100, description="beam (overall width)")
     height_m: float = Field(25.0, gt=0, le=100, description="height of the highest point above the waterline")
@@ -448,13 +457,13 @@ def r_enu_from_ship(heading_ned_rad: float) -> np.ndarray:
 # --------------------------------------------------------------------------- mesh
 
 #: proportions of the mesh (fractions of length L, width W, height H)
-HULL_HEIGHT_FRAC = 0.30  # hull (deck) height / H
-BOW_FRAC = 0.20  # the bow tapers to a point over this fraction of L
+HULL_HEIGHT_FRAC = {"bridge_aft": 0.30, "bridge_forward": 0.30, "patrol_boat": 0.40, "ferry": 0.25}  # deck / H
+BOW_FRAC = {"bridge_aft": 0.20, "bridge_forward": 0.15, "patrol_boat": 0.30, "ferry": 0.12}  # bow taper / L
 
 
 def hull_height_m(cfg: TargetConfig) -> float:
     """Height of the hull deck above the waterline (m)."""
-    return HULL_HEIGHT_FRAC * cfg.height_m
+    return HULL_HEIGHT_FRAC[cfg.type] * cfg.height_m
 
 
 def aim_point_ship_m(cfg: TargetConfig) -> np.ndarray:
@@ -462,7 +471,7 @@ def aim_point_ship_m(cfg: TargetConfig) -> np.ndarray:
 
     Midships on the centre line, half-way up the hull: inside the hull, under
     the centre of the deck, so a dive converging on it from any direction meets
-    the hull (or the superstructure just aft of it) first.
+    the hull (or the superstructure above it) first.
     """
     return np.array([0.0, 0.0, 0.5 * hull_height_m(cfg)])
 
@@ -489,32 +498,69 @@ def _box(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float) -> tr
     return _prism([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], z0, z1)
 
 
-def ship_mesh_parts(cfg: TargetConfig) -> list[tuple[str, trimesh.Trimesh]]:
-    """The closed convex parts of the ship, ``(name, mesh)``, in the ship frame.
+def _hull(cfg: TargetConfig) -> trimesh.Trimesh:
+    """The hull: full beam, a bow tapering to a point, a transom stern with chamfered corners."""
+    L, W = cfg.length_m, cfg.width_m
+    xb = 0.5 * L - BOW_FRAC[cfg.type] * L  # where the bow taper starts
+    xs = -0.5 * L  # transom
+    return _prism([(xs, -0.42 * W), (xs + 0.04 * L, -0.5 * W), (xb, -0.5 * W), (0.5 * L, 0.0),
+                   (xb, 0.5 * W), (xs + 0.04 * L, 0.5 * W), (xs, 0.42 * W)], 0.0, hull_height_m(cfg))
 
-    hull (bow tapering to a point over the front 20 % of the length, transom
-    stern with chamfered corners, 0.3 H high), deckhouse and wheelhouse (the
-    bridge, aft of midships, narrower than the beam), funnel, and a mast that
-    reaches the full height. The parts touch but do not overlap.
+
+def _funnel(x0: float, x1: float, half_w: float, z0: float, z1: float) -> trimesh.Trimesh:
+    """A funnel: an elongated octagon-ish prism from x0 (aft) to x1."""
+    d = 0.3 * (x1 - x0)
+    return _prism([(x0, -0.6 * half_w), (x0 + d, -half_w), (x1, -half_w), (x1, half_w), (x0 + d, half_w),
+                   (x0, 0.6 * half_w)], z0, z1)
+
+
+def ship_mesh_parts(cfg: TargetConfig) -> list[tuple[str, trimesh.Trimesh]]:
+    """The closed convex parts of the ship, ``(name, mesh)``, in the ship frame, for its ``type``.
+
+    Every layout has a hull (HULL_HEIGHT_FRAC of H high, the bow tapering to a point over BOW_FRAC of the
+    length, a chamfered transom) and parts on it that reach the full height H; the parts touch but do not
+    overlap, and the bounding box is exactly [-L/2, L/2] x [-W/2, W/2] x [0, H].
+
+    * bridge_aft (the paper's ship): deckhouse and wheelhouse (the bridge) aft of midships, narrower than
+      the beam, a funnel, and a mast to the full height.
+    * bridge_forward: deckhouse and wheelhouse forward of midships, a mast on the wheelhouse, open deck aft.
+    * patrol_boat: a high-sided hull, a cabin amidships and a mast on it.
+    * ferry: two decks of superstructure over most of the length, a bridge deck forward, a funnel aft.
     """
     L, W, H = cfg.length_m, cfg.width_m, cfg.height_m
     hh = hull_height_m(cfg)
-    xb = 0.5 * L - BOW_FRAC * L  # where the bow taper starts
-    xs = -0.5 * L  # transom
-    hull = _prism([(xs, -0.42 * W), (xs + 0.04 * L, -0.5 * W), (xb, -0.5 * W), (0.5 * L, 0.0),
-                   (xb, 0.5 * W), (xs + 0.04 * L, 0.5 * W), (xs, 0.42 * W)], 0.0, hh)
-    z_house = 0.50 * H  # deckhouse roof
-    z_wheel = 0.65 * H  # wheelhouse roof
-    deckhouse = _box(-0.32 * L, -0.04 * L, -0.36 * W, 0.36 * W, hh, z_house)
-    wheelhouse = _box(-0.20 * L, -0.07 * L, -0.42 * W, 0.42 * W, z_house, z_wheel)
-    funnel = _prism([(-0.30 * L, -0.05 * W), (-0.28 * L, -0.08 * W), (-0.23 * L, -0.08 * W),
-                     (-0.23 * L, 0.08 * W), (-0.28 * L, 0.08 * W), (-0.30 * L, 0.05 * W)], z_house, 0.85 * H)
-    mast = _box(-0.145 * L, -0.125 * L, -0.015 * W, 0.015 * W, z_wheel, H)
-    return [("hull", hull), ("deckhouse", deckhouse), ("wheelhouse", wheelhouse), ("funnel", funnel),
-            ("mast", mast)]
+    hull = _hull(cfg)
+    if cfg.type == "bridge_aft":
+        z_house, z_wheel = 0.50 * H, 0.65 * H  # deckhouse and wheelhouse roofs
+        return [("hull", hull),
+                ("deckhouse", _box(-0.32 * L, -0.04 * L, -0.36 * W, 0.36 * W, hh, z_house)),
+                ("wheelhouse", _box(-0.20 * L, -0.07 * L, -0.42 * W, 0.42 * W, z_house, z_wheel)),
+                ("funnel", _prism([(-0.30 * L, -0.05 * W), (-0.28 * L, -0.08 * W), (-0.23 * L, -0.08 * W),
+                                   (-0.23 * L, 0.08 * W), (-0.28 * L, 0.08 * W), (-0.30 * L, 0.05 * W)],
+                                  z_house, 0.85 * H)),
+                ("mast", _box(-0.145 * L, -0.125 * L, -0.015 * W, 0.015 * W, z_wheel, H))]
+    if cfg.type == "bridge_forward":
+        z_house, z_wheel = 0.55 * H, 0.75 * H
+        return [("hull", hull),
+                ("deckhouse", _box(0.08 * L, 0.33 * L, -0.40 * W, 0.40 * W, hh, z_house)),
+                ("wheelhouse", _box(0.14 * L, 0.30 * L, -0.45 * W, 0.45 * W, z_house, z_wheel)),
+                ("mast", _box(0.20 * L, 0.22 * L, -0.015 * W, 0.015 * W, z_wheel, H))]
+    if cfg.type == "patrol_boat":
+        z_cabin = 0.75 * H
+        return [("hull", hull),
+                ("deckhouse", _box(-0.18 * L, 0.12 * L, -0.30 * W, 0.30 * W, hh, z_cabin)),
+                ("mast", _box(-0.04 * L, -0.01 * L, -0.03 * W, 0.03 * W, z_cabin, H))]
+    # ferry
+    z1, z2, z3 = 0.55 * H, 0.80 * H, 0.92 * H
+    return [("hull", hull),
+            ("deckhouse", _box(-0.44 * L, 0.30 * L, -0.47 * W, 0.47 * W, hh, z1)),
+            ("upper_deck", _box(-0.36 * L, 0.24 * L, -0.44 * W, 0.44 * W, z1, z2)),
+            ("wheelhouse", _box(0.08 * L, 0.22 * L, -0.46 * W, 0.46 * W, z2, z3)),
+            ("funnel", _funnel(-0.30 * L, -0.20 * L, 0.10 * W, z2, H))]
 
 
 _PART_RGBA = {"hull": (90, 95, 105, 255), "deckhouse": (225, 225, 220, 255), "wheelhouse": (235, 235, 230, 255),
+              "upper_deck": (230, 230, 225, 255),
               "funnel": (40, 40, 45, 255), "mast": (60, 60, 60, 255)}
 
 

@@ -315,3 +315,28 @@ def test_manoeuvre_changes_speed_and_turns_the_short_way():
     # distance along the path: 4 t + t^2 / 4 over the 8 s ramp
     s = sum(ship.state(k * 0.01 + 0.01).speed_m_s * 0.01 for k in range(800))
     assert s == pytest.approx(4 * 8 + 64 / 4, rel=1e-3)
+
+
+@pytest.mark.parametrize("kind", ["bridge_aft", "bridge_forward", "patrol_boat", "ferry"])
+@pytest.mark.parametrize("dims", [(55.0, 25.0, 25.0), (28.0, 6.0, 9.0), (140.0, 24.0, 38.0)])
+def test_every_ship_type_scales_and_is_closed(kind, dims):
+    from fwsim.target import HULL_HEIGHT_FRAC, HullVolume
+    L, W, H = dims
+    cfg = TargetConfig(type=kind, length_m=L, width_m=W, height_m=H)
+    np.testing.assert_allclose(ship_mesh(cfg).bounds, [[-L / 2, -W / 2, 0], [L / 2, W / 2, H]], atol=1e-9)
+    parts = dict(ship_mesh_parts(cfg))
+    for name, part in parts.items():
+        assert part.is_watertight and part.is_winding_consistent and part.volume > 0, name
+    assert parts["hull"].bounds[1, 2] == pytest.approx(HULL_HEIGHT_FRAC[kind] * H)
+    hull = HullVolume(cfg)
+    assert hull.contains(aim_point_ship_m(cfg))
+    assert not hull.contains(np.array([0.0, 0.0, H + 0.1])) and not hull.contains(np.array([L / 2 + 0.1, 0, 0.1]))
+
+
+def test_the_bridge_is_where_the_type_says():
+    def house_x(kind):
+        b = dict(ship_mesh_parts(TargetConfig(type=kind)))["wheelhouse"].bounds
+        return 0.5 * (b[0, 0] + b[1, 0])
+    assert house_x("bridge_aft") < 0 < house_x("bridge_forward")
+    with pytest.raises(ValueError):
+        TargetConfig(type="submarine")
