@@ -95,6 +95,29 @@ class DetectionGateConfig(StrictModel):
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
+    class_check_window: int = Field(
+        150, ge=10, le=100000,
+        description="the ship-class check: of the last this many boxes whose size the ship model predicted, ...")
+    class_mismatch_enter: float = Field(
+        0.5, gt=0, le=1,
+        description="... when this share or more are off in size (box_size_tolerance), the boxes disagree with "
+                    "the ship class (another size or layout than configured): the perception then does "
+                    "class_mismatch_action")
+    class_mismatch_action: Literal["plain_centre", "no_size_gate"] = Field(
+        "no_size_gate",
+        description="what the perception does while the boxes disagree with the class: plain_centre (the plain "
+                    "box centre, no class correction, no size gate) or no_size_gate (the class correction stays, "
+                    "no box is skipped for its size)")
+    class_mismatch_exit: float = Field(
+        0.2, ge=0, le=1,
+        description="... and goes back to the class correction when the share falls to this or below")
+
+    @model_validator(mode="after")
+    def _class_check_hysteresis(self):
+        if self.class_mismatch_exit >= self.class_mismatch_enter:
+            raise ValueError(f"class_mismatch_exit ({self.class_mismatch_exit:g}) must be below "
+                             f"class_mismatch_enter ({self.class_mismatch_enter:g})")
+        return self
 
 
 class ShapeHeadingConfig(StrictModel):

@@ -19,6 +19,14 @@ Per tick (:meth:`Perception.step`):
 5. **Decision.** After ``max_skipped_in_a_row`` skips in a row (bar
    ``too_close``) the next detection is used anyway: the estimate the checks
    rely on may be what is wrong (``overridden`` names the gate passed over).
+6. **The class check.** The correction and the size gate trust the configured
+   ship class. When ``class_mismatch_enter`` of the last
+   ``class_check_window`` size-checked boxes or more are off in size, the
+   boxes disagree with the class (a ship of another size or layout than
+   configured, not a passing occlusion): from then on no box is skipped for
+   its size (``class_mismatch_action: no_size_gate``, the default) or, with
+   ``plain_centre``, the fix is also the plain box centre, until the share
+   falls to ``class_mismatch_exit``. Both switches are events in the log.
 
 What the estimator then does with the fix (fused, innovation gate, ...) is
 decided there; the flight software logs the two together as one
@@ -29,6 +37,7 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -78,6 +87,9 @@ class Perception:
         self._record = recorder
         self.skipped_in_a_row = 0
         self.last_detection_t_s = math.nan
+        self._size_off: deque[bool] = deque(maxlen=gate.class_check_window)  # the class check's window
+        self.class_mismatch = False
+        self._spread = np.zeros(2)  # this tick's correction spread (DetectionFix.offset_std_px)
 
     @classmethod
     def from_config(cls, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship_cfg: ShipModelConfig,
@@ -92,6 +104,7 @@ class Perception:
             self.last_detection_t_s = nav.t_s
         u, v = nav.det_u_px, nav.det_v_px
         pred, use, reason, overridden = _NAN4, False, "", ""
+        self._spread = np.zeros(2)
         if new and not self.lock.locked:
             reason = FusionReason.ACQUIRING
         elif new and cam is None:
@@ -104,7 +117,7 @@ class Perception:
             use = True  # the estimator is down: this detection may (re)start it
         return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
                             u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
-                            self.last_detection_t_s)
+                            self.last_detection_t_s, self._spread)
 
     # ------------------------------------------------------------------ the checks
     def _judge(self, nav: Measurements, cam: CameraMotion, prior: TargetState):
@@ -157,15 +170,40 @@ class Perception:
                 sizes = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
-                if np.all(np.any(off, axis=1)):  # no heading the ship may have explains this box
+                mismatch = bool(np.all(np.any(off, axis=1)))  # no heading the ship may have explains this box
+                if self._class_check(nav.t_s, mismatch):  # the class does not fit: no box skipped for its size
+                    if g.class_mismatch_action == "plain_centre":
+                        return u, v, pred, ""
+                elif mismatch:
                     return u, v, pred, FusionReason.SIZE_MISMATCH
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
-                                   courses_weights=None if single else (courses, weights))
+                                   courses_weights=None if single else (courses, weights), spread=self._spread)
         if off is None:
             return u, v, pred, ""
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""
+
+    def _class_check(self, t_s: float, mismatch: bool) -> bool:
+        """Record one size check; True while the boxes disagree with the ship class (see the module text)."""
+        g, window = self.cfg, self._size_off
+        window.append(mismatch)
+        if len(window) < window.maxlen:
+            return self.class_mismatch
+        share = sum(window) / len(window)
+        if not self.class_mismatch and share >= g.class_mismatch_enter:
+            self.class_mismatch = True
+            self._event(f"perception: {100 * share:.0f} % of the last {len(window)} boxes are off the ship class's "
+                        f"size: {g.class_mismatch_action.replace('_', ' ')} from now on")
+        elif self.class_mismatch and share <= g.class_mismatch_exit:
+            self.class_mismatch = False
+            self._event(f"perception: the boxes fit the ship class again ({100 * share:.0f} % off): class "
+                        "correction and size gate as configured")
+        return self.class_mismatch
+
+    def _event(self, text: str) -> None:
+        if self._record is not None:
+            self._record.event(text)
 
     def _decide(self, reason: str) -> tuple[bool, str]:
         """(use it, the gate passed over): skip on a gate reason until max_skipped_in_a_row (bar too_close)."""
