@@ -144,6 +144,7 @@ def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
     from mcap.stream_reader import StreamReader  # mcap's own reader opens it too
     with open(log_path, "rb") as f:
         assert any(type(r).__name__ == "Footer" for r in StreamReader(f).records)
+    assert main_cli(["metrics", str(log_path)]) == 0  # and fwsim scores it
 
 
 def test_after_sigkill_the_log_reads_to_its_last_chunk(tmp_path):
