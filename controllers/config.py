@@ -95,6 +95,13 @@ class DetectionGateConfig(StrictModel):
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
+    propagate_feature: bool = Field(
+        True, description="bring a late detection's box centre to now before it is used (the detector's latency: "
+                          "the box is of the exposure, the camera pose of now): first order, with the camera's "
+                          "present angular velocity (gyros + encoder rates) and, once there is an estimate, its "
+                          "depth and relative velocity (the feature kinematics of controllers/camera_model.py)")
+    max_propagation_s: float = Field(
+        0.5, gt=0, le=10, description="a detection older than this is used as it is (propagate_feature)")
     class_check_window: int = Field(
         150, ge=10, le=100000,
         description="the ship-class check: of the last this many boxes whose size the ship model predicted, ...")

@@ -16,10 +16,13 @@ Per tick (:meth:`Perception.step`):
    fix is the image of the point the estimator tracks. A box whose width or
    height no plausible heading explains is skipped (``size_mismatch``: part of
    the ship is hidden, or the box is wrong).
-5. **Decision.** After ``max_skipped_in_a_row`` skips in a row (bar
+5. **Latency.** A detection arrives ``latency`` after its exposure; its box
+   centre is brought to now (``propagate_feature``) before anything else, so
+   that it goes with the camera pose of now.
+6. **Decision.** After ``max_skipped_in_a_row`` skips in a row (bar
    ``too_close``) the next detection is used anyway: the estimate the checks
    rely on may be what is wrong (``overridden`` names the gate passed over).
-6. **The class check.** The correction and the size gate trust the configured
+7. **The class check.** The correction and the size gate trust the configured
    ship class. When ``class_mismatch_enter`` of the last
    ``class_check_window`` size-checked boxes or more are off in size, the
    boxes disagree with the class (a ship of another size or layout than
@@ -52,6 +55,8 @@ __all__ = ["Perception", "Lock"]
 
 _NAN4 = np.full(4, np.nan)
 _NAN4.setflags(write=False)
+#: the flight software's tick is at most this long (the poses kept for late detections are matched to half of it)
+_POSE_MATCH_S = 1.0 / 20.0
 
 
 class Lock:
@@ -90,6 +95,8 @@ class Perception:
         self._size_off: deque[bool] = deque(maxlen=gate.class_check_window)  # the class check's window
         self.class_mismatch = False
         self._spread = np.zeros(2)  # this tick's correction spread (DetectionFix.offset_std_px)
+        # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
+        self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
 
     @classmethod
     def from_config(cls, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship_cfg: ShipModelConfig,
@@ -98,6 +105,7 @@ class Perception:
 
     def step(self, nav: Measurements, cam: CameraMotion | None, prior: TargetState) -> DetectionFix:
         """This tick's fix. ``prior``: the estimate brought to now (before this detection)."""
+        self.remember_pose(cam)
         lock_now = self.lock.observe(nav)
         new = bool(nav.det_new and nav.det_valid)
         if new:
@@ -115,6 +123,7 @@ class Perception:
             reason = "" if use else reason
         elif new:
             use = True  # the estimator is down: this detection may (re)start it
+            u, v = self._to_now(nav, cam, prior)
         return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
                             u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
                             self.last_detection_t_s, self._spread)
@@ -152,7 +161,7 @@ class Perception:
         not apply), the predicted box of the most likely heading, and ``size_mismatch`` when no plausible
         heading explains the box's size (else "")."""
         tm = self.ship.cfg
-        u, v = nav.det_u_px, nav.det_v_px
+        u, v = self._to_now(nav, cam, prior)
         if not tm.enabled:
             return u, v, _NAN4, ""
         g = self.cfg
@@ -183,6 +192,40 @@ class Perception:
         if off is None:
             return u, v, pred, ""
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""
+
+    def _to_now(self, nav: Measurements, cam: CameraMotion | None, prior: TargetState) -> tuple[float, float]:
+        """The detection's box centre brought from its exposure to now (``propagate_feature``): its ray, from
+        the camera pose at the exposure (kept from the ticks before), meets the target's plane; that point,
+        moved on by the estimated velocity over the latency, is projected into the camera of now. Unchanged
+        without latency, or when the exposure's pose is not at hand."""
+        u, v = float(nav.det_u_px), float(nav.det_v_px)
+        g, c = self.cfg, self.camera
+        age = float(nav.t_s) - float(nav.det_exposure_t_s)
+        if cam is None or not (g.propagate_feature and 0.0 < age <= g.max_propagation_s):
+            return u, v
+        t_exp = float(nav.det_exposure_t_s)
+        past = min(self._poses, key=lambda p: abs(p[0] - t_exp), default=None)
+        if past is None or abs(past[0] - t_exp) > 0.5 * _POSE_MATCH_S:
+            return u, v
+        _, c_exp, R_exp = past
+        d = R_exp @ np.array([(u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0])
+        known = prior.known and np.all(np.isfinite(prior.pos_enu_m)) and np.all(np.isfinite(prior.vel_enu_m_s))
+        plane = float(prior.pos_enu_m[2]) if known else 0.0
+        if d[2] >= -1e-6:  # the ray does not come down to the plane
+            return u, v
+        point = c_exp + ((plane - c_exp[2]) / d[2]) * d
+        if known:
+            point = point + age * np.asarray(prior.vel_enu_m_s, dtype=float)
+        q = np.asarray(cam.R_enu_from_cam, dtype=float).T @ (point - cam.pos_enu_m)
+        if q[2] <= 1.0:
+            return u, v
+        return c.fx * q[0] / q[2] + c.cx, c.fy * q[1] / q[2] + c.cy
+
+    def remember_pose(self, cam: CameraMotion | None) -> None:
+        """Keep the camera pose of this tick for the detections exposed now that arrive later."""
+        if cam is not None and self.cfg.propagate_feature:
+            self._poses.append((float(cam.t_s), np.array(cam.pos_enu_m, dtype=float),
+                                np.array(cam.R_enu_from_cam, dtype=float)))
 
     def _class_check(self, t_s: float, mismatch: bool) -> bool:
         """Record one size check; True while the boxes disagree with the ship class (see the module text)."""

@@ -387,3 +387,42 @@ def test_the_compiled_boxes_equal_the_numpy_ones(n):
             b = predicted_boxes_px_numpy(outline, fsw_cam, cp, Rc, ref, courses)
             np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
             np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)], rtol=1e-12, atol=1e-9)
+
+
+def test_a_late_detection_is_brought_to_the_camera_pose_of_now():
+    """Detector latency 0.1 s while the gimbal slews at 40 deg/s and the UAV flies on at 22 m/s: the box centre
+    of the exposure, used with the camera pose of now, is off by tens of pixels; brought to now through the
+    exposure's pose it lands on the target's image within a pixel (a still ship on the tracked plane)."""
+    from controllers.ukf import CameraMotion
+    from fwsim.frames import dcm_enu_from_frd
+    cam_model = PinholeCamera.from_config(CAM_CFG)
+    p = _perception(ShipModel(ShipModelConfig(), cam_model))
+    h = UkfConfig().target_plane_height_m
+    target = np.array([1500.0, 200.0, h])
+
+    def pose(t):  # the camera at 1000 m, flying east, its yaw slewing at 40 deg/s; pitched down at the target
+        pos = np.array([22.0 * t, 0.0, 1000.0])
+        rel = target - pos
+        yaw = math.atan2(rel[0], rel[1]) + math.radians(40.0) * (t - 1.0)  # clockwise from North
+        pitch = -math.atan2(-rel[2], math.hypot(rel[0], rel[1]))
+        R_body = dcm_enu_from_frd(np.array([0.0, pitch, yaw]))
+        R_cam = R_body @ np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # cam z fwd, x right, y down
+        return CameraMotion(t, pos, np.array([22.0, 0.0, 0.0]), R_cam, np.zeros(3), 1000.0)
+
+    def pixel(m):
+        q = m.R_enu_from_cam.T @ (target - m.pos_enu_m)
+        return np.array([cam_model.fx * q[0] / q[2] + cam_model.cx, cam_model.fy * q[1] / q[2] + cam_model.cy])
+
+    t_exp, t_now = 0.9, 1.0
+    for k in range(4):  # the ticks before: their poses are kept
+        p.remember_pose(pose(t_exp - 1 / 30 * (3 - k) + 0.0))
+    u, v = pixel(pose(t_exp))
+    meas = Measurements(t_now, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), 22.0, 1000.0, det_new=True,
+                        det_valid=True, det_u_px=float(u), det_v_px=float(v), det_exposure_t_s=t_exp)
+    prior = TargetState(t_now, "estimator", target, np.zeros(3), 0.1, h)
+    now = pose(t_now)
+    stale = np.hypot(*(np.array([u, v]) - pixel(now)))
+    moved = np.hypot(*(np.array(p._to_now(meas, now, prior)) - pixel(now)))
+    assert stale > 30.0 and moved < 1.0, (stale, moved)
+    p.cfg = p.cfg.model_copy(update={"propagate_feature": False})
+    assert p._to_now(meas, now, prior) == (float(u), float(v))
