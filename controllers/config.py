@@ -241,6 +241,56 @@ class UkfConfig(StrictModel):
     sigma_kappa: float = Field(0.0, ge=-7, le=10, description="Merwe kappa (n + kappa must stay > 0)")
 
 
+class CtUkfConfig(StrictModel):
+    """Tuning of the manoeuvring-ship UKF (``controllers.estimator: ct_ukf``, ``controllers.ct_ukf``): the
+    paper's UKF with the ship's turn rate and along-track acceleration as two more states, each a first-order
+    Gauss-Markov process (it wanders about zero: a ship's manoeuvre lasts tens of seconds, then it steadies).
+
+    Only the ship's motion model is set here; the measurement model and its noise, the innovation gate, the
+    tracked point's height, the feature noise, the start and the sigma points are the UKF's
+    (``controllers.ukf``), so a scenario tuned for the UKF flies this filter with the same camera model."""
+
+    turn_rate_std_deg_s: float = Field(
+        1.5, gt=0, le=20,
+        description="turn-rate std of the Gauss-Markov model (its spread in the long run, and at the start), "
+                    "deg/s; ships turn at up to ~1.5 deg/s, and a +-30 deg zigzag of period 60 s peaks at 3")
+    turn_rate_time_s: float = Field(
+        60.0, gt=0, le=3600,
+        description="correlation time of the turn rate, s: how long a turn is expected to last (a shorter one "
+                    "lets the estimate follow a zigzag's reversals, a longer one holds a steady turn better; "
+                    "30 and 60 s track a +-30 deg, 60 s zigzag alike, 60 s keeps a held turn's rate through the "
+                    "dive)")
+    accel_std_m_s2: float = Field(
+        0.3, gt=0, le=10,
+        description="along-track acceleration std of the Gauss-Markov model (long run, and at the start), m/s^2; "
+                    "ships change speed at up to ~0.5 m/s^2")
+    accel_time_s: float = Field(
+        20.0, gt=0, le=3600, description="correlation time of the along-track acceleration, s (how long a speed "
+                                         "change is expected to go on)")
+    target_accel_noise_m_s2: float = Field(
+        0.05, gt=0, le=50,
+        description="horizontal white-noise acceleration beside the modelled turn and speed change (process, PSD = "
+                    "this^2 per second), m/s^2; the UKF's default: small, for the same reason (the dive's "
+                    "box-centre errors must not pass into the velocity)")
+    min_speed_m_s: float = Field(
+        0.5, gt=0, le=20,
+        description="the along-track direction is V / max(|V|, this): below this speed an acceleration moves "
+                    "the velocity less (a ship at rest has no track to speed up along), m/s")
+    hold_tgo_s: float = Field(
+        15.0, ge=0, le=600,
+        description="while the camera closes on the estimate fast enough to reach it within this time (range / "
+                    "closing speed: a dive), s, hold the manoeuvre learnt before: the turn rate kept, the "
+                    "acceleration set to zero (a speed change ends within seconds), neither learnt from "
+                    "detections any more: the dive's fast-changing view brings box-centre errors that look like a "
+                    "turn or a speed change, which the last seconds' coast would fly out. Released when the time "
+                    "to go exceeds twice this (or the camera recedes); 0: never hold")
+    hold_turn_rate: bool = Field(
+        True, description="the hold keeps the turn rate too (true), or goes on learning it (false: only the "
+                          "speed is held). Paper missions, seeds 11-13: a 1.5 deg/s turn, miss 1.05 against "
+                          "2.39 m; a +-30 deg, 60 s zigzag (its turn rate reverses within the dive), 4.65 against "
+                          "3.42 m; speed steps alike")
+
+
 # --------------------------------------------------------------------------- guidance and pointing
 
 
@@ -535,7 +585,7 @@ def _checked(slot: str, section: str):
     return AfterValidator(check)
 
 
-EstimatorChoice = Annotated[BlockChoice, _checked("estimator", "ukf")]
+EstimatorChoice = Annotated[BlockChoice, _checked("estimator", "ukf (and ct_ukf)")]
 LoiterChoice = Annotated[BlockChoice, _checked("after_lock", "nmpc or controllers.orbit")]
 TerminalChoice = Annotated[BlockChoice, _checked("terminal", "bpng")]
 PointingChoice = Annotated[BlockChoice, _checked("pointing", "ibvs")]
@@ -552,7 +602,9 @@ class Controllers(StrictModel):
     acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
     estimator: EstimatorChoice = Field(
         default_factory=lambda: BlockChoice(use="ukf"),
-        description="the target estimator: ukf (the paper's, settings in ukf), or a user's class")
+        description="the target estimator: ukf (the paper's, settings in ukf), ct_ukf (the UKF with the ship's "
+                    "turn rate and along-track acceleration, for manoeuvring ships: settings in ct_ukf and ukf), "
+                    "or a user's class")
     after_lock: LoiterChoice = Field(
         default_factory=lambda: BlockChoice(use="path"),
         description="after the lock: keep the initial path (path), or loiter (Phase 2) with a circle follower "
@@ -569,6 +621,7 @@ class Controllers(StrictModel):
     reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
     bpng: BpngConfig = Field(default_factory=BpngConfig)
     ukf: UkfConfig = Field(default_factory=UkfConfig)
+    ct_ukf: CtUkfConfig = Field(default_factory=CtUkfConfig)
     target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
     detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)

@@ -291,50 +291,50 @@ def _fx_batch(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float
 class _CompiledProcess:
     """:func:`_fx_batch` as one CasADi function per RK4 substep (``controllers.compiled``): the same
     integration, one C call instead of some eighty numpy calls (~20 us against ~140 us for 17 sigma
-    points); the results differ from numpy's by rounding only."""
+    points); the results differ from numpy's by rounding only.
 
-    _cache: dict[int, "_CompiledProcess"] = {}
+    The state is ``[x1, x2, r_q, V_q, ...]``: the features' rates (the camera part, shared) come from
+    :func:`_sx_feature_rates`; :meth:`_target_rates` gives the rates of the rest (here the constant-velocity
+    target). A subclass with another target model (``controllers.ct_ukf``) sets ``dim_x``, ``function_name``,
+    its own ``_cache`` and overrides :meth:`_target_rates`; ``params`` are its model's constants (part of the
+    cache key)."""
+
+    dim_x = 8
+    function_name = "ukf_rk4_step"
+    _cache: dict[tuple, "_CompiledProcess"] = {}
 
     @classmethod
-    def for_points(cls, m: int) -> "_CompiledProcess":
-        if m not in cls._cache:
-            cls._cache[m] = cls(m)
-        return cls._cache[m]
+    def for_points(cls, m: int, *params: float) -> "_CompiledProcess":
+        key = (m, *params)
+        if key not in cls._cache:
+            cls._cache[key] = cls(m, *params)
+        return cls._cache[key]
 
-    def __init__(self, m: int):
+    def __init__(self, m: int, *params: float):
         import casadi as ca
 
         from controllers.compiled import Buffered
         self.m = m
-        X, h, t0 = ca.SX.sym("X", m, 8), ca.SX.sym("h"), ca.SX.sym("t0")
+        X, h, t0 = ca.SX.sym("X", m, self.dim_x), ca.SX.sym("h"), ca.SX.sym("t0")
         r, R, V, w = ca.SX.sym("r", 3), ca.SX.sym("R", 3, 3), ca.SX.sym("V", 3), ca.SX.sym("w", 3)
 
-        def exp_so3(tau):  # _exp_so3
-            wx, wy, wz = w[0] * tau, w[1] * tau, w[2] * tau
-            th2 = wx * wx + wy * wy + wz * wz
-            K = ca.vertcat(ca.horzcat(0, -wz, wy), ca.horzcat(wz, 0, -wx), ca.horzcat(-wy, wx, 0))
-            KK = ca.mtimes(K, K)
-            th = ca.sqrt(th2)
-            return ca.if_else(th2 < 1e-16, ca.SX.eye(3) + K + 0.5 * KK,
-                              ca.SX.eye(3) + (ca.sin(th) / th) * K + ((1.0 - ca.cos(th)) / th2) * KK)
-
-        def deriv(Xs, tau):  # the process model of _fx_batch, feature rates as camera_model.feature_rates
-            Rce = ca.mtimes(R, exp_so3(tau)).T
-            rel = Xs[:, 2:5] - ca.repmat((r + V * tau).T, m, 1)
-            Z = ca.fmax(ca.mtimes(rel, Rce[2, :].T), MIN_DEPTH_M)
-            v = ca.mtimes(Xs[:, 5:8] - ca.repmat(V.T, m, 1), Rce.T)
-            x1, x2 = Xs[:, 0], Xs[:, 1]
-            x12 = x1 * x2
-            x1d = (v[:, 0] - x1 * v[:, 2]) / Z + x12 * w[0] + (-(1.0 + x1 * x1)) * w[1] + x2 * w[2]
-            x2d = (v[:, 1] - x2 * v[:, 2]) / Z + (1.0 + x2 * x2) * w[0] + (-x12) * w[1] + (-x1) * w[2]
-            return ca.horzcat(x1d, x2d, Xs[:, 5:8], ca.SX.zeros(m, 3))
+        def deriv(Xs, tau):  # the process model of _fx_batch
+            x1d, x2d = _sx_feature_rates(Xs, tau, r, R, V, w, m)
+            return ca.horzcat(x1d, x2d, self._target_rates(Xs, m, *params))
 
         k1 = deriv(X, t0)
         k2 = deriv(X + 0.5 * h * k1, t0 + 0.5 * h)
         k3 = deriv(X + 0.5 * h * k2, t0 + 0.5 * h)
         k4 = deriv(X + h * k3, t0 + h)
-        step = ca.Function("ukf_rk4_step", [X, h, t0, r, R, V, w], [X + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)])
+        step = ca.Function(self.function_name, [X, h, t0, r, R, V, w],
+                           [X + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)])
         self._step = Buffered(step)
+
+    @staticmethod
+    def _target_rates(Xs, m: int):
+        """``[r_q_dot, V_q_dot] = [V_q, 0]`` (constant velocity), CasADi SX (m, 6)."""
+        import casadi as ca
+        return ca.horzcat(Xs[:, 5:8], ca.SX.zeros(m, 3))
 
     def __call__(self, S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
         n = max(1, int(math.ceil(dt / max_step - 1e-9)))
@@ -343,7 +343,36 @@ class _CompiledProcess:
         X = np.asarray(S, dtype=float).T.ravel()
         for k in range(n):
             X = self._step(X, h, k * h, r_c0, R, V_c, omega)[0]
-        return X.reshape(8, self.m).T.copy()  # (the buffer is the next call's output)
+        return X.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
+
+
+def _sx_exp_so3(w, tau):
+    """:func:`_exp_so3` in CasADi SX (``w`` a 3-vector symbol, ``tau`` a scalar expression)."""
+    import casadi as ca
+    wx, wy, wz = w[0] * tau, w[1] * tau, w[2] * tau
+    th2 = wx * wx + wy * wy + wz * wz
+    K = ca.vertcat(ca.horzcat(0, -wz, wy), ca.horzcat(wz, 0, -wx), ca.horzcat(-wy, wx, 0))
+    KK = ca.mtimes(K, K)
+    th = ca.sqrt(th2)
+    return ca.if_else(th2 < 1e-16, ca.SX.eye(3) + K + 0.5 * KK,
+                      ca.SX.eye(3) + (ca.sin(th) / th) * K + ((1.0 - ca.cos(th)) / th2) * KK)
+
+
+def _sx_feature_rates(Xs, tau, r, R, V, w, m: int):
+    """``(x1_dot, x2_dot)`` (each SX (m, 1)) of the sigma points ``Xs`` (rows ``[x1, x2, r_q, V_q, ...]``) at
+    ``tau`` into the interval, as :func:`_fx_batch` (feature rates as
+    :func:`controllers.camera_model.feature_rates`): camera at ``r + V tau``, ``R_enu_from_cam = R exp([w]x
+    tau)``, depth floored at MIN_DEPTH_M. Every estimator with the UKF's feature states shares it."""
+    import casadi as ca
+    Rce = ca.mtimes(R, _sx_exp_so3(w, tau)).T
+    rel = Xs[:, 2:5] - ca.repmat((r + V * tau).T, m, 1)
+    Z = ca.fmax(ca.mtimes(rel, Rce[2, :].T), MIN_DEPTH_M)
+    v = ca.mtimes(Xs[:, 5:8] - ca.repmat(V.T, m, 1), Rce.T)
+    x1, x2 = Xs[:, 0], Xs[:, 1]
+    x12 = x1 * x2
+    x1d = (v[:, 0] - x1 * v[:, 2]) / Z + x12 * w[0] + (-(1.0 + x1 * x1)) * w[1] + x2 * w[2]
+    x2d = (v[:, 1] - x2 * v[:, 2]) / Z + (1.0 + x2 * x2) * w[0] + (-x12) * w[1] + (-x1) * w[2]
+    return x1d, x2d
 
 
 class _CompiledUpdate:
@@ -445,12 +474,13 @@ class UkfTargetEstimator:
 
     name = "ukf"
     label = "UKF"  # its name in the flight software's events
+    dim_x = 8  # [x1, x2, r_q, V_q]; a subclass with more target states (controllers.ct_ukf) appends them
 
     def __init__(self, camera: PinholeCamera, config: UkfConfig | None = None):
         self.cfg = config if config is not None else UkfConfig()
         self.camera = camera
         c = self.cfg
-        self._core = UnscentedCore(8, 5, c.sigma_alpha, c.sigma_beta, c.sigma_kappa)
+        self._core = UnscentedCore(self.dim_x, 5, c.sigma_alpha, c.sigma_beta, c.sigma_kappa)
         self._update = _CompiledUpdate.for_core(self._core)
         self._initialised = False
         self._t = math.nan
@@ -514,6 +544,18 @@ class UkfTargetEstimator:
     def core(self) -> UnscentedCore:
         return self._core
 
+    # ------------------------------------------------------------ the target model (a subclass's hooks)
+    _fx = staticmethod(_fx_compiled)  # fx_batch of UnscentedCore.predict: the sigma points over dt
+
+    def _process_noise(self, dt: float) -> np.ndarray:
+        """Q over dt (:func:`_process_noise`)."""
+        return _process_noise(dt, self.cfg)
+
+    @staticmethod
+    def _initial_state(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The state and covariance to start from, given the 8-state ones :meth:`initialise` makes."""
+        return x, P
+
     # ------------------------------------------------------------ steps
     def reset(self) -> None:
         """Forget the target: the next valid detection initialises again."""
@@ -543,7 +585,7 @@ class UkfTargetEstimator:
         sv = c.init_vel_std_m_s
         P = np.diag([(c.pixel_noise_px / cam.fx) ** 2, (c.pixel_noise_px / cam.fy) ** 2, sp * sp, sp * sp,
                      _INIT_VERTICAL_POS_STD_M ** 2, sv * sv, sv * sv, _INIT_VERTICAL_VEL_STD_M_S ** 2])
-        self._core.set_state(np.concatenate([[x1, x2], r_q, np.zeros(3)]), P)
+        self._core.set_state(*self._initial_state(np.concatenate([[x1, x2], r_q, np.zeros(3)]), P))
         self.initialisations += 1
         self._t = float(fix.t_s)
         self._motion = motion
@@ -568,7 +610,7 @@ class UkfTargetEstimator:
             # a target leaving the camera's front half-space makes x1, x2 = X/Z, Y/Z blow up: the
             # resulting non-finite state is caught below, so numpy's overflow warnings are noise here
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                self._core.predict(dt, _fx_compiled, _process_noise(dt, self.cfg), r_c0=m0.pos_enu_m,
+                self._core.predict(dt, self._fx, self._process_noise(dt), r_c0=m0.pos_enu_m,
                                    R_ec0=m0.R_enu_from_cam, V_c=V_c, omega=omega, max_step=self.cfg.max_substep_s)
         except FloatingPointError:
             self.divergence_resets += 1
