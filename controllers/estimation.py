@@ -121,7 +121,9 @@ class Estimation:
         if self.filter.initialised:
             est = self.filter.estimate()
             vel_std = float(np.max(est.vel_std_m_s[:2]))
-            return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h), est
+            turn, accel = (float(getattr(est, name, 0.0)) for name in ("turn_rate_rad_s", "accel_along_m_s2"))
+            return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,
+                               turn if math.isfinite(turn) else 0.0, accel if math.isfinite(accel) else 0.0), est
         if self._last is not None:
             pos, vel = self._extrapolated(t_s)
             return TargetState(t_s, "extrapolated", pos, vel, math.nan, h), None

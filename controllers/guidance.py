@@ -116,10 +116,30 @@ class BpngTerminal:
     def step(self, nav: Measurements, target: TargetState) -> Guidance:
         pos = target.pos_enu_m.copy()
         pos[2] = 0.0  # the estimate's plane height is a camera-model detail; BPNG adds its aim height
-        cmd, status = self.law.step(nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, pos, target.vel_enu_m_s,
-                                    self.contact_aim(nav, pos, target.vel_enu_m_s))
+        vel, vel_at_impact = self.ship_velocity(nav, pos, target)
+        cmd, status = self.law.step(nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, pos, vel,
+                                    self.contact_aim(nav, pos, vel_at_impact))
         self._record.log(topics.FSW_BPNG, status)
         return Guidance(cmd, "terminal")
+
+    @staticmethod
+    def ship_velocity(nav: Measurements, pos: np.ndarray, target: TargetState) -> tuple[np.ndarray, np.ndarray]:
+        """(the velocity the law extrapolates the ship with, the ship's velocity at impact).
+
+        A ship that turns or changes speed (an estimator that estimates it: ``controllers.ct_ukf``) is
+        predicted along its turn to the time to go (the law's ``t_go = |r| / |V_p|``), and the law is given
+        the chord's velocity, ``(p(t_go) - p) / t_go``: its constant-velocity extrapolation then meets the ship
+        where the turn takes it. Without a manoeuvre, the estimated velocity, for both."""
+        vel = np.asarray(target.vel_enu_m_s, dtype=float)
+        if target.turn_rate_rad_s == 0.0 and target.accel_along_m_s2 == 0.0:
+            return vel, vel
+        from controllers.ct_ukf import predict_ctra
+        t_go = max(float(np.linalg.norm(pos - nav.pos_enu_m)) / max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0),
+                   0.1)
+        p_f, v_f = predict_ctra(pos, vel, target.turn_rate_rad_s, target.accel_along_m_s2, t_go)
+        chord = (p_f - pos) / t_go
+        chord[2] = vel[2]
+        return chord, v_f
 
     def contact_aim(self, nav: Measurements, target: np.ndarray, target_vel: np.ndarray) -> np.ndarray | None:
         """Where the approach through the aim point along the impact direction (relative to the moving ship)
