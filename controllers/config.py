@@ -110,11 +110,12 @@ class DetectionGateConfig(StrictModel):
         description="... when this share or more are off in size (box_size_tolerance), the boxes disagree with "
                     "the ship class (another size or layout than configured): the perception then does "
                     "class_mismatch_action")
-    class_mismatch_action: Literal["plain_centre", "no_size_gate"] = Field(
-        "no_size_gate",
-        description="what the perception does while the boxes disagree with the class: plain_centre (the plain "
-                    "box centre, no class correction, no size gate) or no_size_gate (the class correction stays, "
-                    "no box is skipped for its size)")
+    class_mismatch_action: Literal["rescale", "plain_centre", "no_size_gate"] = Field(
+        "rescale",
+        description="what the perception does while the boxes disagree with the class: rescale (the size gate "
+                    "against the class's boxes scaled by the median size ratio of the last class_check_window "
+                    "boxes), no_size_gate (no box skipped for its size), plain_centre (the plain box centre: no "
+                    "class correction, no size gate)")
     class_mismatch_exit: float = Field(
         0.2, ge=0, le=1,
         description="... and goes back to the class correction when the share falls to this or below")

@@ -26,9 +26,11 @@ Per tick (:meth:`Perception.step`):
    ship class. When ``class_mismatch_enter`` of the last
    ``class_check_window`` size-checked boxes or more are off in size, the
    boxes disagree with the class (a ship of another size or layout than
-   configured, not a passing occlusion): from then on no box is skipped for
-   its size (``class_mismatch_action: no_size_gate``, the default) or, with
-   ``plain_centre``, the fix is also the plain box centre, until the share
+   configured, not a passing occlusion): from then on the size gate compares
+   a box with the class's prediction scaled by the median size ratio of the
+   last boxes (``class_mismatch_action: rescale``, the default: a box cut
+   short still stands out), or skips none for its size (``no_size_gate``), or
+   the fix is also the plain box centre (``plain_centre``), until the share
    falls to ``class_mismatch_exit``. Both switches are events in the log.
 
 What the estimator then does with the fix (fused, innovation gate, ...) is
@@ -93,6 +95,7 @@ class Perception:
         self.skipped_in_a_row = 0
         self.last_detection_t_s = math.nan
         self._size_off: deque[bool] = deque(maxlen=gate.class_check_window)  # the class check's window
+        self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
         self._spread = np.zeros(2)  # this tick's correction spread (DetectionFix.offset_std_px)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
@@ -180,9 +183,19 @@ class Perception:
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
                 mismatch = bool(np.all(np.any(off, axis=1)))  # no heading the ship may have explains this box
-                if self._class_check(nav.t_s, mismatch):  # the class does not fit: no box skipped for its size
+                ratio = det / np.maximum(sizes[int(np.argmax(weights))], 1.0)
+                if np.all(ratio > 0.0):
+                    self._ratios.append(np.log(ratio))
+                if self._class_check(nav.t_s, mismatch):  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
                         return u, v, pred, ""
+                    if g.class_mismatch_action == "rescale" and self._ratios:
+                        # the size gate against the class scaled by the boxes' typical size ratio: a box cut
+                        # short (occlusion) still stands out from the ship's usual boxes
+                        scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
+                        off = np.abs(det[None, :] - scaled) > g.box_size_tolerance * scaled + g.box_size_tolerance_px
+                        if np.all(np.any(off, axis=1)):
+                            return u, v, pred, FusionReason.SIZE_MISMATCH
                 elif mismatch:
                     return u, v, pred, FusionReason.SIZE_MISMATCH
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
