@@ -109,9 +109,6 @@ class DetectionFix:
     lock_now: bool  # this tick made the lock
     lock_t_s: float  # when it was locked (NaN before)
     last_detection_t_s: float  # arrival of the newest detection with a box (NaN before any)
-    # (2,) px: how uncertain the shape correction of u_px, v_px is (the spread of the offsets over the
-    # headings the ship may have; 0 with a known course or no correction): measurement noise to add to it
-    offset_std_px: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 @dataclass(frozen=True, slots=True)

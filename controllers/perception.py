@@ -97,7 +97,6 @@ class Perception:
         self._size_off: deque[bool] = deque(maxlen=gate.class_check_window)  # the class check's window
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
-        self._spread = np.zeros(2)  # this tick's correction spread (DetectionFix.offset_std_px)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
         self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
 
@@ -115,7 +114,6 @@ class Perception:
             self.last_detection_t_s = nav.t_s
         u, v = nav.det_u_px, nav.det_v_px
         pred, use, reason, overridden = _NAN4, False, "", ""
-        self._spread = np.zeros(2)
         if new and not self.lock.locked:
             reason = FusionReason.ACQUIRING
         elif new and cam is None:
@@ -129,7 +127,7 @@ class Perception:
             u, v = self._to_now(nav, cam, prior)
         return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
                             u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
-                            self.last_detection_t_s, self._spread)
+                            self.last_detection_t_s)
 
     # ------------------------------------------------------------------ the checks
     def _judge(self, nav: Measurements, cam: CameraMotion, prior: TargetState):
@@ -201,7 +199,7 @@ class Perception:
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
-                                   courses_weights=None if single else (courses, weights), spread=self._spread)
+                                   courses_weights=None if single else (courses, weights))
         if off is None:
             return u, v, pred, ""
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""

@@ -341,8 +341,7 @@ class ShapeHeading:
 def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam,
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
                          headings_when_unknown: int = 8, boxes_px: np.ndarray | None = None,
-                         courses_weights: tuple[np.ndarray, np.ndarray] | None = None,
-                         spread: np.ndarray | None = None) -> np.ndarray | None:
+                         courses_weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
     ``ref_enu_m``: the ship's waterline centre (estimated); the tracked point is
@@ -354,9 +353,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     :func:`predicted_boxes_px` rows for the courses used (``course_enu_rad``, or those of
     ``courses_weights``), so that they are not projected twice. ``courses_weights``:
     with an unknown course, the headings to average over and their weights (:meth:`ShapeHeading.headings`)
-    instead of ``headings_when_unknown`` equal ones. ``spread``: a (2,) array that, when given, receives the
-    weighted standard deviation of the headings' offsets about the returned mean (0 for one course): what
-    the correction does not know while the heading is uncertain.
+    instead of ``headings_when_unknown`` equal ones.
     """
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     ref = np.asarray(ref_enu_m, dtype=float)
@@ -378,10 +375,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
             return None
         offsets = np.stack([0.5 * (b[:, 0] + b[:, 2]) - uv_tracked[0], 0.5 * (b[:, 1] + b[:, 3]) - uv_tracked[1]],
                            axis=1)
-        mean = np.average(offsets, axis=0, weights=weights)
-        if spread is not None:  # how far the headings' offsets lie from their mean: the correction's uncertainty
-            spread[:] = np.sqrt(np.average((offsets - mean) ** 2, axis=0, weights=weights))
-        return mean
+        return np.average(offsets, axis=0, weights=weights)
     offsets = []
     for i, course in enumerate(courses):
         box = boxes_px[i] if boxes_px is not None else \
@@ -389,11 +383,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if box is None or not np.all(np.isfinite(box)):
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
-    offsets = np.array(offsets)
-    mean = np.average(offsets, axis=0, weights=weights)
-    if spread is not None:
-        spread[:] = np.sqrt(np.average((offsets - mean) ** 2, axis=0, weights=weights))
-    return mean
+    return np.average(np.array(offsets), axis=0, weights=weights)
 
 
 @dataclass(frozen=True, slots=True)
