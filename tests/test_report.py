@@ -65,3 +65,17 @@ def test_report_html_and_cli(tmp_path, capsys):
     with pytest.raises(ReportError):
         write_report(tmp_path / "nothing")
     assert main(["report", str(tmp_path / "nothing")]) == 2
+
+
+def test_the_envelope_verdict_splits_by_estimator():
+    import importlib.util
+
+    from fwsim import PROJECT_ROOT
+    spec = importlib.util.spec_from_file_location("envelope_tool", PROJECT_ROOT / "tools" / "envelope.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    rows = [dict(r, **{"set.controllers.estimator": "ct_ukf"}) for r in _rows()] + _rows()[:4]
+    table = {name: (n, shares) for name, n, shares in tool.verdict(rows, "set.controllers.estimator")}
+    assert table["ct_ukf"][0] == 6 and table["(the scenario's)"][0] == 4
+    assert table["ct_ukf"][1][0] == pytest.approx(4 / 6) and table["(the scenario's)"][1][0] == 1.0
+    assert table["(the scenario's)"][1][1] == pytest.approx(3 / 4)  # r3 misses by 4 m

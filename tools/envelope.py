@@ -1,8 +1,9 @@
 """The envelope sweep's verdict: issue 16's four bars, estimator by estimator, from a batch's summary.
 
     fwsim batch scenarios/batches/envelope.yaml --workers 2 --out runs/envelope
-    python tools/envelope.py runs/envelope              # a table in Markdown, and where each bar stands
-    python tools/envelope.py runs/envelope --by set.target.motion     # split another way
+    fwsim batch scenarios/batches/envelope_ct_ukf.yaml --workers 2 --out runs/envelope_ct_ukf  # same draws
+    python tools/envelope.py runs/envelope runs/envelope_ct_ukf   # a Markdown table: each bar, each estimator
+    python tools/envelope.py runs/envelope --by set.target.motion  # split another way
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock; >= 90 %
@@ -26,7 +27,7 @@ BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("in view >= 99 %", 0.95), 
 def _label(value) -> str:
     if isinstance(value, dict):
         return str(value.get("model", value))
-    return "(default)" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+    return "(the scenario's)" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
 
 
 def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float]]]:
@@ -44,15 +45,17 @@ def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float]]]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out_dir", type=Path, help="the output folder of fwsim batch (with summary.json)")
+    ap.add_argument("out_dirs", type=Path, nargs="+", help="output folders of fwsim batch (with summary.json)")
     ap.add_argument("--by", default="set.controllers.estimator",
                     help="the summary column to group by (default: the estimator)")
     args = ap.parse_args(argv)
-    try:
-        rows = json.loads((args.out_dir / "summary.json").read_text())["rows"]
-    except (OSError, ValueError, KeyError) as exc:
-        print(f"error: {args.out_dir}/summary.json: {exc}", file=sys.stderr)
-        return 2
+    rows = []
+    for out_dir in args.out_dirs:
+        try:
+            rows += json.loads((out_dir / "summary.json").read_text())["rows"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"error: {out_dir}/summary.json: {type(exc).__name__}: {exc}", file=sys.stderr)
+            return 2
     table = verdict(rows, args.by)
     print(f"| {args.by} | runs | " + " | ".join(f"{name} (bar {100 * bar:.0f} %)" for name, bar in BARS) + " |")
     print("|---|---|" + "---|" * len(BARS))
