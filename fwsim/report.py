@@ -89,7 +89,8 @@ class Report:
                          f"(95 % Wilson interval {lo:.3f} to {hi:.3f})"),
                 ("miss distance CEP50 / CEP90", f"{self.cep50_m:.2f} m / {self.cep90_m:.2f} m"),
                 ("hits within 3 m and 3 deg of both impact angles",
-                 f"{100 * self.within_3m_3deg:.0f} % of runs ({round(self.within_3m_3deg * self.runs)} of {self.runs})")]
+                 f"{100 * self.within_3m_3deg:.0f} % of runs "
+                 f"({round(self.within_3m_3deg * self.runs)} of {self.runs})")]
         for name, s in self.angle_errors.items():
             rows.append((f"impact {name} error", f"mean {s['mean']:+.2f} deg, std {s['std']:.2f} deg, "
                                                  f"|error| p95 {s['p95_abs']:.2f} deg"))

@@ -140,3 +140,24 @@ def test_version():
     proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "--version"], capture_output=True, text=True,
                           timeout=60)
     assert proc.returncode == 0 and proc.stdout.startswith("fwsim ")
+
+
+def test_lz4_chunks_without_lz4_say_what_is_missing(tmp_path, monkeypatch):
+    """fwsim writes zstd; a log from elsewhere with lz4 chunks needs the lz4 package: one line saying so, not
+    'corrupted'."""
+    pytest.importorskip("lz4")  # to write one
+    from mcap.writer import CompressionType, Writer
+
+    from fwsim.log.reader import LogError, read_log
+    path = tmp_path / "lz4.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.LZ4)
+        w.start()
+        channel = w.register_channel("/uav/state", "json", w.register_schema("x", "jsonschema", b"{}"))
+        w.add_message(channel, 1, b"{}", 1)
+        w.finish()
+    monkeypatch.setitem(sys.modules, "lz4", None)
+    monkeypatch.setitem(sys.modules, "lz4.frame", None)
+    with pytest.raises(LogError, match="lz4-compressed, which needs the lz4 package"):
+        read_log(path)
+    assert main(["metrics", str(path)]) == 2

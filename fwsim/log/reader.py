@@ -259,8 +259,10 @@ def _decompress(chunk: Chunk) -> bytes:
             chunk.data, max_output_size=chunk.uncompressed_size
         )
     if chunk.compression == "lz4":
-        import lz4.frame  # only if someone wrote lz4 chunks
-
+        try:
+            import lz4.frame  # only if someone wrote lz4 chunks (fwsim writes zstd)
+        except ImportError:
+            raise LogError("its chunks are lz4-compressed, which needs the lz4 package (pip install lz4)") from None
         return lz4.frame.decompress(chunk.data)
     if chunk.compression == "":
         return chunk.data
@@ -341,6 +343,8 @@ def read_log(path: str | os.PathLike) -> RunLog:
                     _add_record(log, opcode, body)
         except _Truncated as e:
             log.truncation_error = f"cut off {e}"
+        except LogError as e:  # readable, but not here
+            raise LogError(f"{log.path}: {e}") from None
         except Exception as e:  # noqa: BLE001 - a record that does not parse: the file is damaged there
             log.truncation_error = f"corrupted at byte {f.tell()}: {type(e).__name__}: {e}"
             log.corrupted = True
