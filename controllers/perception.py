@@ -95,6 +95,7 @@ class Perception:
         self.skipped_in_a_row = 0
         self.last_detection_t_s = math.nan
         self._size_off: deque[bool] = deque(maxlen=gate.class_check_window)  # the class check's window
+        self._size_off_count = 0  # how many of it are off
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
@@ -179,8 +180,7 @@ class Perception:
                 pred = boxes[int(np.argmax(weights))].copy()
                 sizes = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
                 det = np.array([b[2] - b[0], b[3] - b[1]])
-                off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
-                mismatch = bool(np.all(np.any(off, axis=1)))  # no heading the ship may have explains this box
+                mismatch = self._no_heading_fits(det, sizes)
                 ratio = det / np.maximum(sizes[int(np.argmax(weights))], 1.0)
                 if np.all(ratio > 0.0):
                     self._ratios.append(np.log(ratio))
@@ -191,8 +191,7 @@ class Perception:
                         # the size gate against the class scaled by the boxes' typical size ratio: a box cut
                         # short (occlusion) still stands out from the ship's usual boxes
                         scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
-                        off = np.abs(det[None, :] - scaled) > g.box_size_tolerance * scaled + g.box_size_tolerance_px
-                        if np.all(np.any(off, axis=1)):
+                        if self._no_heading_fits(det, scaled):
                             return u, v, pred, FusionReason.SIZE_MISMATCH
                 elif mismatch:
                     return u, v, pred, FusionReason.SIZE_MISMATCH
@@ -203,6 +202,13 @@ class Perception:
         if off is None:
             return u, v, pred, ""
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""
+
+    def _no_heading_fits(self, det: np.ndarray, sizes: np.ndarray) -> bool:
+        """True when the box's (width, height) ``det`` differs from every heading's predicted ``sizes`` (n, 2)
+        by more than the tolerance in width or height: no heading the ship may have explains it."""
+        g = self.cfg
+        off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
+        return bool(np.all(np.any(off, axis=1)))
 
     def _to_now(self, nav: Measurements, cam: CameraMotion | None, prior: TargetState) -> tuple[float, float]:
         """The detection's box centre brought from its exposure to now (``propagate_feature``): its ray, from
@@ -219,7 +225,8 @@ class Perception:
         if past is None or abs(past[0] - t_exp) > 0.5 * _POSE_MATCH_S:
             return u, v
         _, c_exp, R_exp = past
-        d = R_exp @ np.array([(u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0])
+        x1, x2 = c.normalised(u, v)
+        d = R_exp @ np.array([float(x1), float(x2), 1.0])
         known = prior.known and np.all(np.isfinite(prior.pos_enu_m)) and np.all(np.isfinite(prior.vel_enu_m_s))
         plane = float(prior.pos_enu_m[2]) if known else 0.0
         if d[2] >= -1e-6:  # the ray does not come down to the plane
@@ -235,16 +242,19 @@ class Perception:
     def remember_pose(self, cam: CameraMotion | None) -> None:
         """Keep the camera pose of this tick for the detections exposed now that arrive later."""
         if cam is not None and self.cfg.propagate_feature:
-            self._poses.append((float(cam.t_s), np.array(cam.pos_enu_m, dtype=float),
-                                np.array(cam.R_enu_from_cam, dtype=float)))
+            self._poses.append((float(cam.t_s), np.asarray(cam.pos_enu_m, dtype=float),
+                                np.asarray(cam.R_enu_from_cam, dtype=float)))
 
     def _class_check(self, t_s: float, mismatch: bool) -> bool:
         """Record one size check; True while the boxes disagree with the ship class (see the module text)."""
         g, window = self.cfg, self._size_off
+        if len(window) == window.maxlen:
+            self._size_off_count -= window[0]  # the oldest leaves the window
         window.append(mismatch)
+        self._size_off_count += mismatch
         if len(window) < window.maxlen:
             return self.class_mismatch
-        share = sum(window) / len(window)
+        share = self._size_off_count / len(window)
         if not self.class_mismatch and share >= g.class_mismatch_enter:
             self.class_mismatch = True
             self._event(f"perception: {100 * share:.0f} % of the last {len(window)} boxes are off the ship class's "

@@ -40,9 +40,9 @@ def main() -> int:
 
         return cli_main()
     except KeyboardInterrupt as exc:  # during start-up (the commands handle their own once they work)
-        print(f"interrupted ({signal.Signals(exit_code(exc) - 128).name}) before anything was written",
-              file=sys.stderr)
-        return exit_code(exc)
+        code = exit_code(exc)
+        print(f"interrupted ({signal.Signals(code - 128).name}) before anything was written", file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":
