@@ -233,6 +233,13 @@ class Autopilot:
 
     # ------------------------------------------------------------------ step
     def step(self, cmd: AutopilotCommand, st: AirframeState) -> tuple[ActuatorCommand, AutopilotStatus]:
+        """One tick: the actuator commands and the loops' status (:meth:`actuate`, then :meth:`status`)."""
+        act = self.actuate(cmd, st)
+        return act, self.status()
+
+    def actuate(self, cmd: AutopilotCommand, st: AirframeState) -> ActuatorCommand:
+        """One tick of the loops: the actuator commands. The loops' status of this tick is built only when
+        asked for (:meth:`status`): the loop logs it at the log rate, a quarter of the ticks or fewer."""
         pv = self._gain
         dt = self.dt_s
         V = max(st.airspeed_m_s, 5.0)
@@ -266,12 +273,16 @@ class Autopilot:
         throttle = self.airspeed_from_throttle.step(
             cmd.airspeed_m_s - st.airspeed_m_s, dt, ff=self._throttle_trim + pv("airspeed_climb_ff") * sin_gamma)
 
-        act = ActuatorCommand(st.t_s, aileron, elevator, rudder, throttle)
-        status = AutopilotStatus(
+        self._last = (cmd, st, p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach)
+        return ActuatorCommand(st.t_s, aileron, elevator, rudder, throttle)
+
+    def status(self) -> AutopilotStatus:
+        """The loops' set-points and state at the last :meth:`actuate`."""
+        cmd, st, p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._last
+        return AutopilotStatus(
             t_s=st.t_s, mode=cmd.mode, airspeed_sp_m_s=cmd.airspeed_m_s, airspeed_m_s=st.airspeed_m_s,
             body_rates_sp_frd_rad_s=np.array([p_sp, q_sp, r_sp]), body_rates_frd_rad_s=st.body_rates_frd_rad_s,
             bank_sp_rad=bank_sp,
             accel_sp_enu_m_s2=_NAN3 if a_sp is None else a_sp,
             accel_enu_m_s2=_NAN3 if a_ach is None else a_ach,
         )
-        return act, status

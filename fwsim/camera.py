@@ -161,8 +161,10 @@ class Pose:
         """Rays into the local frame; ``origins`` may be one point (3,) shared by all rays (returned as
         float32 rows, as the ray caster takes them)."""
         o = (origins - self.t) @ self.R
-        if o.ndim == 1:
-            o = np.broadcast_to(o.astype(np.float32), dirs.shape)
+        if o.ndim == 1:  # one contiguous float32 row per ray (a broadcast view would be copied by the caster)
+            rows = np.empty(dirs.shape, dtype=np.float32)
+            rows[:] = o
+            o = rows
         return o, dirs @ self.R
 
 
@@ -221,7 +223,7 @@ def _summarise(t_s, u, v, d_ship, d_uav, stride, rays) -> FrameGeometry:
     rays cast row by row (the box is then found from the rows and columns that have a visible pixel)."""
     ship = np.isfinite(d_ship)
     vis = ship & ~(d_uav < d_ship)
-    n_ship, n_vis = int(ship.sum()), int(vis.sum())
+    n_ship, n_vis = np.count_nonzero(ship), np.count_nonzero(vis)
     area = float(stride * stride)
     if n_vis and len(u) * len(v) == len(d_ship) and len(u) != len(d_ship):  # a grid: columns u, rows v
         grid = vis.reshape(len(v), len(u))
@@ -248,11 +250,20 @@ class Camera:
         rc = cfg.render
         self.K_render = self.K.scaled(rc.width_px, rc.height_px)
         self._render_rays = self._table(self.K_render).reshape(-1, 3)
+        self._render_uv = np.meshgrid(np.arange(rc.width_px), np.arange(rc.height_px))  # each pixel's column, row
 
     @staticmethod
     def _table(K: Intrinsics) -> np.ndarray:
-        uu, vv = np.meshgrid(np.arange(K.width_px, dtype=float), np.arange(K.height_px, dtype=float))
-        return K.rays(uu.ravel(), vv.ravel()).reshape(K.height_px, K.width_px, 3)
+        """``K.rays`` of every pixel (H, W, 3), built from the columns' and rows' terms: the same numbers
+        (the norm's sum in its order, x^2 + y^2 + 1) at an eighth of the cost."""
+        x = (np.arange(K.width_px, dtype=float) - K.cx) / K.fx
+        y = (np.arange(K.height_px, dtype=float) - K.cy) / K.fy
+        n = np.sqrt((x * x)[None, :] + (y * y)[:, None] + 1.0)
+        out = np.empty((K.height_px, K.width_px, 3))
+        out[..., 0] = x[None, :] / n
+        out[..., 1] = y[:, None] / n
+        out[..., 2] = 1.0 / n
+        return out
 
     # ------------------------------------------------------------------ detection
     def roi(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose) -> tuple[int, int, int, int] | None:
@@ -310,7 +321,7 @@ class Camera:
             ship_rays = np.empty(0, dtype=int)
         else:
             s = rc.width_px / self.cfg.width_px
-            uu, vv = np.meshgrid(np.arange(rc.width_px), np.arange(rc.height_px))
+            uu, vv = self._render_uv
             inside = ((uu >= box[0] * s - 1) & (uu <= box[2] * s + 1) & (vv >= box[1] * s - 1)
                       & (vv <= box[3] * s + 1))
             ship_rays = np.flatnonzero(inside.ravel())

@@ -5,7 +5,7 @@ their own rates, one line per block in signal order (DESIGN.md section 1):
 
     meas  = sensors.sample(truth)         # harness: what the UAV can know
     out   = flight_software.step(meas)    # controllers/: the paper's algorithms
-    act   = autopilot.step(cmd, truth)    # inner loops (PX4 on the airframe)
+    act   = autopilot.actuate(cmd, truth) # inner loops (PX4 on the airframe)
     truth = airframe.step(act)            # JSBSim
     log.write(...)                        # observes, never feeds back
 
@@ -277,7 +277,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                         log.write_event(t_now, text)
                     if new_det is not None:
                         log.write(topics.CAMERA_DETECTION, new_det)
-                act, ap_status = autopilot.step(out.command, truth.uav)
+                act = autopilot.actuate(out.command, truth.uav)
                 gimbal_cmd = out.gimbal
                 if events is not None and events.gimbal_stuck:
                     gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
@@ -293,7 +293,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                     log.write(topics.CAMERA_FRAME, frame)
                 if (tick + 1) % log_every == 0:
                     _log_truth(log, truth, origin, trails)
-                    log.write(topics.AUTOPILOT_STATUS, ap_status)
+                    log.write(topics.AUTOPILOT_STATUS, autopilot.status())
                     log.write(topics.ACTUATORS, act)
                     if disturbed:
                         log.write(topics.WORLD_AIR, world.air())

@@ -177,3 +177,13 @@ def test_scripted_bank_in_jsbsim_hides_then_shows_the_ship(cam):
     assert all(abs(b) < 3.0 for b in banks[:30]) and all(abs(b) < 5.0 for b in banks[-15:])
     assert all(d.in_fov and d.ship_px > 300 and d.visible_px == 0 for d in hidden)
     assert all(d.visible_px > 300 and d.occluded_fraction == 0.0 for d in level_before + level_after)
+
+
+def test_ray_table_is_the_rays_of_every_pixel():
+    """The camera's table of pixel rays (built from column and row terms) is ``Intrinsics.rays`` of each
+    pixel, bit for bit: the ROI's rays come from it, so a detection is the same either way."""
+    from fwsim.camera import Camera, Intrinsics
+    K = Intrinsics.from_fov(160, 90, 60.0)
+    uu, vv = np.meshgrid(np.arange(K.width_px, dtype=float), np.arange(K.height_px, dtype=float))
+    direct = K.rays(uu.ravel(), vv.ravel()).reshape(K.height_px, K.width_px, 3)
+    assert np.array_equal(Camera._table(K), direct)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import json
+import re
 import types
 import typing
 from functools import lru_cache
@@ -134,7 +135,7 @@ def _classify(cls: type, name: str, tp: Any) -> tuple[int, dict]:
 class MessageSpec:
     """What the writer needs to know about one dataclass type (computed once)."""
 
-    __slots__ = ("cls", "names", "kinds", "getter", "schema_name", "schema_json", "_schema")
+    __slots__ = ("cls", "names", "kinds", "getter", "schema_name", "schema_json", "_schema", "_drop")
 
     def __init__(self, cls: type):
         if not dataclasses.is_dataclass(cls):
@@ -176,6 +177,14 @@ class MessageSpec:
         }
         self._schema = schema
         self.schema_json = json.dumps(schema, indent=1).encode()
+        # what orjson writes for a field that as_dict leaves out: any field None (null), a number that is not
+        # finite (null), an array of them ([null,...]); t_s, the first field, has no comma before it
+        nulls = b"|".join(re.escape(n.encode()) for n in self.names[1:])
+        arrays = b"|".join(re.escape(n.encode()) for n, k in zip(self.names[1:], self.kinds[1:]) if k == VECTOR)
+        pattern = b',"(?:' + nulls + b')":null(?=[,}])' if nulls else b""
+        if arrays:
+            pattern += b'|,"(?:' + arrays + b')":\\[null(?:,null)*\\](?=[,}])'
+        self._drop = re.compile(pattern) if pattern else None
 
     def schema_json_for(self, first: Any) -> bytes:
         """The schema with each array's length (``minItems`` = ``maxItems``) taken from ``first``, a message of
@@ -193,6 +202,10 @@ class MessageSpec:
         data = _orjson_dumps(msg, option=_ORJSON_OPTIONS, default=_json_default)
         if b"null" not in data:
             return data
+        if self._drop is not None:  # the fields left out, cut from orjson's text (no string holds an unescaped ")
+            out = self._drop.sub(b"", data)
+            if b'":null' not in out:  # else (t_s null): the dict below
+                return out
         return _orjson_dumps(self.as_dict(msg), option=_ORJSON_OPTIONS, default=_json_default)
 
     def as_dict(self, msg: Any) -> dict:
