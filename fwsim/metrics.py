@@ -9,7 +9,12 @@ paper's figures; the filter estimates a point on the ship at its configured
 height, the truth is the waterline centre. Convergence is defined from the
 filter's own covariance, not from truth: the first time after which the
 estimate's horizontal position standard deviation stays below
-``CONVERGED_STD_M``.
+``CONVERGED_STD_M``. So that std is checked against the truth too:
+``ukf_pos_err_within_2std_fraction`` is the share of estimates whose horizontal
+error is within twice that std. For an honest (consistent) filter it is about
+86 % or more (1 - exp(-2) for a round two-dimensional Gaussian error; more when
+one axis's std is the larger); well below, the filter is overconfident, and its
+"convergence" comes too early.
 
 Terminal phase: ``miss_distance_m`` is the closest approach of the UAV's
 centre of gravity to the ship's aim point (target.aim_point_ship_m: midships,
@@ -41,6 +46,15 @@ PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres
 def _rms(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
+
+
+def share_within(err: np.ndarray, std: np.ndarray, k: float = 2.0) -> float:
+    """Share of the samples whose error magnitude ``err`` is within ``k`` times the estimator's own ``std``
+    (NaN where either is not finite: left out; NaN if none is left). For a round two-dimensional Gaussian
+    error and its true std, ``1 - exp(-k^2 / 2)``: 86.5 % at k = 2."""
+    err, std = np.asarray(err, dtype=float), np.asarray(std, dtype=float)
+    ok = np.isfinite(err) & np.isfinite(std)
+    return float(np.mean(err[ok] <= k * std[ok])) if ok.any() else math.nan
 
 
 def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
@@ -289,6 +303,7 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         ve = np.linalg.norm(vel - tv, axis=1)
         m["ukf_pos_rmse_m"] = _rms(pe)
         m["ukf_vel_rmse_m_s"] = _rms(ve)
+        m["ukf_pos_err_within_2std_fraction"] = share_within(pe, std, 2.0)
         above = np.flatnonzero(std >= CONVERGED_STD_M)
         k = 0 if above.size == 0 else above[-1] + 1
         if k < len(t):

@@ -76,7 +76,7 @@ class Report:
     cep90_m: float
     angle_errors: dict[str, dict[str, float]]  # fpa / heading -> mean, std, p95_abs
     in_view_after_lock: dict[str, float]  # mean, min, share of runs >= 0.99
-    estimator_error_m: dict[str, float]  # median, p90, share of runs <= 8 m
+    estimator_error_m: dict[str, float]  # median, p90, share of runs <= 8 m; consistency (median share within 2 std)
     outcomes: dict[str, int]  # failures and non-hits by reason
     dispersed: list[str] = field(default_factory=list)
     within_3m_3deg: float = math.nan  # share of runs that hit within 3 m of the aim point and 3 deg of both angles
@@ -100,6 +100,10 @@ class Report:
         e = self.estimator_error_m
         rows.append(("estimator error after convergence (worst per run)",
                      f"median {e['median']:.1f} m, p90 {e['p90']:.1f} m, {100 * e['share_8m']:.0f} % of runs <= 8 m"))
+        if math.isfinite(e.get("within_2std_median", math.nan)):
+            rows.append(("estimator consistency (error within 2 std)",
+                         f"median {100 * e['within_2std_median']:.0f} % of a run's estimates, worst run "
+                         f"{100 * e['within_2std_min']:.0f} % (an honest filter: about 86 % or more)"))
         rows.append(("outcomes", ", ".join(f"{k}: {n}" for k, n in self.outcomes.items()) or "none"))
         return rows
 
@@ -126,6 +130,7 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                          "p95_abs": _pct(np.abs(x), 95)}
     view = _finite(rows, "target_in_fov_fraction_after_lock")
     est = _finite(rows, "ukf_pos_err_max_after_convergence_m")
+    cover = _finite(rows, "ukf_pos_err_within_2std_fraction")
     return Report(
         name=name, runs=n, completed=sum(1 for r in rows if r.get("status") == "completed"), hits=hits,
         hit_probability=hits / n if n else math.nan, hit_interval_95=wilson_interval(hits, n),
@@ -134,7 +139,9 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                             "min": float(view.min()) if view.size else math.nan,
                             "share_99": float(np.mean(view >= 0.99)) if view.size else math.nan},
         estimator_error_m={"median": _pct(est, 50), "p90": _pct(est, 90),
-                           "share_8m": float(np.mean(est <= 8.0)) if est.size else math.nan},
+                           "share_8m": float(np.mean(est <= 8.0)) if est.size else math.nan,
+                           "within_2std_median": _pct(cover, 50),
+                           "within_2std_min": float(cover.min()) if cover.size else math.nan},
         outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []),
         within_3m_3deg=sum(1 for r in rows if _within(r, 3.0, 3.0)) / n if n else math.nan)
 

@@ -28,6 +28,7 @@ def _rows():
                      "impact_fpa_error_deg": [-1.0, 1.0, -2.0, 2.0][i], "impact_heading_error_deg": 0.5,
                      "target_in_fov_fraction_after_lock": [1.0, 1.0, 0.98, 1.0][i],
                      "ukf_pos_err_max_after_convergence_m": [3.0, 5.0, 9.0, 7.0][i],
+                     "ukf_pos_err_within_2std_fraction": [0.9, 0.5, 0.2, 0.7][i],
                      "set.target.speed_m_s": float(i), "log": f"/tmp/logs/r{i}.mcap"})
     rows.append({"id": "r4", "status": "completed", "reason": "duration reached", "hit": 0.0,
                  "miss_distance_m": 30.0, "target_in_fov_fraction_after_lock": 0.5,
@@ -43,6 +44,9 @@ def test_summary_statistics_by_hand():
     assert rep.hit_probability == pytest.approx(4 / 6)
     assert rep.hit_interval_95 == pytest.approx(wilson_interval(4, 6))
     assert rep.cep50_m == pytest.approx(2.0)  # median of 0.5, 1, 2, 4, 30
+    e = rep.estimator_error_m
+    assert e["within_2std_median"] == pytest.approx(0.6) and e["within_2std_min"] == pytest.approx(0.2)
+    assert dict(rep.headline())["estimator consistency (error within 2 std)"].startswith("median 60 %")
     assert rep.cep90_m == pytest.approx(4.0 + 0.6 * 26.0)  # numpy's linear percentile
     fpa = rep.angle_errors["flight-path"]
     assert fpa["mean"] == pytest.approx(0.0) and fpa["std"] == pytest.approx(math.sqrt(10 / 3))
@@ -75,7 +79,24 @@ def test_the_envelope_verdict_splits_by_estimator():
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
     rows = [dict(r, **{"set.controllers.estimator": "ct_ukf"}) for r in _rows()] + _rows()[:4]
-    table = {name: (n, shares) for name, n, shares in tool.verdict(rows, "set.controllers.estimator")}
+    table = {name: (n, shares, cover) for name, n, shares, cover in tool.verdict(rows, "set.controllers.estimator")}
     assert table["ct_ukf"][0] == 6 and table["(the scenario's)"][0] == 4
+    assert table["(the scenario's)"][2] == pytest.approx(0.6)  # median of 0.9, 0.5, 0.2, 0.7
     assert table["ct_ukf"][1][0] == pytest.approx(4 / 6) and table["(the scenario's)"][1][0] == 1.0
     assert table["(the scenario's)"][1][1] == pytest.approx(3 / 4)  # r3 misses by 4 m
+
+
+def test_estimator_consistency_share_against_a_known_gaussian():
+    """ukf_pos_err_within_2std_fraction's statistic: an honest std covers a round 2-D Gaussian error 86.5 %
+    of the time at twice the std (1 - exp(-2)); a std three times too small covers far less."""
+    import numpy as np
+
+    from fwsim.metrics import share_within
+    rng = np.random.default_rng(5)
+    err = np.hypot(*rng.normal(0.0, 4.0, size=(2, 20000)))
+    std = np.full(err.size, 4.0)
+    assert share_within(err, std) == pytest.approx(1.0 - math.exp(-2.0), abs=0.01)
+    assert share_within(err, std / 3.0) == pytest.approx(1.0 - math.exp(-2.0 / 9.0), abs=0.01)
+    std[:10000] = np.nan  # samples without a std are left out
+    assert share_within(err, std) == pytest.approx(1.0 - math.exp(-2.0), abs=0.015)
+    assert math.isnan(share_within(err[:3], np.full(3, np.nan)))
