@@ -178,7 +178,7 @@ class Perception:
                 boxes = None
             else:
                 pred = boxes[int(np.argmax(weights))].copy()
-                sizes = np.stack([boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]], axis=1)
+                sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 mismatch = self._no_heading_fits(det, sizes)
                 ratio = det / np.maximum(sizes[int(np.argmax(weights))], 1.0)

@@ -338,6 +338,19 @@ class ShapeHeading:
         return min(d, math.pi - d)
 
 
+def _weighted_mean_rows(a: np.ndarray, weights) -> np.ndarray:
+    """``np.average(a, axis=0, weights=weights)`` for rows ``a`` (n, k), with its very reductions (the same
+    numbers, bit for bit) but not its argument checks, which cost most of its time on a few rows.
+    ``weights=None``: the plain mean (np.average's own)."""
+    if weights is None:
+        return np.average(a, axis=0)
+    w = np.asarray(weights, dtype=float).reshape(-1, 1)
+    scl = w.sum(axis=(0,))
+    if not scl.all():
+        raise ZeroDivisionError("Weights sum to zero, can't be normalized")
+    return np.multiply(a, w).sum(axis=(0,)) / scl
+
+
 def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam,
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
                          headings_when_unknown: int = 8, boxes_px: np.ndarray | None = None,
@@ -375,7 +388,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
             return None
         offsets = np.stack([0.5 * (b[:, 0] + b[:, 2]) - uv_tracked[0], 0.5 * (b[:, 1] + b[:, 3]) - uv_tracked[1]],
                            axis=1)
-        return np.average(offsets, axis=0, weights=weights)
+        return _weighted_mean_rows(offsets, weights)
     offsets = []
     for i, course in enumerate(courses):
         box = boxes_px[i] if boxes_px is not None else \
@@ -383,7 +396,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if box is None or not np.all(np.isfinite(box)):
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
-    return np.average(np.array(offsets), axis=0, weights=weights)
+    return _weighted_mean_rows(np.array(offsets), weights)
 
 
 @dataclass(frozen=True, slots=True)
@@ -451,10 +464,11 @@ class ShipModel:
             sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
             w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
-            if not np.sum(w) > 0.0:
+            if not w.sum() > 0.0:  # (the array methods: np.sum's and np.max's numbers, without their wrappers)
                 return np.array([course]), np.ones(1), course
-            keep = w >= sh.min_weight * np.max(w)
-            return self.shape.courses_enu_rad[keep], w[keep] / np.sum(w[keep]), course
+            keep = w >= sh.min_weight * w.max()
+            wk = w[keep]
+            return self.shape.courses_enu_rad[keep], wk / wk.sum(), course
         shaped = self.shape.headings()
         if shaped is not None:
             return shaped[0], shaped[1], None
