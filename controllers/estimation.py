@@ -120,7 +120,7 @@ class Estimation:
         h = float(self.filter.tracked_height_m)
         if self.filter.initialised:
             est = self.filter.estimate()
-            vel_std = float(np.max(est.vel_std_m_s[:2]))
+            vel_std = float(np.asarray(est.vel_std_m_s, dtype=float)[:2].max())
             turn, accel = (float(getattr(est, name, 0.0)) for name in ("turn_rate_rad_s", "accel_along_m_s2"))
             return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,
                                turn if math.isfinite(turn) else 0.0, accel if math.isfinite(accel) else 0.0), est

@@ -695,7 +695,7 @@ class UkfTargetEstimator:
         return self.estimate() if self._initialised else None
 
     def estimate(self) -> TargetEstimate:
-        x, P = self._core.x, self._core.P
+        x, P = self._core._x, self._core._P  # read only (what is returned is copied)
         sd = np.sqrt(np.maximum(np.diag(P), 0.0))
         innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
         if not self._initialised:
