@@ -52,6 +52,10 @@ def test_summary_statistics_by_hand():
     assert fpa["mean"] == pytest.approx(0.0) and fpa["std"] == pytest.approx(math.sqrt(10 / 3))
     assert rep.in_view_after_lock["share_99"] == pytest.approx(3 / 5) and rep.in_view_after_lock["min"] == 0.5
     assert rep.estimator_error_m["share_8m"] == pytest.approx(3 / 4)
+    # a run whose estimate never converged counts against the share, it does not drop out of it
+    never = dict(_rows()[0], id="r6", ukf_pos_rmse_m=12.0)
+    del never["ukf_pos_err_max_after_convergence_m"]
+    assert summarise(_rows() + [never]).estimator_error_m["share_8m"] == pytest.approx(3 / 5)
     assert rep.within_3m_3deg == pytest.approx(3 / 6)  # r0, r1, r2 (r3 misses by 4 m; r4, r5 no hit)
     assert rep.outcomes == {"hit": 4, "no hit: duration reached": 1, "failed: AirframeError: trim failed": 1}
     assert [r["id"] for r in worst_runs(_rows(), 3)] == ["r5", "r4", "r3"]

@@ -7,7 +7,8 @@
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock; >= 90 %
-keep the estimator's horizontal error within 8 m after it has converged (its own std under 5 m). A last
+keep the estimator's horizontal error within 8 m after it has converged (its own std under 5 m; a run
+whose estimate never converges counts against this bar). A last
 column says whether that std is honest: the median run's share of estimates whose error is within twice
 it (about 86 % or more for a consistent filter). The statistics are fwsim report's (fwsim.report.summarise).
 Exit code 0 when every group meets every bar.
