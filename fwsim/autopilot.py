@@ -166,6 +166,7 @@ class Autopilot:
         self.rudder_from_sideslip = _PI(v("sideslip_kp"), v("sideslip_ki"), -1.0, 1.0)
         self._normal_accel_integ = 0.0
         self._p_sp = 0.0
+        self._last = None  # (command, state, set-points) of the last actuate, for status()
         gains = {name: v(name) for name in type(params).model_fields}  # looked up once, not per tick
         self._gain = gains.__getitem__
 
@@ -278,6 +279,8 @@ class Autopilot:
 
     def status(self) -> AutopilotStatus:
         """The loops' set-points and state at the last :meth:`actuate`."""
+        if self._last is None:
+            raise RuntimeError("Autopilot.status() asked before the first actuate()")
         cmd, st, p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._last
         return AutopilotStatus(
             t_s=st.t_s, mode=cmd.mode, airspeed_sp_m_s=cmd.airspeed_m_s, airspeed_m_s=st.airspeed_m_s,

@@ -179,3 +179,19 @@ def test_stall_protection_holds_alpha_below_the_stall(protected):
         assert alpha.max() < limit + 2.5 and alpha[tr.window(10, 25)].mean() > limit - 2.0  # held, not avoided
     else:
         assert alpha.max() > 11.0  # past CLmax: the case the protection is for
+
+
+def test_status_is_the_last_actuate_s_and_step_gives_both():
+    """The loop asks for the autopilot's status only at the log rate: status() describes the last actuate(),
+    and step() is actuate() then status()."""
+    f = Flight()
+    ap = Autopilot(load_autopilot_params("fwuav"), f.airframe.dt_s, f.airframe.trim.throttle_norm)
+    with pytest.raises(RuntimeError):
+        ap.status()
+    cmd = RateCommand(0.0, 22.0, 0.1, 0.02)
+    act = ap.actuate(cmd, f.state)
+    st = ap.status()
+    assert st.t_s == f.state.t_s and st.airspeed_sp_m_s == 22.0 and st.mode == cmd.mode
+    twin = Autopilot(load_autopilot_params("fwuav"), f.airframe.dt_s, f.airframe.trim.throttle_norm)
+    act2, st2 = twin.step(cmd, f.state)
+    assert act2 == act and np.array_equal(st2.body_rates_sp_frd_rad_s, st.body_rates_sp_frd_rad_s)
