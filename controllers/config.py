@@ -226,6 +226,14 @@ class UkfConfig(StrictModel):
     target_plane_height_m: float = Field(
         0.0, ge=-100, le=200,
         description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
+    box_centre_bias_frac: float = Field(
+        0.04, ge=0, le=1,
+        description="1-sigma systematic error of the (corrected) box centre, as a fraction of the box's width "
+                    "(u) and height (v): what the ship class cannot tell of the real ship (its size, its "
+                    "layout). Not fused (it would average away as if it were noise): it is carried into the "
+                    "estimate's reported position std through the latest view's geometry (a consider "
+                    "covariance), so the std says how far off a ship unlike the class can be; 0: the class is "
+                    "exact")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "

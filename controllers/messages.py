@@ -53,7 +53,7 @@ class TargetEstimate:
     t_s: float
     pos_enu_m: np.ndarray  # (3,) r_q
     vel_enu_m_s: np.ndarray  # (3,) V_q
-    pos_std_m: np.ndarray  # (3,) sqrt of the diagonal of the r_q covariance
+    pos_std_m: np.ndarray  # (3,) sqrt of the diagonal of the r_q covariance as reported (the UKFs: plus the box bias)
     vel_std_m_s: np.ndarray  # (3,)
     x1: float  # normalised image features (NaN if the estimator has none)
     x2: float

@@ -7,9 +7,10 @@ Target estimation (``/fsw/estimate`` against ``/target/state``, truth
 interpolated to the estimate's times): errors are horizontal (x, y), as in the
 paper's figures; the filter estimates a point on the ship at its configured
 height, the truth is the waterline centre. Convergence is defined from the
-filter's own covariance, not from truth: the first time after which the
-estimate's horizontal position standard deviation stays below
-``CONVERGED_STD_M``. So that std is checked against the truth too:
+estimator's own reported uncertainty, not from truth: the first time after
+which the estimate's horizontal position standard deviation (as logged:
+for the UKFs the filter's covariance plus the box centre's systematic
+error, ``controllers.ukf``) stays below ``CONVERGED_STD_M``. So that std is checked against the truth too:
 ``ukf_pos_err_within_2std_fraction`` is the share of estimates whose horizontal
 error is within twice that std. For an honest (consistent) filter it is about
 86 % or more (1 - exp(-2) for a round two-dimensional Gaussian error; more when

@@ -377,3 +377,56 @@ def test_the_compiled_update_equals_the_numpy_one():
     assert nis == pytest.approx(ref.last_nis, rel=1e-10)
     np.testing.assert_allclose(x_new, ref.x, rtol=1e-10, atol=1e-9)
     np.testing.assert_allclose(P_new, ref.P, rtol=1e-8, atol=1e-10)
+
+
+def test_ground_from_pixel_jacobian_against_finite_differences():
+    """d(point on the plane)/d(u, v): the analytic form against central differences of the ray's meeting point
+    with the plane, for oblique and steep views."""
+    from controllers.ukf import ground_from_pixel_jacobian
+    for euler, pan, tilt, px in (((0.1, -0.05, 0.4), -0.3, -0.6, (700.0, 300.0)),
+                                 ((-0.5, 0.1, 2.0), 1.2, -1.2, (100.0, 650.0)),
+                                 ((0.0, 0.0, 0.0), 0.0, -0.25, (640.0, 360.0))):
+        cam_pos, R = F.camera_pose_world(np.array([-400.0, 10.0, 480.0]), np.array(euler), MOUNT, pan, tilt)
+
+        def ground(u, v):
+            x1, x2 = (float(a) for a in CAM.normalised(u, v))
+            Z = depth_on_plane(x1, x2, R, cam_pos[2], 3.75)
+            return cam_pos + Z * (R @ np.array([x1, x2, 1.0]))
+
+        u, v = px
+        h = 1e-3
+        fd = np.stack([(ground(u + h, v) - ground(u - h, v)) / (2 * h),
+                       (ground(u, v + h) - ground(u, v - h)) / (2 * h)], axis=1)
+        x1, x2 = (float(a) for a in CAM.normalised(u, v))
+        J = ground_from_pixel_jacobian(x1, x2, R, cam_pos[2], 3.75, CAM.fx, CAM.fy)
+        np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-9)
+        assert abs(J[2]).max() < 1e-9  # the point stays on the plane
+    # a ray that does not come down to the plane
+    assert np.all(np.isnan(ground_from_pixel_jacobian(0.0, -2.0, np.eye(3), 100.0, 0.0, CAM.fx, CAM.fy)))
+
+
+def test_the_box_centre_bias_widens_the_reported_std_only():
+    """box_centre_bias_frac: the estimate's position std carries the systematic box-centre error through the
+    latest view's geometry (J diag(s^2) J^T, s a fraction of the box's size); the state and the filter's own
+    covariance are those of box_centre_bias_frac = 0."""
+    from controllers.ukf import ground_from_pixel_jacobian
+    truth = OrbitTruth()
+    runs = {}
+    for k in (0.0, 0.1):
+        rng = np.random.default_rng(11)
+        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=k))
+        for i in range(90):
+            meas = truth.sample(i / 30.0, rng)
+            meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
+                                                                  meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
+            motion = CameraMotion.from_measurements(meas, MOUNT)
+            est = ukf.step(meas, motion)
+        runs[k] = (est, ukf.x, ukf.cov, meas, motion)
+    (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[0.1]
+    assert np.array_equal(x0, x1) and np.array_equal(P0, P1)
+    np.testing.assert_allclose(e0.pos_std_m, np.sqrt(np.diag(P0)[2:5]))
+    n1, n2 = (float(a) for a in CAM.normalised(meas.det_u_px, meas.det_v_px))
+    J = ground_from_pixel_jacobian(n1, n2, motion.R_enu_from_cam, motion.height_m, 0.0, CAM.fx, CAM.fy)[:2]
+    C = (J * np.array([8.0, 3.0]) ** 2) @ J.T  # 10 % of the 80 x 30 px box
+    np.testing.assert_allclose(e1.pos_std_m[:2] ** 2, np.diag(P0)[2:4] + np.diag(C), rtol=1e-9)
+    assert e1.pos_std_m[2] == e0.pos_std_m[2] and np.all(e1.pos_std_m[:2] > e0.pos_std_m[:2])
