@@ -97,9 +97,9 @@ class DetectionGateConfig(StrictModel):
                                          "(the estimate the checks rely on may be what is wrong)")
     propagate_feature: bool = Field(
         True, description="bring a late detection's box centre to now before it is used (the detector's latency: "
-                          "the box is of the exposure, the camera pose of now): first order, with the camera's "
-                          "present angular velocity (gyros + encoder rates) and, once there is an estimate, its "
-                          "depth and relative velocity (the feature kinematics of controllers/camera_model.py)")
+                          "the box is of the exposure, the camera pose of now): its ray from the camera pose at "
+                          "the exposure (kept from the last ticks) meets the target's plane, the point moves on "
+                          "by the estimated velocity over the latency and is projected into the camera of now")
     max_propagation_s: float = Field(
         0.5, gt=0, le=10, description="a detection older than this is used as it is (propagate_feature)")
     class_check_window: int = Field(

@@ -300,8 +300,8 @@ class CtUkfTargetEstimator(UkfTargetEstimator):
         if not self._initialised:
             return ManoeuvreEstimate(e.t_s, e.pos_enu_m, e.vel_enu_m_s, e.pos_std_m, e.vel_std_m_s, e.x1, e.x2,
                                      e.innovation_px)
-        x = self._core.x
-        var = np.diag(self._core.P).copy()
+        x = self._core._x  # read only
+        var = np.diag(self._core._P).copy()
         if self.held:  # a held state's std is the one it had when it was held
             var[list(self._hold_idx)] = np.diag(self._held_cov)
         return ManoeuvreEstimate(e.t_s, e.pos_enu_m, e.vel_enu_m_s, e.pos_std_m, e.vel_std_m_s, e.x1, e.x2,

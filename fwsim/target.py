@@ -55,7 +55,7 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
@@ -146,7 +146,7 @@ Motion = Annotated[ConstantVelocity | ConstantTurn | Zigzag | SpeedChanges, Fiel
 
 #: the ship layouts (:func:`ship_mesh_parts`)
 ShipType = Literal["bridge_aft", "bridge_forward", "patrol_boat", "ferry"]
-SHIP_TYPES: tuple[str, ...] = ("bridge_aft", "bridge_forward", "patrol_boat", "ferry")
+SHIP_TYPES: tuple[str, ...] = get_args(ShipType)
 
 
 class TargetConfig(StrictModel):
