@@ -349,6 +349,15 @@ class NmpcConfig(StrictModel):
         (30.0, 30.0, 1.0), description="W3 diagonal: per rad^2 of change of [phi, theta, psi] per step")
     w4_continuity: float = Field(0.1, ge=0.0, le=1e6,
                                  description="w4, per (rad/s)^2 of [u_p, u_q] change from the previous input")
+    w5_approach: float = Field(1.0, ge=0.0, le=1e6,
+                               description="w5 (ours), per stage: the approach-rate term (r_dot / V_ref + "
+                                           "tanh((r - R) / L))^2; 0 = the paper's cost")
+    approach_length_m: float = Field(150.0, gt=0.0, le=5000.0,
+                                     description="L of the approach-rate term: the radius error over which the "
+                                                 "wanted closing rate falls from V_ref to 0")
+    air_relative: bool = Field(True, description="predict the target in the air mass (its velocity minus the "
+                                                  "navigation's wind estimate), where the model's airspeed "
+                                                  "kinematics hold; false: over the ground (the paper's)")
     w_airspeed: float = Field(1e-4, ge=0.0, le=1e6,
                               description="input regularisation, per (m/s)^2 of V_U - airspeed_ref, per stage")
     w_rates: float = Field(1e-4, ge=0.0, le=1e6,

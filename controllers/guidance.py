@@ -91,7 +91,10 @@ class NmpcLoiter:
         from controllers.nmpc import NmpcStatus
 
         t, nmpc = nav.t_s, self.nmpc
-        res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, target.vel_enu_m_s)
+        v_q = target.vel_enu_m_s
+        if self.cfg.air_relative and np.all(np.isfinite(nav.wind_enu_m_s)):
+            v_q = v_q - nav.wind_enu_m_s  # the model flies in the air: the target drifts by minus the wind
+        res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, v_q)
         self._cmd = nmpc.command(res)
         self._next_t = t + self.cfg.step_s
         self._record.log(topics.FSW_NMPC, NmpcStatus.from_result(res, nmpc.fallback_count))

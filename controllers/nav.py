@@ -109,4 +109,5 @@ class Navigation:
             if meas.nav_t_s != self._fix_t:  # a new fix: blend it in
                 self._pos = self._pos + self.cfg.fix_gain * (fix - self._pos)
         self._t, self._fix_t, self._v_out = t, meas.nav_t_s, np.array(v_now, dtype=float)
-        return dataclasses.replace(meas, pos_enu_m=self._pos.copy(), vel_enu_m_s=np.array(v_now, dtype=float))
+        return dataclasses.replace(meas, pos_enu_m=self._pos.copy(), vel_enu_m_s=np.array(v_now, dtype=float),
+                                   wind_enu_m_s=self.wind_enu_m_s.copy())

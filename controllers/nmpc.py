@@ -25,9 +25,20 @@ Cost, summed over the horizon (paper eq. NMPC with f1..f4)::
     f3 = (Q_{k+1} - Q_k)^T W3 (Q_{k+1} - Q_k)    k = 0..N-1, Q = [phi, theta, psi]
     f4 = w4 |[u_p, u_q]_0 - [u_p, u_q]*_{-1}|^2   the previously applied input
     reg = w_V (V_U,k - V_ref)^2 + w_rate (u_p,k^2 + u_q,k^2)     (ours, small)
+    f5 = w5 (r_dot_k / V_ref + tanh((r_k - R) / L))^2            k = 0..N-1 (ours, ``w5_approach``)
 
 ``r_q,k = r_q + V_q k T_s``: the target's constant-velocity future from the UKF estimate at
-solve time. ``Q_{k+1} - Q_k`` is written as ``Q(F(X_k, U_k)) - Q(X_k)`` (F the discrete step),
+solve time (with ``air_relative``, V_q minus the navigation's wind estimate: the model's
+kinematics are the air's, so the target is predicted in the air mass, where the relative
+geometry is exact).
+
+f5 (not in the paper; ``w5_approach`` = 0 leaves it out) shapes the approach to the ring:
+``r_k = |r_p,k - r_q,k|_xy`` and ``r_dot_k = (r_{k+1} - r_k) / T_s`` through the step, so the
+wanted closing rate falls from V_ref far out to zero on the ring over the length L
+(``approach_length_m``). It is zero on a steady orbit in either direction. Without it the cost
+sees only the radius error of the next 5 s: arriving head-on at the ring it banks in at the
+limit, overshoots, and in the JSBSim loop (wind, the airframe's lags) can keep looping at full
+bank round a point near the ring, the ship passing behind the UAV each loop (the pan's seam). ``Q_{k+1} - Q_k`` is written as ``Q(F(X_k, U_k)) - Q(X_k)`` (F the discrete step),
 equal on the dynamics and stage-separable, which the structured solvers need. The input
 regularisation makes V_U (which only enters through the kinematics) and the rates strictly
 convex in the QP (its weights are 1e-4 of the tracking terms' scale). The CBF slack
@@ -191,10 +202,14 @@ class _Problem:
         sws = math.sqrt(cfg.cbf.slack_weight_quadratic)
         R, H = cfg.radius_m, cfg.altitude_m
 
-        def track(x, k):
+        def dist(x, k):
             tq = rq + vq * (k * dt)
-            d = ca.sqrt((x[0] - tq[0]) ** 2 + (x[1] - tq[1]) ** 2 + _DIST_EPS2)
-            return [sw1 * (d - R), sw2 * (x[2] - H)]
+            return ca.sqrt((x[0] - tq[0]) ** 2 + (x[1] - tq[1]) ** 2 + _DIST_EPS2)
+
+        def track(x, k):
+            return [sw1 * (dist(x, k) - R), sw2 * (x[2] - H)]
+
+        sw5, L5 = math.sqrt(cfg.w5_approach), cfg.approach_length_m
 
         res, cons, lin, steps = [], [], 0, []
         step_fun = ca.Function("F", [X[0], U[0]], [_discrete_step(X[0], U[0][0:3], dt, cfg.integrator)])
@@ -205,6 +220,9 @@ class _Problem:
             if k >= 1:
                 res += track(x, k)
             res.append(sw3 * (xn[3:6] - x[3:6]))  # f3 through the step: stage-separable
+            if sw5 > 0.0:  # the approach rate, also through the step
+                dk = dist(x, k)
+                res.append(sw5 * ((dist(xn, k + 1) - dk) / (dt * cfg.airspeed_ref_m_s) + ca.tanh((dk - R) / L5)))
             res.append(ca.vertcat(swV * (u[0] - cfg.airspeed_ref_m_s), swr * u[1], swr * u[2]))
             if k == 0:
                 res.append(sw4 * f4_on * (u[1:3] - uprev))

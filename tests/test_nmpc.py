@@ -1,4 +1,5 @@
 """The Phase 2 NMPC (controllers/nmpc.py): conventions, optimality against IPOPT, closed loop, fallbacks."""
+import dataclasses
 import math
 
 import numpy as np
@@ -85,8 +86,10 @@ def test_fast_solver_reaches_the_ipopt_optimum(x0):
     """The real-time-iteration solver, iterated at one time, converges to IPOPT's optimum (tol 1e-8).
 
     Tolerances: first input within 2e-3 (m/s and rad/s: a fraction of a degree per second, far below what
-    the autopilot resolves) and the cost within 1e-4 relative (both solve the same NLP; the residue is the
-    QP tolerance and the slowly converging tail of the horizon, which is not applied).
+    the autopilot resolves) and the cost no more than 1e-4 relative above IPOPT's (both solve the same NLP;
+    the residue is the QP tolerance and the slowly converging tail of the horizon, which is not applied;
+    with the approach term IPOPT stops on that flat tail first: at the first start its plan costs 2e-4 more
+    than the real-time iteration's, with the same first input to 1e-6).
     """
     fast = nmpc(max_solve_ms=1e5, cold_start_iterations=300, cold_start_tol=1e-9)
     ref = nmpc(solver="ipopt", max_solve_ms=1e5)
@@ -96,7 +99,7 @@ def test_fast_solver_reaches_the_ipopt_optimum(x0):
     assert np.abs(rf.u0 - rr.u0).max() < 2e-3
     jf = fast.plan_cost(x0, [0, 0, 0], SHIP_V, rf.inputs)
     jr = fast.plan_cost(x0, [0, 0, 0], SHIP_V, rr.inputs)
-    assert abs(jf - jr) <= 1e-4 * jr
+    assert jf - jr <= 1e-4 * jr
 
 
 def _direction(run):
@@ -105,9 +108,10 @@ def _direction(run):
     return np.sign(np.mean((rel[:, 0] * heading[:, 1] - rel[:, 1] * heading[:, 0])[-600:]))
 
 
-@pytest.mark.parametrize("psi0, direction", [(0.5 * math.pi, +1.0), (math.pi, -1.0)])
+@pytest.mark.parametrize("psi0, direction", [(0.5 * math.pi, +1.0), (-0.5 * math.pi, -1.0)])
 def test_closed_loop_settles_on_the_loiter_circle(psi0, direction):
-    """Model as plant, 10 Hz, ship at 5 m/s, start 800 m away at 600 m: on R, H within 60 s, both directions.
+    """Model as plant, 10 Hz, ship at 5 m/s, start 800 m away at 600 m heading north or south (across the
+    line to the ship): on R, H within 60 s, going round the way the start points (both directions).
 
     Bounds: radius RMS < 15 m and altitude RMS < 10 m over the last 60 s of 150 s (measured: about 0.2 m
     and < 1e-6 m; the residue is the Euler model against the continuous plant).
@@ -182,3 +186,74 @@ def test_failed_solve_returns_the_shifted_previous_plan(solver):
     r = n.solve(0.4, good.predicted[4], [0, 2, 0], SHIP_V)
     assert r.fallback and "exception" in r.status and np.allclose(r.u0, good.inputs[4])
     assert n.fallback_count == 2
+
+
+def _turns(run):
+    """(turns of the UAV's heading, turns of its bearing round the target), signed, counter-clockwise > 0."""
+    rel = run.states[:, :2] - run.target[:, :2]
+    psi = np.unwrap(run.states[:, 5])
+    brg = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
+    return (psi[-1] - psi[0]) / (2 * math.pi), (brg[-1] - brg[0]) / (2 * math.pi)
+
+
+@pytest.mark.parametrize("radius_m, start_m, ship_v", [(600.0, 1200.0, 0.0), (300.0, 900.0, 3.0)])
+def test_approach_term_enters_the_ring_head_on_without_overshoot(radius_m, start_m, ship_v):
+    """Straight at the ship from outside the ring: the approach-rate term (f5, default) turns onto the ring
+    before reaching it, never more than 5 m inside, and settles on it (measured: 0 m inside, 0.2-0.4 m RMS);
+    the heading turns with the bearing round the ship (no loops) and the bank never sits at its limit."""
+    n = nmpc(radius_m=radius_m)
+    assert n.cfg.w5_approach > 0.0
+    run = kinematic_closed_loop(n, [-start_m, 0.0, 500.0, 0.0, 0.0, 0.0], [0, 0, 0], [0.0, ship_v, 0.0], 120.0,
+                                substeps=2)
+    assert run.radius_err_m.min() > -5.0
+    assert run.rms_after(90.0)[0] < 2.0
+    yaw_turns, orbit_turns = _turns(run)
+    after = run.t_s > 60.0  # on the ring: heading and bearing turn together (a loop would add a whole turn)
+    assert abs(yaw_turns - orbit_turns) < 0.5
+    assert np.mean(np.abs(run.states[after, 3]) > math.radians(34.0)) == 0.0
+    assert run.fallbacks == 0
+
+
+def test_approach_term_is_nil_on_the_ring():
+    """On a steady orbit the approach-rate residual vanishes (but for the Euler step's outward drift of
+    (V T_s)^2 / 2R a step): the plan costs the same with and without it, to 1e-3 of the paper's cost."""
+    R, V = 500.0, 22.0
+    phi = math.atan(V * V / (9.80665 * R))  # bank of a circle of radius R at V, counter-clockwise
+    x0 = np.array([R, 0.0, 500.0, -phi, 0.0, 0.5 * math.pi])
+    inputs = np.tile([V, 0.0, 0.0], (50, 1))
+    on = nmpc(radius_m=R, altitude_m=500.0)
+    off = nmpc(radius_m=R, altitude_m=500.0, w5_approach=0.0)
+    c_on = on.plan_cost(x0, np.zeros(3), np.zeros(3), inputs)
+    c_off = off.plan_cost(x0, np.zeros(3), np.zeros(3), inputs)
+    assert c_off > 0.0 and abs(c_on - c_off) < 1e-3 * max(c_off, 1.0)
+    # a plan heading straight at the ship from the ring costs more with it than without
+    x1 = np.array([R + 100.0, 0.0, 500.0, 0.0, 0.0, math.pi])
+    straight = np.tile([V, 0.0, 0.0], (50, 1))
+    assert on.plan_cost(x1, np.zeros(3), np.zeros(3), straight) > off.plan_cost(x1, np.zeros(3), np.zeros(3), straight) + 1.0
+
+
+def test_air_relative_loiter_predicts_the_target_in_the_air_mass():
+    """With ``air_relative`` (default) the loiter hands the NMPC the target's velocity minus the navigation's
+    wind estimate; without it, or with no estimate, the velocity over the ground."""
+    from controllers.guidance import NmpcLoiter
+    from controllers.messages import TargetState
+
+    class _Recorder:
+        def log(self, *args):
+            pass
+
+        def event(self, *args):
+            pass
+
+    wind = np.array([3.0, -4.0, 0.0])
+    target = TargetState(0.0, "estimator", np.zeros(3), SHIP_V.copy(), 0.5, 3.75)
+    for air_relative, w, want in [(True, wind, SHIP_V - wind), (False, wind, SHIP_V),
+                                  (True, np.full(3, np.nan), SHIP_V)]:
+        loiter = NmpcLoiter(NmpcConfig.model_validate({"air_relative": air_relative}), _Recorder())
+        seen = []
+        real_solve = loiter.nmpc.solve
+        loiter.nmpc.solve = lambda t, x0, q, v, _real=real_solve, _seen=seen: (_seen.append(np.array(v)),
+                                                                               _real(t, x0, q, v))[1]
+        m = meas(0.0, [-600.0, 0.0, 500.0], [0.0, 0.0, 0.5 * math.pi])
+        loiter.step(dataclasses.replace(m, wind_enu_m_s=w), target)
+        np.testing.assert_allclose(seen[0], want)
