@@ -229,7 +229,8 @@ def test_approach_term_is_nil_on_the_ring():
     # a plan heading straight at the ship from the ring costs more with it than without
     x1 = np.array([R + 100.0, 0.0, 500.0, 0.0, 0.0, math.pi])
     straight = np.tile([V, 0.0, 0.0], (50, 1))
-    assert on.plan_cost(x1, np.zeros(3), np.zeros(3), straight) > off.plan_cost(x1, np.zeros(3), np.zeros(3), straight) + 1.0
+    z = np.zeros(3)
+    assert on.plan_cost(x1, z, z, straight) > off.plan_cost(x1, z, z, straight) + 1.0
 
 
 def test_air_relative_loiter_predicts_the_target_in_the_air_mass():
