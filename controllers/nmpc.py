@@ -41,8 +41,9 @@ limit, overshoots, and in the JSBSim loop (wind, the airframe's lags) can keep l
 bank round a point near the ring, the ship passing behind the UAV each loop (the pan's seam).
 
 ``Q_{k+1} - Q_k`` is written as ``Q(F(X_k, U_k)) - Q(X_k)`` (F the discrete step), equal on the
-dynamics and stage-separable, which the structured solvers need. The input regularisation makes V_U (which only enters through the kinematics) and the rates strictly
-convex in the QP (its weights are 1e-4 of the tracking terms' scale). The CBF slack
+dynamics and stage-separable, which the structured solvers need. The input regularisation makes V_U
+(which only enters through the kinematics) and the rates strictly convex in the QP (its weights are
+1e-4 of the tracking terms' scale). The CBF slack
 (controllers/cbf.py) is a 4th control per stage, penalised linearly and quadratically. Weights
 are per stage; the defaults put the cost at O(100) for the paper's start (300 m, 100 m off).
 
