@@ -285,6 +285,14 @@ class CtUkfConfig(StrictModel):
         0.5, gt=0, le=20,
         description="the along-track direction is V / max(|V|, this): below this speed an acceleration moves "
                     "the velocity less (a ship at rest has no track to speed up along), m/s")
+    manoeuvre_fade_speed_m_s: float = Field(
+        2.0, ge=0, le=20,
+        description="below this estimated speed the turn rate and the acceleration also revert to zero within "
+                    "about manoeuvre_fade_time_s (fully at rest, not at all from this speed up): near zero speed "
+                    "they hardly move the velocity, so the detections cannot correct them, and a deceleration "
+                    "holds the estimate at zero speed; 0: no fade, m/s")
+    manoeuvre_fade_time_s: float = Field(
+        2.0, gt=0, le=3600, description="the fade's time constant at rest, s")
     hold_tgo_s: float = Field(
         15.0, ge=0, le=600,
         description="while the camera closes on the estimate fast enough to reach it within this time (range / "

@@ -19,8 +19,9 @@ Process model (continuous, RK4 over each predict, as the UKF's)::
     x1_dot, x2_dot     = the UKF's feature kinematics (controllers.ukf._sx_feature_rates, shared)
     r_q_dot            = V_q
     V_q_dot            = omega e_z x V_q + a V_q / max(|V_q,h|, min_speed_m_s)     (horizontal)
-    omega_dot          = -omega / turn_rate_time_s      + white noise
-    a_dot              = -a / accel_time_s              + white noise
+    omega_dot          = -omega (1 / turn_rate_time_s + f / fade_time_s)   + white noise
+    a_dot              = -a (1 / accel_time_s + f / fade_time_s)           + white noise
+    f                  = max(0, 1 - |V_q,h| / fade_speed_m_s)   (0 when fade_speed_m_s = 0)
 
 i.e. a coordinated turn with a varying speed ("CTRA"), turn rate and
 acceleration each a first-order Gauss-Markov process with std
@@ -48,6 +49,16 @@ acceleration set to zero (a speed change ends at the ordered speed within
 seconds; extrapolated through a dive it overshoots), and their uncertainty
 set aside, so the filter is the UKF on a turning track. Released (with the
 covariance it had) when the camera recedes.
+
+The fade (``manoeuvre_fade_speed_m_s``, ``manoeuvre_fade_time_s``). A turn rate
+turns the velocity and an acceleration moves it along itself, so near zero speed
+neither moves anything: the detections cannot correct them, and a deceleration
+makes zero speed an attractor (``V_q_dot = (a / min_speed) V_q``). A slow ship's
+estimate that fell to zero speed with a < 0 stayed there for tens of seconds
+(envelope, seed 1602: 0.0-0.3 m/s against 1.8 m/s true, the turn rate wandering to
+5 deg/s), and the loiter chased it. Below the fade speed both states also revert
+to zero within about the fade time, fully at rest: a slow ship is the UKF's
+constant-velocity ship.
 
 Process noise over dt: the UKF's (feature random walk, white-noise
 acceleration on r_q / V_q with ``target_accel_noise_m_s2`` horizontally) plus
@@ -108,21 +119,28 @@ class _CtProcess(_CompiledProcess):
     _cache: dict[tuple, "_CtProcess"] = {}
 
     @staticmethod
-    def _target_rates(Xs, m: int, turn_rate_time_s: float, accel_time_s: float, min_speed_m_s: float):
+    def _target_rates(Xs, m: int, turn_rate_time_s: float, accel_time_s: float, min_speed_m_s: float,
+                      fade_speed_m_s: float = 0.0, fade_time_s: float = math.inf):
         """``[r_q_dot, V_q_dot, omega_dot, a_dot]`` (SX (m, 8)): the module's process model."""
         import casadi as ca
         vx, vy = Xs[:, 5], Xs[:, 6]
         w, a = Xs[:, I_TURN], Xs[:, I_ACCEL]
-        a_per_speed = a / ca.fmax(ca.sqrt(vx * vx + vy * vy), min_speed_m_s)
+        speed = ca.sqrt(vx * vx + vy * vy)
+        a_per_speed = a / ca.fmax(speed, min_speed_m_s)
+        kw, ka = 1.0 / turn_rate_time_s, 1.0 / accel_time_s
+        if fade_speed_m_s > 0.0 and math.isfinite(fade_time_s):
+            fade = ca.fmax(0.0, 1.0 - speed / fade_speed_m_s) / fade_time_s
+            kw, ka = kw + fade, ka + fade
         return ca.horzcat(Xs[:, 5:8], -w * vy + a_per_speed * vx, w * vx + a_per_speed * vy, ca.SX.zeros(m, 1),
-                          -w / turn_rate_time_s, -a / accel_time_s)
+                          -w * kw, -a * ka)
 
 
 def fx_ct_batch(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float, turn_rate_time_s: float,
-                accel_time_s: float, min_speed_m_s: float) -> np.ndarray:
+                accel_time_s: float, min_speed_m_s: float, fade_speed_m_s: float = 0.0,
+                fade_time_s: float = math.inf) -> np.ndarray:
     """The sigma points ``S`` (m, 10) over dt (:class:`_CtProcess`)."""
-    return _CtProcess.for_points(len(S), turn_rate_time_s, accel_time_s, min_speed_m_s)(
-        S, dt, r_c0, R_ec0, V_c, omega, max_step)
+    return _CtProcess.for_points(len(S), turn_rate_time_s, accel_time_s, min_speed_m_s, fade_speed_m_s,
+                                 fade_time_s)(S, dt, r_c0, R_ec0, V_c, omega, max_step)
 
 
 def ct_process_noise(dt: float, ukf_cfg: UkfConfig, cfg: CtUkfConfig, held: tuple[int, ...] = ()) -> np.ndarray:
@@ -146,7 +164,8 @@ HELD_STD_FRACTION = 1e-3
 
 def predict_ctra(pos_enu_m, vel_enu_m_s, turn_rate_rad_s: float, accel_along_m_s2: float, dt_s: float,
                  turn_rate_time_s: float = math.inf, accel_time_s: float = math.inf,
-                 min_speed_m_s: float = 0.5, steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 min_speed_m_s: float = 0.5, fade_speed_m_s: float = 0.0, fade_time_s: float = math.inf,
+                 steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ship's position and velocity ``dt_s`` ahead under the filter's process model without noise (the
     turn rate and acceleration decaying with their correlation times; ``inf``: held), horizontally; the
     vertical part moves at its velocity. RK4 in steps of at most 0.1 s (``steps`` to fix their number).
@@ -157,10 +176,14 @@ def predict_ctra(pos_enu_m, vel_enu_m_s, turn_rate_rad_s: float, accel_along_m_s
     y = np.array([p[0], p[1], v[0], v[1], float(turn_rate_rad_s), float(accel_along_m_s2)])
     kw = 0.0 if math.isinf(turn_rate_time_s) else 1.0 / turn_rate_time_s
     ka = 0.0 if math.isinf(accel_time_s) else 1.0 / accel_time_s
+    fading = fade_speed_m_s > 0.0 and math.isfinite(fade_time_s)
 
     def f(s: np.ndarray) -> np.ndarray:
-        k = s[5] / max(math.hypot(s[2], s[3]), min_speed_m_s)
-        return np.array([s[2], s[3], -s[4] * s[3] + k * s[2], s[4] * s[2] + k * s[3], -kw * s[4], -ka * s[5]])
+        speed = math.hypot(s[2], s[3])
+        k = s[5] / max(speed, min_speed_m_s)
+        fade = max(0.0, 1.0 - speed / fade_speed_m_s) / fade_time_s if fading else 0.0
+        return np.array([s[2], s[3], -s[4] * s[3] + k * s[2], s[4] * s[2] + k * s[3], -(kw + fade) * s[4],
+                         -(ka + fade) * s[5]])
 
     n = steps if steps is not None else max(1, int(math.ceil(abs(dt_s) / 0.1)))
     h = dt_s / n
@@ -190,7 +213,8 @@ class CtUkfTargetEstimator(UkfTargetEstimator):
         self.ct_cfg = config if config is not None else CtUkfConfig()
         super().__init__(camera, ukf_config)
         c = self.ct_cfg
-        self._params = (c.turn_rate_time_s, c.accel_time_s, c.min_speed_m_s)
+        self._params = (c.turn_rate_time_s, c.accel_time_s, c.min_speed_m_s, c.manoeuvre_fade_speed_m_s,
+                        c.manoeuvre_fade_time_s)
         self._q_key: tuple[float, bool] | None = None
         self._q = np.zeros((10, 10))
         self._held_cov: np.ndarray | None = None  # the held states' covariance when they were held, else None

@@ -103,6 +103,36 @@ def test_the_process_model_flies_the_analytic_circle():
     np.testing.assert_allclose(p, [0.6 * 24.0, 0.8 * 24.0, 0.0], atol=1e-9)
 
 
+def test_the_manoeuvre_fades_near_rest_and_not_above_the_fade_speed():
+    """A slow ship's estimate with a deceleration: without the fade, zero speed attracts it (V_dot = a V /
+    min_speed) and the deceleration, which then moves nothing, stays for its 20 s correlation time; with the
+    fade (default 2 m/s, 2 s) the turn rate and the deceleration revert within seconds and the speed stays
+    up. Above the fade speed the two models are the same."""
+    from controllers.config import CtUkfConfig
+    c = CtUkfConfig()
+    assert c.manoeuvre_fade_speed_m_s > 0.0
+    _, R = F.camera_pose_world(np.array([-500.0, 0.0, 500.0]), np.zeros(3), MOUNT, 0.0, -0.7)
+
+    def fly(v0, fade_speed, seconds=10):
+        x = np.array([0.01, -0.02, 0.0, 0.0, 0.0, v0, 0.0, 0.0, math.radians(3.0), -0.3])
+        S = np.tile(x, (21, 1))
+        for _ in range(seconds):
+            S = fx_ct_batch(S, 1.0, np.array([-500.0, 0.0, 500.0]), R, np.zeros(3), np.zeros(3), 0.05,
+                            c.turn_rate_time_s, c.accel_time_s, c.min_speed_m_s, fade_speed,
+                            c.manoeuvre_fade_time_s)
+        return S[0]
+
+    no_fade, fade = fly(1.0, 0.0), fly(1.0, c.manoeuvre_fade_speed_m_s)
+    assert np.hypot(*no_fade[5:7]) < 0.05 and no_fade[9] < -0.15  # stuck at rest, still decelerating
+    assert np.hypot(*fade[5:7]) > 0.3 and abs(fade[9]) < 0.02 and abs(fade[8]) < math.radians(0.2)
+    fast_no_fade, fast_fade = fly(8.0, 0.0, 3), fly(8.0, c.manoeuvre_fade_speed_m_s, 3)  # 8 -> 7.1 m/s
+    np.testing.assert_allclose(fast_fade, fast_no_fade, rtol=0, atol=1e-12)
+    # predict_ctra is the same model
+    p, v = predict_ctra(np.zeros(3), [1.0, 0.0, 0.0], math.radians(3.0), -0.3, 10.0, c.turn_rate_time_s,
+                        c.accel_time_s, c.min_speed_m_s, c.manoeuvre_fade_speed_m_s, c.manoeuvre_fade_time_s)
+    np.testing.assert_allclose(v[:2], fade[5:7], atol=1e-3)
+
+
 # ---------------------------------------------------------------- tracking: turn and straight line
 
 
