@@ -252,9 +252,12 @@ def test_air_relative_loiter_predicts_the_target_in_the_air_mass():
                                   (True, np.full(3, np.nan), SHIP_V)]:
         loiter = NmpcLoiter(NmpcConfig.model_validate({"air_relative": air_relative}), _Recorder())
         seen = []
-        real_solve = loiter.nmpc.solve
-        loiter.nmpc.solve = lambda t, x0, q, v, _real=real_solve, _seen=seen: (_seen.append(np.array(v)),
-                                                                               _real(t, x0, q, v))[1]
+
+        def solve(t, x0, q, v, _real=loiter.nmpc.solve, _seen=seen):  # the real solve, its target velocity kept
+            _seen.append(np.array(v))
+            return _real(t, x0, q, v)
+
+        loiter.nmpc.solve = solve
         m = meas(0.0, [-600.0, 0.0, 500.0], [0.0, 0.0, 0.5 * math.pi])
         loiter.step(dataclasses.replace(m, wind_enu_m_s=w), target)
         np.testing.assert_allclose(seen[0], want)
