@@ -88,8 +88,8 @@ def _turn(seconds=6.0, fsw_hz=30.0, gnss_hz=10.0, speed=50.0, rate=0.5, bank=mat
 
 
 def test_the_velocity_turns_with_the_gyros_between_fixes():
-    """In a 25 m/s^2 turn a held 10 Hz fix velocity read at 30 Hz is up to 1.7 m/s old; turned with the gyros it is within
-    a few cm/s of the truth (the first order step), and the propagated position follows the turn."""
+    """In a 25 m/s^2 turn a held 10 Hz fix velocity read at 30 Hz is up to 1.7 m/s old; turned with the gyros it is
+    within a few cm/s of the truth (the first order step), and the propagated position follows the turn."""
     for turn, limit in ((True, 0.1), (False, None)):
         nav = Navigation(NavigationConfig(turn_velocity=turn))
         v_err, p_err = [], []

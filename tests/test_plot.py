@@ -68,7 +68,8 @@ def test_a_log_missing_topics_skips_those_figures(tmp_path):
 
 def test_cli_plot_lists_files_and_skips(mission_log, tmp_path, capsys):
     from fwsim.cli import main
-    code = main(["plot", str(mission_log), "--out", str(tmp_path), "--only", "trajectory_xy,inner_loops,accel_tracking"])
+    code = main(["plot", str(mission_log), "--out", str(tmp_path), "--only",
+                 "trajectory_xy,inner_loops,accel_tracking"])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert out.split() == [str(tmp_path / "trajectory_xy.png"), str(tmp_path / "inner_loops.png")]

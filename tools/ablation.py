@@ -27,7 +27,8 @@ from fwsim.cases import SWEEP_SPEC, sweep_rows
 
 #: name -> (what it is, the overrides that switch it off)
 DEPARTURES: dict[str, tuple[str, dict]] = {
-    "box_centre_correction": ("box-centre correction for the ship's shape", {"controllers.target_model.enabled": False}),
+    "box_centre_correction": ("box-centre correction for the ship's shape",
+                              {"controllers.target_model.enabled": False}),
     "heading_from_shapes": ("a still ship's heading from its box shapes",
                             {"controllers.target_model.heading_from_shape.enabled": False}),
     "detection_gates": ("detection gates (overflowing box, size mismatch, inside 120 m)",

@@ -64,7 +64,8 @@ def _rms(a) -> float:
 
 def run_one(label, overrides, scen, duration_s, gap_every, no_budget=True):
     base = dict(scen["cfg"])
-    cfg = NmpcConfig.model_validate({**base, **overrides, **({"max_solve_ms": 1e5} if no_budget else {"budget": "wall_clock"})})
+    budget = {"max_solve_ms": 1e5} if no_budget else {"budget": "wall_clock"}
+    cfg = NmpcConfig.model_validate({**base, **overrides, **budget})
     nmpc = Nmpc(cfg)
     ref = Nmpc(NmpcConfig.model_validate({**base, "solver": "ipopt", "max_solve_ms": 1e5})) if gap_every else None
     gaps = []
