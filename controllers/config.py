@@ -180,6 +180,27 @@ class ShapeHeadingConfig(StrictModel):
                     "course: a ship moves along its axis, so such a velocity is the estimate's error")
 
 
+class SizeFitConfig(StrictModel):
+    """The ship's own length, beam and height, learnt from its boxes (``controllers.target_model.ShipSize``)."""
+
+    enabled: bool = Field(False, description="fit the class outline's length, beam and height to the detected "
+                                            "boxes' sizes and correct the box centres with the fitted outline")
+    prior_std: float = Field(0.2, gt=0, le=2,
+                             description="1-sigma of each log scale a priori (0.2: about +-20 % of the class)")
+    box_std: float = Field(0.1, gt=0, le=2,
+                           description="1-sigma of a box's log width and log height about the fitted outline's "
+                                       "(detector noise, the layout's difference from the class)")
+    gate: float = Field(9.2, gt=0, le=1000,
+                        description="skip a box whose size residual has a normalised square (chi-square, 2 dof) "
+                                    "above this (9.2: 1 %; boxes cut by the UAV's airframe, merged clutter)")
+    min_updates: int = Field(30, ge=0, le=100000,
+                             description="boxes taken before the fitted outline replaces the class's")
+    max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
+    min_range_m: float = Field(150.0, ge=0, le=100000,
+                               description="boxes from closer than this are not taken (perspective, the UAV's "
+                                           "airframe in view)")
+
+
 class ShipModelConfig(StrictModel):
     """The flight software's outline of the ship class (ship frame: x bow, y port, z up, origin at the
     waterline centre)."""
@@ -199,6 +220,7 @@ class ShipModelConfig(StrictModel):
     headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
                                                                    "when the course is unknown")
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
+    size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
 
 
 class UkfConfig(StrictModel):
@@ -234,6 +256,13 @@ class UkfConfig(StrictModel):
                     "estimate's reported position std through the latest view's geometry (a consider "
                     "covariance), so the std says how far off a ship unlike the class can be; 0: the class is "
                     "exact")
+    consider_heading_spread: bool = Field(
+        True,
+        description="add to the reported position std the shape correction's spread over the headings the ship "
+                    "may have (while its heading is unknown the correction is their weighted mean, off by up to "
+                    "a few px from the real heading's: an error common to every detection until the heading is "
+                    "known, which the filter's covariance, fusing detections as independent, does not hold); "
+                    "like box_centre_bias_frac it is not fused")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "

@@ -109,6 +109,9 @@ class DetectionFix:
     lock_now: bool  # this tick made the lock
     lock_t_s: float  # when it was locked (NaN before)
     last_detection_t_s: float  # arrival of the newest detection with a box (NaN before any)
+    # (2 x 2, px^2) the spread of the shape correction over the ship's possible headings (zeros: one heading,
+    # or no correction): how far (u_px, v_px) may be off while the heading is not known
+    offset_spread_px2: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
 
 
 @dataclass(frozen=True, slots=True)

@@ -56,6 +56,8 @@ from fwsim.messages import Measurements
 __all__ = ["Perception", "Lock"]
 
 _NAN4 = np.full(4, np.nan)
+_ZERO22 = np.zeros((2, 2))
+_ZERO22.setflags(write=False)
 _NAN4.setflags(write=False)
 #: the flight software's tick is at most this long (the poses kept for late detections are matched to half of it)
 _POSE_MATCH_S = 1.0 / 20.0
@@ -115,12 +117,13 @@ class Perception:
             self.last_detection_t_s = nav.t_s
         u, v = nav.det_u_px, nav.det_v_px
         pred, use, reason, overridden = _NAN4, False, "", ""
+        spread = _ZERO22
         if new and not self.lock.locked:
             reason = FusionReason.ACQUIRING
         elif new and cam is None:
             reason = FusionReason.NO_CAMERA_POSE
         elif new and prior.from_estimator and not lock_now:
-            u, v, pred, reason = self._judge(nav, cam, prior)
+            u, v, pred, reason, spread = self._judge(nav, cam, prior)
             use, overridden = self._decide(reason)
             reason = "" if use else reason
         elif new:
@@ -128,11 +131,12 @@ class Perception:
             u, v = self._to_now(nav, cam, prior)
         return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
                             u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
-                            self.last_detection_t_s)
+                            self.last_detection_t_s, spread)
 
     # ------------------------------------------------------------------ the checks
     def _judge(self, nav: Measurements, cam: CameraMotion, prior: TargetState):
-        """(u, v corrected, predicted box, gate reason or "") of a detection while the estimator runs."""
+        """(u, v corrected, predicted box, gate reason or "", the correction's spread over the headings (2 x 2,
+        px^2)) of a detection while the estimator runs."""
         gate = self._gate(nav, cam, prior)
         h = prior.tracked_height_m
         pos, vel = prior.pos_enu_m, prior.vel_enu_m_s
@@ -142,8 +146,8 @@ class Perception:
                                            prior.vel_std_m_s)
             if status is not None and self._record is not None:
                 self._record.log(topics.FSW_SHIP_HEADING, status)
-        u, v, pred, why = self._corrected(nav, cam, prior, ref)
-        return u, v, pred, gate or why
+        u, v, pred, why, spread = self._corrected(nav, cam, prior, ref, fit_size=not gate)
+        return u, v, pred, gate or why, spread
 
     def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
         """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
@@ -158,22 +162,30 @@ class Perception:
             return FusionReason.OVERFLOWING_BOX
         return ""
 
-    def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray):
+    def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray,
+                   fit_size: bool = False):
         """The box centre with the ship's box-centre offset removed (unchanged when the model is off or does
-        not apply), the predicted box of the most likely heading, and ``size_mismatch`` when no plausible
-        heading explains the box's size (else "")."""
+        not apply), the predicted box of the most likely heading, ``size_mismatch`` when no plausible
+        heading explains the box's size (else ""), and the offset's spread over the headings the ship may have
+        (2 x 2, px^2; zeros when there is one, or no correction). ``fit_size``: the box may teach the ship's
+        size (:class:`~controllers.target_model.ShipSize`, at the most likely heading, when one is known); the
+        correction and the size gate use the fitted outline once it is in use."""
         tm = self.ship.cfg
         u, v = self._to_now(nav, cam, prior)
         if not tm.enabled:
-            return u, v, _NAN4, ""
+            return u, v, _NAN4, "", _ZERO22
         g = self.cfg
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         single = len(courses) == 1
         boxes, pred = None, _NAN4
-        if (course is not None or self.ship.shape.ready) and np.all(np.isfinite(b)):
+        known = course is not None or self.ship.shape.ready
+        if fit_size and known:
+            self.ship.size.update(cam.pos_enu_m, cam.R_enu_from_cam, ref, float(courses[int(np.argmax(weights))]), b)
+        scale = self.ship.size.scale
+        if known and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
-                                       courses)
+                                       courses, scale)
             if not np.all(np.isfinite(boxes)):
                 boxes = None
             else:
@@ -186,22 +198,24 @@ class Perception:
                     self._ratios.append(np.log(ratio))
                 if self._class_check(nav.t_s, mismatch):  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
-                        return u, v, pred, ""
+                        return u, v, pred, "", _ZERO22
                     if g.class_mismatch_action == "rescale" and self._ratios:
                         # the size gate against the class scaled by the boxes' typical size ratio: a box cut
                         # short (occlusion) still stands out from the ship's usual boxes
                         scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
                         if self._no_heading_fits(det, scaled):
-                            return u, v, pred, FusionReason.SIZE_MISMATCH
+                            return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22
                 elif mismatch:
-                    return u, v, pred, FusionReason.SIZE_MISMATCH
+                    return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
-                                   courses_weights=None if single else (courses, weights))
+                                   courses_weights=None if single else (courses, weights), spread=True,
+                                   scale=scale)
         if off is None:
-            return u, v, pred, ""
-        return float(u) - float(off[0]), float(v) - float(off[1]), pred, ""
+            return u, v, pred, "", _ZERO22
+        off, spread = off
+        return float(u) - float(off[0]), float(v) - float(off[1]), pred, "", spread
 
     def _no_heading_fits(self, det: np.ndarray, sizes: np.ndarray) -> bool:
         """True when the box's (width, height) ``det`` differs from every heading's predicted ``sizes`` (n, 2)

@@ -35,8 +35,12 @@ within twice the std). It is not fused; the estimate's reported position std
 (``TargetEstimate.pos_std_m``, horizontal axes) adds ``J diag(s^2) J^T``, a
 consider covariance: ``s`` is ``box_centre_bias_frac`` of the latest box's
 width and height (px) and ``J`` the pixel-to-plane Jacobian of that view
-(:func:`ground_from_pixel_jacobian`). The state and the filter's covariance
-(``cov``) are unchanged by it.
+(:func:`ground_from_pixel_jacobian`). While the ship's heading is not known the
+shape correction is a weighted mean over the headings it may have, and the
+detection carries the spread of that mean (``DetectionFix.offset_spread_px2``,
+px^2): another error common to consecutive frames, added to ``diag(s^2)``
+(``consider_heading_spread``). The state and the filter's covariance
+(``cov``) are unchanged by either.
 
 Interfaces: :class:`UkfTargetEstimator` implements the flight software's
 estimator Protocol (``controllers.blocks.TargetEstimator``), so a second filter
@@ -703,10 +707,14 @@ class UkfTargetEstimator:
 
     def _box_bias_cov(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:
         """Horizontal covariance (2 x 2, m^2) on the target plane of a systematic box-centre error of
-        ``box_centre_bias_frac`` of the box's width and height, seen from this detection's view (zero without a
-        box or where the ray misses the plane)."""
+        ``box_centre_bias_frac`` of the box's width and height, plus (``consider_heading_spread``) the shape
+        correction's spread over the headings the ship may have (``fix.offset_spread_px2``), seen from this
+        detection's view (zero without a box or where the ray misses the plane)."""
         k, b = self.cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
-        if k <= 0.0 or b.shape != (4,) or not np.all(np.isfinite(b)):
+        spread = np.asarray(fix.offset_spread_px2, dtype=float) if self.cfg.consider_heading_spread else None
+        if spread is not None and not (spread.shape == (2, 2) and np.all(np.isfinite(spread)) and spread.any()):
+            spread = None
+        if (k <= 0.0 and spread is None) or b.shape != (4,) or not np.all(np.isfinite(b)):
             return np.zeros((2, 2))
         cam = self.camera
         x1, x2 = (float(a) for a in cam.normalised(fix.u_px, fix.v_px))
@@ -715,7 +723,9 @@ class UkfTargetEstimator:
         if not np.all(np.isfinite(J)):
             return np.zeros((2, 2))
         s = np.array([k * (b[2] - b[0]), k * (b[3] - b[1])])
-        return (J * (s * s)) @ J.T
+        if spread is None:
+            return (J * (s * s)) @ J.T
+        return J @ (np.diag(s * s) + spread) @ J.T
 
     def status(self, t_s: float) -> EstimatorStatus:
         """The counters since the start, as the log's ``/fsw/estimator_status``."""

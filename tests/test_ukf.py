@@ -338,7 +338,8 @@ def test_a_short_burst_of_biased_detections_barely_moves_the_velocity():
     assert nervous > after + 0.3
 
 
-@pytest.mark.parametrize("dt, omega", [(1 / 30, [0.01, -0.02, 0.03]), (0.12, [0.3, 0.1, -0.2]), (1 / 30, [0.0, 0.0, 0.0])])
+@pytest.mark.parametrize("dt, omega", [(1 / 30, [0.01, -0.02, 0.03]), (0.12, [0.3, 0.1, -0.2]),
+                                       (1 / 30, [0.0, 0.0, 0.0])])
 def test_the_compiled_process_model_equals_the_numpy_one(dt, omega):
     """The filter integrates its sigma points with a CasADi function (controllers.compiled): the same RK4 of the
     same model as the numpy form to rounding, over one substep and several (dt > max_substep_s), rotating or not."""
@@ -428,5 +429,39 @@ def test_the_box_centre_bias_widens_the_reported_std_only():
     n1, n2 = (float(a) for a in CAM.normalised(meas.det_u_px, meas.det_v_px))
     J = ground_from_pixel_jacobian(n1, n2, motion.R_enu_from_cam, motion.height_m, 0.0, CAM.fx, CAM.fy)[:2]
     C = (J * np.array([8.0, 3.0]) ** 2) @ J.T  # 10 % of the 80 x 30 px box
+    np.testing.assert_allclose(e1.pos_std_m[:2] ** 2, np.diag(P0)[2:4] + np.diag(C), rtol=1e-9)
+    assert e1.pos_std_m[2] == e0.pos_std_m[2] and np.all(e1.pos_std_m[:2] > e0.pos_std_m[:2])
+
+
+def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only():
+    """A fix's ``offset_spread_px2`` (the shape correction's spread over the headings the ship may have) goes
+    into the reported position std through the view's geometry, beside box_centre_bias_frac:
+    ``J (diag(s^2) + S) J^T``; the state and the filter's covariance are those without it, and
+    ``consider_heading_spread: false`` reports the std without it."""
+    from controllers.ukf import fix_from_measurements, ground_from_pixel_jacobian
+    truth = OrbitTruth()
+    S = np.array([[9.0, 2.0], [2.0, 16.0]])  # px^2
+    runs = {}
+    for name, spread, use in (("none", np.zeros((2, 2)), True), ("spread", S, True), ("off", S, False)):
+        rng = np.random.default_rng(11)
+        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.1, consider_heading_spread=use))
+        for i in range(60):
+            meas = truth.sample(i / 30.0, rng)
+            meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
+                                                                  meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
+            motion = CameraMotion.from_measurements(meas, MOUNT)
+            fix = dataclasses.replace(fix_from_measurements(meas), offset_spread_px2=spread)
+            if i == 0:
+                ukf.initialise(fix, motion)
+            else:
+                ukf.predict(meas.t_s, motion)
+                ukf.update(fix, motion)
+        runs[name] = (ukf.estimate(), ukf.x, ukf.cov, meas, motion)
+    (e0, x0, P0, _, _), (e1, x1, P1, meas, motion), (e2, x2, P2, _, _) = runs["none"], runs["spread"], runs["off"]
+    assert np.array_equal(x0, x1) and np.array_equal(P0, P1) and np.array_equal(x0, x2) and np.array_equal(P0, P2)
+    np.testing.assert_array_equal(e2.pos_std_m, e0.pos_std_m)
+    n1, n2 = (float(a) for a in CAM.normalised(meas.det_u_px, meas.det_v_px))
+    J = ground_from_pixel_jacobian(n1, n2, motion.R_enu_from_cam, motion.height_m, 0.0, CAM.fx, CAM.fy)[:2]
+    C = J @ (np.diag(np.array([8.0, 3.0]) ** 2) + S) @ J.T
     np.testing.assert_allclose(e1.pos_std_m[:2] ** 2, np.diag(P0)[2:4] + np.diag(C), rtol=1e-9)
     assert e1.pos_std_m[2] == e0.pos_std_m[2] and np.all(e1.pos_std_m[:2] > e0.pos_std_m[:2])
