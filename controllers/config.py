@@ -183,13 +183,19 @@ class ShapeHeadingConfig(StrictModel):
 class SizeFitConfig(StrictModel):
     """The ship's own length, beam and height, learnt from its boxes (``controllers.target_model.ShipSize``)."""
 
-    enabled: bool = Field(False, description="fit the class outline's length, beam and height to the detected "
+    enabled: bool = Field(True, description="fit the class outline's length, beam and height to the detected "
                                             "boxes' sizes and correct the box centres with the fitted outline")
     prior_std: float = Field(0.2, gt=0, le=2,
                              description="1-sigma of each log scale a priori (0.2: about +-20 % of the class)")
     box_std: float = Field(0.1, gt=0, le=2,
                            description="1-sigma of a box's log width and log height about the fitted outline's "
                                        "(detector noise, the layout's difference from the class)")
+    box_px_std: float = Field(3.0, ge=0, le=100,
+                              description="1-sigma of a box's width and height in px on top of box_std (a small, "
+                                          "far box's sizes are a few pixels' worth)")
+    max_gated_in_a_row: int = Field(30, ge=1, le=100000,
+                                    description="this many boxes turned away by the gate in a row restart the fit "
+                                                "from the prior")
     gate: float = Field(9.2, gt=0, le=1000,
                         description="skip a box whose size residual has a normalised square (chi-square, 2 dof) "
                                     "above this (9.2: 1 %; boxes cut by the UAV's airframe, merged clutter)")

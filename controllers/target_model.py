@@ -33,10 +33,14 @@ headings drive the box-size check (a detection no plausible heading explains is
 skipped), and a ship's axis from the shapes vetoes an estimated velocity
 across it (the UKF's error, not a course: ships move along their axis).
 
-What it does not model: the UAV's own wing hiding part of the ship (the box
-shrinks; the correction then over- or under-shoots until the wing clears),
-and a ship of another class than configured. ``enabled: false`` turns it off
-(the paper's plain point model).
+A ship of the class's layout but another size is learnt from its boxes
+(:class:`ShipSize`, ``size_fit``): its length, beam and height scale the
+outline the correction projects once enough boxes have been seen at a known
+heading. What it does not model: the UAV's own wing hiding part of the ship
+(the box shrinks; the correction then over- or under-shoots until the wing
+clears), and a ship of another layout than the class's (the fit then finds
+the sizes that best explain the boxes with the class's layout).
+``enabled: false`` turns it off (the paper's plain point model).
 
 The outline is a priori knowledge of the target class (the paper's ship is a
 known 55 x 25 x 25 m vessel), configured with the flight software; nothing
@@ -446,7 +450,9 @@ class ShipSize:
     ``log(box width, height) - log(predicted width, height at theta)``, the prediction from the outline
     without its mast (a thin mast is often not in a detector's box; with it, a ship exactly of the class
     came out 8 % low), its Jacobian by finite differences, prior N(0, prior_std^2) per axis, a chi-square
-    gate against boxes cut short (the UAV's own airframe in view); a box at the image's edge is not taken at
+    gate against boxes cut short (the UAV's own airframe in view), and a fresh start from the prior when it
+    has turned ``max_gated_in_a_row`` boxes away in a row (then the fit is off, not the boxes); a box's
+    noise grows as it gets small (``box_px_std`` over its size); a box at the image's edge is not taken at
     all. After ``min_updates`` boxes the perception corrects with the fitted outline (:attr:`scale`, the
     whole outline scaled); before, with the class's.
 
@@ -465,6 +471,8 @@ class ShipSize:
         self.P = np.eye(3) * cfg.prior_std ** 2
         self.updates = 0
         self.gated = 0
+        self.gated_in_a_row = 0
+        self.restarts = 0
 
     @property
     def theta(self) -> np.ndarray:
@@ -509,8 +517,9 @@ class ShipSize:
             return False
         logs = np.log(sizes)
         J = (logs[1:] - logs[0]).T / self._STEP  # (2, 3): d log(width, height) / d log scales
-        y = np.log([b[2] - b[0], b[3] - b[1]]) - logs[0]
-        Rn = np.eye(2) * cfg.box_std ** 2
+        det_size = np.array([b[2] - b[0], b[3] - b[1]])
+        y = np.log(det_size) - logs[0]
+        Rn = np.diag(cfg.box_std ** 2 + (cfg.box_px_std / det_size) ** 2)  # small far boxes weigh less
         S = J @ self.P @ J.T + Rn
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         if not det > 0.0:
@@ -518,7 +527,15 @@ class ShipSize:
         Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
         if float(y @ Si @ y) > cfg.gate:
             self.gated += 1
+            self.gated_in_a_row += 1
+            if self.gated_in_a_row >= cfg.max_gated_in_a_row:  # the fit, not the boxes, is off: start again
+                self.x = np.zeros(3)
+                self.P = np.eye(3) * cfg.prior_std ** 2
+                self.updates = 0
+                self.gated_in_a_row = 0
+                self.restarts += 1
             return False
+        self.gated_in_a_row = 0
         K = self.P @ J.T @ Si
         I_KJ = np.eye(3) - K @ J
         self.P = I_KJ @ self.P @ I_KJ.T + K @ Rn @ K.T  # Joseph form
