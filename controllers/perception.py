@@ -56,8 +56,9 @@ from fwsim.messages import Measurements
 __all__ = ["Perception", "Lock"]
 
 _NAN4 = np.full(4, np.nan)
-#: the size fit takes a box only when the headings' weights are this concentrated (mean resultant length;
-#: 0.98: a circular std of about 11 deg; a bow / stern ambiguity is far below)
+#: the size fit takes a box only when the box shapes' heading weights (a known course fused in) are this
+#: concentrated (mean resultant length; 0.98: a circular std of about 11 deg; a bow / stern ambiguity is far
+#: below)
 _SIZE_FIT_MIN_RESULTANT = 0.98
 _ZERO22 = np.zeros((2, 2))
 _ZERO22.setflags(write=False)
@@ -183,7 +184,10 @@ class Perception:
         single = len(courses) == 1
         boxes, pred = None, _NAN4
         known = course is not None or self.ship.shape.ready
-        if fit_size and known and (single or abs(np.dot(weights, np.exp(1j * courses))) >= _SIZE_FIT_MIN_RESULTANT):
+        # the size fit needs a sure heading: the box shapes' (with the course fused in when known), not a course
+        # alone (a still ship's estimated velocity gives a course for seconds after the lock, any way round)
+        if fit_size and self.ship.shape.ready and not single and \
+                abs(np.dot(weights, np.exp(1j * courses))) >= _SIZE_FIT_MIN_RESULTANT:
             self.ship.size.update(cam.pos_enu_m, cam.R_enu_from_cam, ref, float(courses[int(np.argmax(weights))]), b)
         scale = self.ship.size.scale
         if known and np.all(np.isfinite(b)):

@@ -1,5 +1,6 @@
 """The flight software's ship-class outline (controllers.target_model) against the harness's ray-cast camera,
 and the detection gates that keep cut-short boxes out of the UKF."""
+import dataclasses
 import math
 
 import numpy as np
@@ -529,10 +530,10 @@ def test_a_size_fit_gone_wrong_starts_again():
 
 
 def test_the_perception_corrects_with_the_fitted_size():
-    """The perception feeds the size fit the boxes it sees at a known course and, once the fit is in use,
-    corrects with the fitted outline: round a ship 28 % taller and 15 % shorter than the class its corrected
-    box centres land nearer the tracked point's image than with the fit off."""
-    from controllers.config import ShapeHeadingConfig as SHC
+    """The perception feeds the size fit the boxes it sees at a sure heading (the box shapes', the course fused
+    in) and, once the fit is in use, corrects with the fitted outline: round a ship 28 % taller and 15 %
+    shorter than the class its corrected box centres land nearer the tracked point's image than with the fit
+    off."""
     from controllers.ukf import CameraMotion
     heading = 40.0
     ship = Ship(TargetConfig(heading_deg=heading, length_m=47.0, width_m=20.0, height_m=32.0))
@@ -542,22 +543,22 @@ def test_the_perception_corrects_with_the_fitted_size():
     course = math.radians(90.0 - heading)
     h = UkfConfig().target_plane_height_m
     vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
-    percs = {fit: _perception(ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=fit),
-                                                        heading_from_shape=SHC(enabled=False)), fsw_cam))
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)  # (the ship held still here)
+    percs = {fit: _perception(ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=fit)), fsw_cam))
              for fit in (False, True)}
     errs = {False: [], True: []}
-    for az in list(range(0, 360, 5)) * 2:
+    for k, az in enumerate(list(range(0, 360, 5)) * 2):
+        t = 0.5 * k  # the box shapes take two a second
         cp, Rc, frame = _look_from(cam, pose, 600.0, 35.0, az)
         box = frame.bbox_px
-        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+        motion = CameraMotion(t, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        meas = Measurements(t, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
                             det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
                             det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
         p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
         truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
         for fit, perc in percs.items():
-            fix = perc.step(meas, motion, prior)
+            fix = perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
             errs[fit].append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
     fitted = percs[True].ship.size
     assert percs[False].ship.size.scale is None and fitted.scale is not None and fitted.scale[2] > 1.15
