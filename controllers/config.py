@@ -190,6 +190,12 @@ class SizeFitConfig(StrictModel):
     box_std: float = Field(0.1, gt=0, le=2,
                            description="1-sigma of a box's log width and log height about the fitted outline's "
                                        "(detector noise, the layout's difference from the class)")
+    box_scale: float = Field(
+        0.95, gt=0.5, le=1.5,
+        description="a detected box's size over its silhouette's, a priori (the detector's calibration; the "
+                    "heading from box shapes allows -15..+5 %, heading_from_shape.size_bias_range, and this is its "
+                    "middle): without it a ship exactly of the class is read 4-7 % small and its corrected box "
+                    "centre, scaled about the waterline, 1-2 px low")
     box_px_std: float = Field(3.0, ge=0, le=100,
                               description="1-sigma of a box's width and height in px on top of box_std (a small, "
                                           "far box's sizes are a few pixels' worth)")

@@ -513,6 +513,7 @@ class ShipSize:
                                      or pb[3] >= cam.height_px - 1.0):
                 return False  # the predicted box is clipped: its size is not the outline's
             sizes[i] = (pb[2] - pb[0], pb[3] - pb[1])
+        sizes *= cfg.box_scale  # what the detector draws round that silhouette
         if np.any(sizes <= 1.0):
             return False
         logs = np.log(sizes)
