@@ -565,3 +565,50 @@ def test_the_perception_corrects_with_the_fitted_size():
     n = len(errs[True]) // 2  # the second time round, the fit in use
     fit_err, class_err = np.mean(errs[True][n:]), np.mean(errs[False][n:])
     assert fit_err < 0.6 * class_err, (fit_err, class_err)
+
+
+def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
+    """With the size fit off, a ship 40 % bigger than the class makes most boxes disagree with the class's
+    predicted size: after class_check_window boxes the perception says so (an event) and, with the default
+    action, stops skipping boxes for their size."""
+    from controllers.ukf import CameraMotion
+
+    class Recorder:
+        def __init__(self):
+            self.events = []
+
+        def event(self, text):
+            self.events.append(text)
+
+        def log(self, topic, msg):
+            pass
+
+    heading = 40.0
+    ship = Ship(TargetConfig(heading_deg=heading, length_m=77.0, width_m=35.0, height_m=35.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    course = math.radians(90.0 - heading)
+    h = UkfConfig().target_plane_height_m
+    vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    rec = Recorder()
+    gate = DetectionGateConfig()
+    perc = Perception(gate, AcquisitionConfig(lock_detections=1),
+                      ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=False)), fsw_cam), fsw_cam, rec)
+    perc.lock.locked = True
+    reasons = []
+    for k, az in enumerate(list(range(0, 360, 2))):
+        t = 0.5 * k
+        cp, Rc, frame = _look_from(cam, pose, 600.0, 35.0, az)
+        box = frame.bbox_px
+        motion = CameraMotion(t, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        meas = Measurements(t, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        prior = TargetState(t, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
+        fix = perc.step(meas, motion, prior)
+        reasons.append(fix.reason or fix.overridden)
+    n = gate.class_check_window
+    assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.events), rec.events
+    assert reasons[:n].count(FusionReason.SIZE_MISMATCH) > n // 2  # skipped for their size until then
+    assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
