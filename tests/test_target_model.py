@@ -529,32 +529,41 @@ def test_a_size_fit_gone_wrong_starts_again():
     assert abs(fit.scale[2] * 25.0 / 32.0 - 1.0) < 0.1, fit.scale
 
 
+def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading_deg: float = 40.0):
+    """A ship of that size on a 3 m/s course, its ray-cast camera and the flight software's: (camera, ship pose,
+    flight software camera, tracked height, the prior's velocity)."""
+    ship = Ship(TargetConfig(heading_deg=heading_deg, length_m=length_m, width_m=width_m, height_m=height_m))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    course = math.radians(90.0 - heading_deg)
+    return (cam, Pose(*reversed(ship.pose(0.0))), PinholeCamera.from_config(CAM_CFG),
+            UkfConfig().target_plane_height_m, 3.0 * np.array([math.cos(course), math.sin(course), 0.0]))
+
+
+def _ring_detection(cam, pose, t_s: float, az_deg: float, rng_m: float = 600.0, elevation_deg: float = 35.0):
+    """The ship's ray-cast box seen from the ring at ``t_s``: (Measurements, CameraMotion, cam_pos, R_enu_cam)."""
+    from controllers.ukf import CameraMotion
+    cp, Rc, frame = _look_from(cam, pose, rng_m, elevation_deg, az_deg)
+    box = frame.bbox_px
+    motion = CameraMotion(t_s, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+    meas = Measurements(t_s, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                        det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                        det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+    return meas, motion, cp, Rc
+
+
 def test_the_perception_corrects_with_the_fitted_size():
     """The perception feeds the size fit the boxes it sees at a sure heading (the box shapes', the course fused
     in) and, once the fit is in use, corrects with the fitted outline: round a ship 28 % taller and 15 %
     shorter than the class its corrected box centres land nearer the tracked point's image than with the fit
     off."""
-    from controllers.ukf import CameraMotion
-    heading = 40.0
-    ship = Ship(TargetConfig(heading_deg=heading, length_m=47.0, width_m=20.0, height_m=32.0))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    pose = Pose(*reversed(ship.pose(0.0)))
-    fsw_cam = PinholeCamera.from_config(CAM_CFG)
-    course = math.radians(90.0 - heading)
-    h = UkfConfig().target_plane_height_m
-    vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)  # (the ship held still here)
     percs = {fit: _perception(ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=fit)), fsw_cam))
              for fit in (False, True)}
     errs = {False: [], True: []}
     for k, az in enumerate(list(range(0, 360, 5)) * 2):
         t = 0.5 * k  # the box shapes take two a second
-        cp, Rc, frame = _look_from(cam, pose, 600.0, 35.0, az)
-        box = frame.bbox_px
-        motion = CameraMotion(t, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(t, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
-                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        meas, motion, cp, Rc = _ring_detection(cam, pose, t, az)
         p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
         truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
         for fit, perc in percs.items():
@@ -571,8 +580,6 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     """With the size fit off, a ship 40 % bigger than the class makes most boxes disagree with the class's
     predicted size: after class_check_window boxes the perception says so (an event) and, with the default
     action, stops skipping boxes for their size."""
-    from controllers.ukf import CameraMotion
-
     class Recorder:
         def __init__(self):
             self.events = []
@@ -583,14 +590,7 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
         def log(self, topic, msg):
             pass
 
-    heading = 40.0
-    ship = Ship(TargetConfig(heading_deg=heading, length_m=77.0, width_m=35.0, height_m=35.0))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    pose = Pose(*reversed(ship.pose(0.0)))
-    fsw_cam = PinholeCamera.from_config(CAM_CFG)
-    course = math.radians(90.0 - heading)
-    h = UkfConfig().target_plane_height_m
-    vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(77.0, 35.0, 35.0)
     rec = Recorder()
     gate = DetectionGateConfig()
     perc = Perception(gate, AcquisitionConfig(lock_detections=1),
@@ -599,12 +599,7 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     reasons = []
     for k, az in enumerate(list(range(0, 360, 2))):
         t = 0.5 * k
-        cp, Rc, frame = _look_from(cam, pose, 600.0, 35.0, az)
-        box = frame.bbox_px
-        motion = CameraMotion(t, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(t, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
-                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        meas, motion, _, _ = _ring_detection(cam, pose, t, az)
         prior = TargetState(t, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
         fix = perc.step(meas, motion, prior)
         reasons.append(fix.reason or fix.overridden)
