@@ -31,6 +31,8 @@ DEPARTURES: dict[str, tuple[str, dict]] = {
                               {"controllers.target_model.enabled": False}),
     "heading_from_shapes": ("a still ship's heading from its box shapes",
                             {"controllers.target_model.heading_from_shape.enabled": False}),
+    "size_fit": ("the ship's length, beam and height fitted to its boxes",
+                 {"controllers.target_model.size_fit.enabled": False}),
     "detection_gates": ("detection gates (overflowing box, size mismatch, inside 120 m)",
                         {"controllers.detection_gate.skip_overflowing_box": False,
                          "controllers.detection_gate.box_size_tolerance": 10.0,
