@@ -56,10 +56,6 @@ from fwsim.messages import Measurements
 __all__ = ["Perception", "Lock"]
 
 _NAN4 = np.full(4, np.nan)
-#: the size fit takes a box only when the box shapes' heading weights (a known course fused in) are this
-#: concentrated (mean resultant length; 0.98: a circular std of about 11 deg; a bow / stern ambiguity is far
-#: below)
-_SIZE_FIT_MIN_RESULTANT = 0.98
 _ZERO22 = np.zeros((2, 2))
 _ZERO22.setflags(write=False)
 _NAN4.setflags(write=False)
@@ -172,8 +168,8 @@ class Perception:
         not apply), the predicted box of the most likely heading, ``size_mismatch`` when no plausible
         heading explains the box's size (else ""), and the offset's spread over the headings the ship may have
         (2 x 2, px^2; zeros when there is one, or no correction). ``fit_size``: the box may teach the ship's
-        size (:class:`~controllers.target_model.ShipSize`, at the most likely heading, when one is known); the
-        correction and the size gate use the fitted outline once it is in use."""
+        size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is sure); the correction
+        and the size gate use the fitted outline once it is in use."""
         tm = self.ship.cfg
         u, v = self._to_now(nav, cam, prior)
         if not tm.enabled:
@@ -184,11 +180,8 @@ class Perception:
         single = len(courses) == 1
         boxes, pred = None, _NAN4
         known = course is not None or self.ship.shape.ready
-        # the size fit needs a sure heading: the box shapes' (with the course fused in when known), not a course
-        # alone (a still ship's estimated velocity gives a course for seconds after the lock, any way round)
-        if fit_size and self.ship.shape.ready and not single and \
-                abs(np.dot(weights, np.exp(1j * courses))) >= _SIZE_FIT_MIN_RESULTANT:
-            self.ship.size.update(cam.pos_enu_m, cam.R_enu_from_cam, ref, float(courses[int(np.argmax(weights))]), b)
+        if fit_size:
+            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b)
         scale = self.ship.size.scale
         if known and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,

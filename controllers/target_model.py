@@ -66,6 +66,10 @@ __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel",
 _MIN_DEPTH_M = 0.5
 #: predicted boxes for up to this many courses at once come from a compiled function (beyond, numpy is faster)
 _COMPILED_MAX_COURSES = 8
+#: the size fit takes a box only when the box shapes' heading weights (a known course fused in) are this
+#: concentrated (mean resultant length; 0.98: a circular std of about 11 deg; a bow / stern ambiguity is far
+#: below)
+_SIZE_FIT_MIN_RESULTANT = 0.98
 _ONES3 = np.ones(3)
 _ONES3.setflags(write=False)
 
@@ -625,6 +629,19 @@ class ShipModel:
             return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
+
+    def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px) -> bool:
+        """Feed one detected box to the size fit (:class:`ShipSize`) at the most likely of the headings
+        ``courses`` (weights ``weights``, :meth:`headings_and_course`) when the heading is sure: the box
+        shapes' posterior (with a known course fused in) concentrated to a mean resultant length of at least
+        ``_SIZE_FIT_MIN_RESULTANT``. Never a course alone: a still ship's estimated velocity gives one for
+        seconds after the lock, any way round. True when the box moved the fit."""
+        if not self.size.cfg.enabled or not self.shape.ready or len(courses) == 1:
+            return False
+        if abs(np.dot(weights, np.exp(1j * np.asarray(courses)))) < _SIZE_FIT_MIN_RESULTANT:
+            return False
+        return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, float(courses[int(np.argmax(weights))]),
+                                box_px)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float) -> ShipHeadingStatus | None:
