@@ -174,6 +174,21 @@ class ShapeHeadingConfig(StrictModel):
                           "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
     fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
                                                                          "least this, deg")
+    follow_course: bool = Field(
+        True, description="between detections the posterior turns with the ship's estimated course (a ship's "
+                          "heading turns with its course): the boxes of a turning or zigzagging ship, seen over "
+                          "a loiter, then add up at the heading it has now, not spread over those it had. "
+                          "false: the posterior stays put (a ship that keeps its heading)")
+    follow_course_settle_s: float = Field(
+        10.0, ge=0, le=600,
+        description="the course is followed once it has been known (ShipModelConfig.min_speed_for_course_m_s, "
+                    "max_vel_std_for_course_m_s) this long without a break, s: in the first seconds after a lock "
+                    "or a re-initialisation the estimated velocity's course swings by tens of degrees as it "
+                    "converges, which is the estimate settling, not the ship turning")
+    follow_course_max_rate_deg_s: float = Field(
+        3.0, gt=0, le=90,
+        description="the posterior turns at most this fast, deg/s: a ship turns slower (the estimate's jumps "
+                    "are not turns)")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "

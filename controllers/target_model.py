@@ -293,9 +293,13 @@ class ShapeHeading:
         self._last_t = -math.inf
         self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
         self._axis = None  # axis_enu_rad() of the current loglik
+        self._course = None  # the estimated course at the last used detection (None: not followed then)
 
-    def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px) -> bool:
-        """Use one detected box (u0, v0, u1, v1); True when it was used."""
+    def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
+               course_enu_rad: float | None = None) -> bool:
+        """Use one detected box (u0, v0, u1, v1); True when it was used. ``course_enu_rad``: the ship's
+        estimated course now when it is sure enough to follow (``follow_course``), else None: the posterior
+        turns by the course's change since the last used detection before this box is added."""
         c = self.cfg
         b = np.asarray(box_px, dtype=float)
         if not c.enabled or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9 or not np.all(np.isfinite(b)):
@@ -307,6 +311,12 @@ class ShapeHeading:
         pred = predicted_boxes_px(self.outline, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, self.courses_enu_rad)
         if not np.all(np.isfinite(pred)):
             return False
+        if c.follow_course:
+            if course_enu_rad is not None and self._course is not None and self.updates:
+                most = math.radians(c.follow_course_max_rate_deg_s) * (t_s - self._last_t)
+                d = (course_enu_rad - self._course + math.pi) % (2.0 * math.pi) - math.pi
+                self.turn(min(max(d, -most), most))
+            self._course = None if course_enu_rad is None else float(course_enu_rad)
         size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
         scaled = size_pred[:, None, :] * (1.0 + self.size_biases)[None, :, None]  # (headings, biases, 2)
@@ -317,6 +327,20 @@ class ShapeHeading:
         self._weights = self._axis = None
         self._last_t = t_s
         return True
+
+    def turn(self, angle_rad: float) -> None:
+        """The ship has turned by ``angle_rad`` (counter-clockwise): the evidence for each heading moves to the
+        heading that much further round (linear interpolation between the grid's neighbours)."""
+        s = float(angle_rad) / (2.0 * math.pi / self.cfg.headings)
+        if not s:
+            return
+        i = math.floor(s)
+        f = s - i
+        # evidence that was at heading k - s now belongs to heading k
+        a = np.roll(self._loglik_bias, i, axis=0)
+        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * np.roll(self._loglik_bias, i + 1, axis=0)
+        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
+        self._weights = self._axis = None
 
     def weights(self) -> np.ndarray:
         """Posterior weight of each candidate heading (sums to 1; uniform before any update). Unless
@@ -451,9 +475,10 @@ class ShipSize:
 
     Each box seen at a known heading (the course, or the box shapes' best heading) updates the log scales
     ``theta = log(L / L_class, W / W_class, H / H_class)`` with an extended Kalman step on
-    ``log(box width, height) - log(predicted width, height at theta)``, the prediction from the outline
-    without its mast (a thin mast is often not in a detector's box; with it, a ship exactly of the class
-    came out 8 % low), its Jacobian by finite differences, prior N(0, prior_std^2) per axis, a chi-square
+    ``log(box width, height) - log(predicted width, height at theta)``, the prediction midway (in log) between
+    the outline without its mast and with it, half their difference in the box's noise (a thin mast is not
+    in a far box; close in it shows: fitted to the outline with it a ship exactly of the class came out 8 %
+    low, to the one without it up to 22 % tall in a shallow dive), its Jacobian by finite differences, prior N(0, prior_std^2) per axis, a chi-square
     gate against boxes cut short (the UAV's own airframe in view), and a fresh start from the prior when it
     has turned ``max_gated_in_a_row`` boxes away in a row (then the fit is off, not the boxes); a box's
     noise grows as it gets small (``box_px_std`` over its size); a box at the image's edge is not taken at
@@ -507,10 +532,11 @@ class ShipSize:
             return False
         s0 = np.exp(self.x[:3])
         scales = np.vstack([s0, s0 * np.exp(self._STEP * np.eye(3))])  # the fit and a step in each log scale
-        sizes = np.empty((4, 2))
-        for i, sc in enumerate(scales):
-            pb = predicted_box_px(self.outline.body, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad,
-                                  sc)
+        scales = np.vstack([scales, s0])
+        outlines = [self.outline.body] * 4 + [self.outline]  # and the fit with its mast
+        sizes = np.empty((len(scales), 2))
+        for i, (sc, o) in enumerate(zip(scales, outlines)):
+            pb = predicted_box_px(o, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad, sc)
             if pb is None or not np.all(np.isfinite(pb)):
                 return False
             if cam.width_px > 0 and (pb[0] <= 0.0 or pb[1] <= 0.0 or pb[2] >= cam.width_px - 1.0
@@ -521,10 +547,13 @@ class ShipSize:
         if np.any(sizes <= 1.0):
             return False
         logs = np.log(sizes)
-        J = (logs[1:] - logs[0]).T / self._STEP  # (2, 3): d log(width, height) / d log scales
+        J = (logs[1:4] - logs[0]).T / self._STEP  # (2, 3): d log(width, height) / d log scales
         det_size = np.array([b[2] - b[0], b[3] - b[1]])
-        y = np.log(det_size) - logs[0]
+        # the detector's box may or may not take in the thin mast (close in it shows): midway, +- half of it
+        mast = 0.5 * (logs[4] - logs[0])
+        y = np.log(det_size) - logs[0] - mast
         Rn = np.diag(cfg.box_std ** 2 + (cfg.box_px_std / det_size) ** 2)  # small far boxes weigh less
+        Rn = Rn + np.outer(mast, mast)
         S = J @ self.P @ J.T + Rn
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         if not det > 0.0:
@@ -581,6 +610,7 @@ class ShipModel:
         self.outline = ShipOutline(cfg)
         self.shape = ShapeHeading(cfg.heading_from_shape, self.outline, camera, edge_px)
         self.size = ShipSize(cfg.size_fit, self.outline, camera, edge_px)
+        self._course_known_since = math.nan  # since when the course has been known without a break
 
     def course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
         """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
@@ -631,16 +661,18 @@ class ShipModel:
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px) -> bool:
-        """Feed one detected box to the size fit (:class:`ShipSize`) at the most likely of the headings
-        ``courses`` (weights ``weights``, :meth:`headings_and_course`) when the heading is sure: the box
+        """Feed one detected box to the size fit (:class:`ShipSize`) at the weighted circular mean of the
+        headings ``courses`` (weights ``weights``, :meth:`headings_and_course`; finer than their 5-deg grid)
+        when the heading is sure: the box
         shapes' posterior (with a known course fused in) concentrated to a mean resultant length of at least
         ``_SIZE_FIT_MIN_RESULTANT``. Never a course alone: a still ship's estimated velocity gives one for
         seconds after the lock, any way round. True when the box moved the fit."""
         if not self.size.cfg.enabled or not self.shape.ready or len(courses) == 1:
             return False
-        if abs(np.dot(weights, np.exp(1j * np.asarray(courses)))) < _SIZE_FIT_MIN_RESULTANT:
+        resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
+        if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
-        return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, float(courses[int(np.argmax(weights))]),
+        return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, math.atan2(resultant.imag, resultant.real),
                                 box_px)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
@@ -648,7 +680,8 @@ class ShipModel:
         """Feed one detected box to the heading-from-shapes posterior (``ref_enu_m``: the estimated waterline
         centre); its state for the log when it took the box, else None."""
         sh = self.shape
-        if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px):
+        if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
+                         self._course_to_follow(t_s, vel_enu, vel_std_m_s)):
             return None
         w = sh.weights()
         k = int(np.argmax(w))
@@ -658,6 +691,23 @@ class ShipModel:
                                  float(w[(k + len(w) // 2) % len(w)]), sh.updates, bool(course is None and sh.ready),
                                  math.nan if course is None else heading_deg_from_course_enu(course),
                                  np.exp(sz.theta), sz.updates, sz.scale is not None)
+
+    def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
+        """The estimated velocity's course when the box shapes' posterior may follow it
+        (:attr:`ShapeHeadingConfig.follow_course`): known by speed and std (as in :meth:`course`, but whatever
+        the shapes say: they are what is being turned) for ``follow_course_settle_s`` without a break."""
+        cfg, sh = self.cfg, self.cfg.heading_from_shape
+        if not sh.follow_course:
+            return None
+        speed = math.hypot(float(vel_enu[0]), float(vel_enu[1]))
+        if speed < max(cfg.min_speed_for_course_m_s, 1e-6) or not vel_std_m_s <= cfg.max_vel_std_for_course_m_s:
+            self._course_known_since = math.nan
+            return None
+        if math.isnan(self._course_known_since):
+            self._course_known_since = float(t_s)
+        if t_s - self._course_known_since < sh.follow_course_settle_s:
+            return None
+        return math.atan2(float(vel_enu[1]), float(vel_enu[0]))
 
     def entry_depth_m(self, point_enu_m, ship_enu_m, dir_enu, vel_enu) -> float:
         """How far before ``point_enu_m`` a straight path along ``dir_enu`` (unit) first meets the outline of
