@@ -97,6 +97,8 @@ class FlightSoftware:
                                         self.cfg.bpng.impact_heading_deg, self.cfg.after_lock.use)
         for e in events:
             self.recorder.event(e)
+        if events and self.phase.phase == 3 and self.cfg.target_model.size_fit.hold_in_terminal:
+            self.perception.ship.size.hold()
 
     def _output(self, nav: Measurements, est: TargetState, fix: DetectionFix, guide: Guidance,
                 gimbal: GimbalCommand) -> FlightSoftwareOutput:

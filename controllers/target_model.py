@@ -478,12 +478,13 @@ class ShipSize:
     ``log(box width, height) - log(predicted width, height at theta)``, the prediction midway (in log) between
     the outline without its mast and with it, half their difference in the box's noise (a thin mast is not
     in a far box; close in it shows: fitted to the outline with it a ship exactly of the class came out 8 %
-    low, to the one without it up to 22 % tall in a shallow dive), its Jacobian by finite differences, prior N(0, prior_std^2) per axis, a chi-square
-    gate against boxes cut short (the UAV's own airframe in view), and a fresh start from the prior when it
-    has turned ``max_gated_in_a_row`` boxes away in a row (then the fit is off, not the boxes); a box's
-    noise grows as it gets small (``box_px_std`` over its size); a box at the image's edge is not taken at
-    all. After ``min_updates`` boxes the perception corrects with the fitted outline (:attr:`scale`, the
-    whole outline scaled); before, with the class's.
+    low, to the one without it up to 22 % tall in a shallow dive), its Jacobian by finite differences, prior
+    N(0, prior_std^2) per axis, a chi-square gate against boxes cut short (the UAV's own airframe in view),
+    and a fresh start from the prior when it has turned ``max_gated_in_a_row`` boxes away in a row (then the
+    fit is off, not the boxes); a box's noise grows as it gets small (``box_px_std`` over its size); a box at
+    the image's edge is not taken at all. After ``min_updates`` boxes the perception corrects with the fitted
+    outline (:attr:`scale`, the whole outline scaled); before, with the class's. With ``hold_in_terminal``
+    the fit is held from the terminal dive on (:meth:`hold`).
 
     The ranges come from the estimate, so the fitted scale carries its range error (1 % at 500 m for 5 m):
     harmless to the correction, which scales with it.
@@ -502,6 +503,11 @@ class ShipSize:
         self.gated = 0
         self.gated_in_a_row = 0
         self.restarts = 0
+        self.held = False  # learning stopped (:meth:`hold`)
+
+    def hold(self) -> None:
+        """Stop learning: from now on boxes leave the fit as it is (``hold_in_terminal``)."""
+        self.held = True
 
     @property
     def theta(self) -> np.ndarray:
@@ -519,7 +525,7 @@ class ShipSize:
         """Take one detected box seen with the ship on ``course_enu_rad`` (its waterline centre ``ref_enu_m``,
         estimated); True when it moved the fit."""
         cfg = self.cfg
-        if not cfg.enabled:
+        if not cfg.enabled or self.held:
             return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px

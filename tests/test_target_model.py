@@ -571,6 +571,22 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
         assert np.all(np.abs(fit.theta) < math.log(1.13)) and fit.scale[2] < 1.11, (az, fit.scale)
 
 
+def test_a_held_size_fit_takes_no_more_boxes():
+    from controllers.target_model import ShipSize
+    ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    fit = ShipSize(SizeFitConfig(min_updates=0), ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    views_ = [_look_from(cam, pose, 700.0, 35.0, az) for az in range(0, 360, 20)]
+    for cp, Rc, frame in views_[:9]:
+        assert fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px)
+    x, P = fit.x.copy(), fit.P.copy()
+    fit.hold()
+    for cp, Rc, frame in views_[9:]:
+        assert not fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px)
+    assert np.array_equal(fit.x, x) and np.array_equal(fit.P, P) and fit.updates == 9
+
+
 def test_a_size_fit_gone_wrong_starts_again():
     """A fit sure of a wrong size turns every box away; after max_gated_in_a_row of them it starts again from
     the prior and learns the ship."""

@@ -31,6 +31,8 @@ DEPARTURES: dict[str, tuple[str, dict]] = {
                               {"controllers.target_model.enabled": False}),
     "heading_from_shapes": ("a still ship's heading from its box shapes",
                             {"controllers.target_model.heading_from_shape.enabled": False}),
+    "shapes_follow_course": ("the box shapes' heading turns with the estimated course",
+                             {"controllers.target_model.heading_from_shape.follow_course": False}),
     "size_fit": ("the ship's length, beam and height fitted to its boxes",
                  {"controllers.target_model.size_fit.enabled": False}),
     "detection_gates": ("detection gates (overflowing box, size mismatch, inside 120 m)",
