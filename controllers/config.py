@@ -226,6 +226,11 @@ class SizeFitConfig(StrictModel):
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "
                                            "airframe in view)")
+    rate_hz: float = Field(
+        3.0, gt=0, le=240,
+        description="boxes weighed per second at most: consecutive frames carry nearly the same information, "
+                    "which the fit, taking each box as independent, would count again and again (and it is "
+                    "the perception's costliest step, five outline projections a box)")
     hold_in_terminal: bool = Field(
         False, description="the fit stops learning when the terminal dive starts and keeps what the loiter taught "
                            "it: in the dive the UAV may bank past 90 deg and its own airframe cut the boxes for "

@@ -181,7 +181,7 @@ class Perception:
         boxes, pred = None, _NAN4
         known = course is not None or self.ship.shape.ready
         if fit_size:
-            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b)
+            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
         scale = self.ship.size.scale
         if known and np.all(np.isfinite(b)):
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,

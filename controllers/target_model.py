@@ -504,6 +504,7 @@ class ShipSize:
         self.gated_in_a_row = 0
         self.restarts = 0
         self.held = False  # learning stopped (:meth:`hold`)
+        self._last_t = -math.inf  # when the last box was weighed
 
     def hold(self) -> None:
         """Stop learning: from now on boxes leave the fit as it is (``hold_in_terminal``)."""
@@ -521,11 +522,15 @@ class ShipSize:
             return None
         return np.exp(self.x[:3])
 
-    def update(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad: float, box_px) -> bool:
+    def update(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad: float, box_px,
+               t_s: float | None = None) -> bool:
         """Take one detected box seen with the ship on ``course_enu_rad`` (its waterline centre ``ref_enu_m``,
-        estimated); True when it moved the fit."""
+        estimated) at ``t_s`` (None: whenever, no rate limit); True when it moved the fit. A box within
+        ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at."""
         cfg = self.cfg
         if not cfg.enabled or self.held:
+            return False
+        if t_s is not None and t_s - self._last_t < 1.0 / cfg.rate_hz - 1e-9:
             return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px
@@ -564,6 +569,8 @@ class ShipSize:
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         if not det > 0.0:
             return False
+        if t_s is not None:
+            self._last_t = float(t_s)
         Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
         if float(y @ Si @ y) > cfg.gate:
             self.gated += 1
@@ -666,7 +673,8 @@ class ShipModel:
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
 
-    def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px) -> bool:
+    def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
+                   t_s: float | None = None) -> bool:
         """Feed one detected box to the size fit (:class:`ShipSize`) at the weighted circular mean of the
         headings ``courses`` (weights ``weights``, :meth:`headings_and_course`; finer than their 5-deg grid)
         when the heading is sure: the box
@@ -679,7 +687,7 @@ class ShipModel:
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
         return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, math.atan2(resultant.imag, resultant.real),
-                                box_px)
+                                box_px, t_s)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float) -> ShipHeadingStatus | None:

@@ -587,6 +587,20 @@ def test_a_held_size_fit_takes_no_more_boxes():
     assert np.array_equal(fit.x, x) and np.array_equal(fit.P, P) and fit.updates == 9
 
 
+def test_the_size_fit_weighs_boxes_at_its_rate():
+    """Consecutive frames carry nearly the same information: with times given, a box within 1 / rate_hz of the
+    last one weighed is not looked at (without times, every box is)."""
+    from controllers.target_model import ShipSize
+    ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    cp, Rc, frame = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 700.0, 35.0, 30.0)
+    fit = ShipSize(SizeFitConfig(rate_hz=3.0), ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    course = math.radians(50.0)
+    taken = [fit.update(cp, Rc, np.zeros(3), course, frame.bbox_px, t) for t in np.arange(0.0, 2.0, 1.0 / 30.0)]
+    assert sum(taken) == 6 and fit.updates == 6  # at 0, 1/3, ..., 5/3 s
+    assert fit.update(cp, Rc, np.zeros(3), course, frame.bbox_px) and fit.updates == 7
+
+
 def test_a_size_fit_gone_wrong_starts_again():
     """A fit sure of a wrong size turns every box away; after max_gated_in_a_row of them it starts again from
     the prior and learns the ship."""
