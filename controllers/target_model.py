@@ -473,7 +473,8 @@ class ShipSize:
     -30 deg dive, 4 m for a 25 m class). The boxes tell the real sizes: seen from round the loiter ring
     their widths and heights mix the length, beam and height differently with every relative heading.
 
-    Each box seen at a known heading (the course, or the box shapes' best heading) updates the log scales
+    Each box seen at a sure heading (the box shapes' headings with a known course fused in, their weighted
+    mean; at most ``rate_hz`` boxes a second, consecutive frames being nearly alike) updates the log scales
     ``theta = log(L / L_class, W / W_class, H / H_class)`` with an extended Kalman step on
     ``log(box width, height) - log(predicted width, height at theta)``, the prediction midway (in log) between
     the outline without its mast and with it, half their difference in the box's noise (a thin mast is not
