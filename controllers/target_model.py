@@ -511,6 +511,12 @@ class ShipSize:
         """Stop learning: from now on boxes leave the fit as it is (``hold_in_terminal``)."""
         self.held = True
 
+    def takes_boxes(self, t_s: float | None = None) -> bool:
+        """Whether a box at ``t_s`` would be looked at: the fit on, not held, ``1 / rate_hz`` after the last
+        box weighed (None: no rate limit)."""
+        return self.cfg.enabled and not self.held and (
+            t_s is None or t_s - self._last_t >= 1.0 / self.cfg.rate_hz - 1e-9)
+
     @property
     def theta(self) -> np.ndarray:
         """The log scales (length, beam, height)."""
@@ -529,9 +535,7 @@ class ShipSize:
         estimated) at ``t_s`` (None: whenever, no rate limit); True when it moved the fit. A box within
         ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at."""
         cfg = self.cfg
-        if not cfg.enabled or self.held:
-            return False
-        if t_s is not None and t_s - self._last_t < 1.0 / cfg.rate_hz - 1e-9:
+        if not self.takes_boxes(t_s):
             return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px
@@ -543,9 +547,9 @@ class ShipSize:
         if float(np.linalg.norm(np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) < cfg.min_range_m:
             return False
         s0 = np.exp(self.x[:3])
-        scales = np.vstack([s0, s0 * np.exp(self._STEP * np.eye(3))])  # the fit and a step in each log scale
-        scales = np.vstack([scales, s0])
-        outlines = [self.outline.body] * 4 + [self.outline]  # and the fit with its mast
+        # the fit and a step in each log scale (the outline without its mast), and the fit with its mast
+        scales = np.vstack([s0, s0 * np.exp(self._STEP * np.eye(3)), s0])
+        outlines = [self.outline.body] * 4 + [self.outline]
         sizes = np.empty((len(scales), 2))
         for i, (sc, o) in enumerate(zip(scales, outlines)):
             pb = predicted_box_px(o, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad, sc)
@@ -682,8 +686,8 @@ class ShipModel:
         shapes' posterior (with a known course fused in) concentrated to a mean resultant length of at least
         ``_SIZE_FIT_MIN_RESULTANT``. Never a course alone: a still ship's estimated velocity gives one for
         seconds after the lock, any way round. True when the box moved the fit."""
-        if not self.size.cfg.enabled or not self.shape.ready or len(courses) == 1:
-            return False
+        if not self.shape.ready or len(courses) == 1 or not self.size.takes_boxes(t_s):
+            return False  # (the rate first: the heading's concentration is not worked out for nothing)
         resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
