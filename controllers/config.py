@@ -498,11 +498,25 @@ class SwitchConfig(StrictModel):
     min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
     approach_window_deg: float | None = Field(
         5.0, gt=0, le=180,
-        description="bearing from the UAV to the target within this of the impact heading plus the lead "
+        description="bearing from the UAV to the target within this of the approach bearing plus the lead "
                     "(none: any bearing)")
+    approach_from: Literal["impact_heading", "closing", "closing_after_go_around"] = Field(
+        "closing_after_go_around",
+        description="the approach bearing: the impact heading; 'closing': the bearing the UAV closes on the "
+                    "target in at the end of the dive (its ground velocity along the impact direction at "
+                    "bpng.airspeed_m_s in the estimated wind, less the target's estimated velocity: "
+                    "controllers.phases.approach_bearing_deg), which a fast ship and a steep dive into a headwind "
+                    "turn tens of degrees from the impact heading; 'closing_after_go_around': the impact heading "
+                    "until a dive has gone round (go_around_m), the closing bearing after it")
+    go_around_m: float | None = Field(
+        100.0, gt=0, le=10000,
+        description="in Phase 3, back to Phase 2 (the loiter, the switch armed again) once the range to the "
+                    "target estimate has grown this much above its least since the switch: a dive that is not "
+                    "closing (a steep dive after a fast ship into a headwind can hold its range, then lose it); "
+                    "none: never")
     approach_lead_deg: float = Field(
         5.0, ge=-90, le=90,
-        description="the window's centre lies this far past the impact heading in the direction the UAV goes "
+        description="the window's centre lies this far past the approach bearing in the direction the UAV goes "
                     "round the target: the middle of the terminal law's capture region from a loiter, which "
                     "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
 

@@ -37,7 +37,7 @@ from controllers.guidance import PathGuidance
 from controllers.messages import DetectionFix, Guidance, TargetState
 from controllers.nav import Navigation
 from controllers.perception import Perception
-from controllers.phases import PhaseState, Ring, next_phase, radial_error_m
+from controllers.phases import PhaseState, Ring, next_phase, radial_error_m, window_bearing_deg
 from controllers.pointing import Pointing
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
@@ -92,9 +92,10 @@ class FlightSoftware:
         return self._output(nav, est, fix, guide, gimbal)
 
     def _next_phase(self, nav: Measurements, est: TargetState, fix: DetectionFix) -> None:
+        approach = window_bearing_deg(self.phase, self.cfg.switch, self.cfg.bpng, nav.wind_enu_m_s, est)
         self.phase, events = next_phase(self.phase, nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, nav.height_above_sea_m,
-                                        est, fix.locked, self.ring, self.cfg.switch,
-                                        self.cfg.bpng.impact_heading_deg, self.cfg.after_lock.use)
+                                        est, fix.locked, self.ring, self.cfg.switch, approach,
+                                        self.cfg.after_lock.use)
         for e in events:
             self.recorder.event(e)
         if events and self.phase.phase == 3 and self.cfg.target_model.size_fit.hold_in_terminal:

@@ -8,7 +8,16 @@
    (:class:`~controllers.config.SwitchConfig`): radius and altitude held within
    tolerances for ``dwell_s`` and at least ``min_loiter_s`` in Phase 2 (the two
    side by side), and the bearing from the UAV to the target within
-   ``approach_window_deg`` of the mission's impact heading plus the lead.
+   ``approach_window_deg`` of the approach bearing plus the lead. The
+   approach bearing is the mission's impact heading (``switch.approach_from``),
+   or the bearing the UAV closes on the target in at the end of the dive
+   (:func:`approach_bearing_deg`: its ground velocity along the impact
+   direction, at the dive's airspeed in the estimated wind, less the target's
+   estimated velocity), by default only after a go-around.
+   A dive that does not close goes round: once the range to the target
+   estimate has grown ``go_around_m`` above its least since the switch, the
+   mission returns to Phase 2 (the loiter takes the UAV back to its ring) and
+   the switch is armed again, its dwell and minimum loiter counted afresh.
 
 :func:`next_phase` takes the previous :class:`PhaseState` and this tick's
 inputs and returns the next state and why it changed; it keeps nothing of its
@@ -21,10 +30,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from controllers.config import SwitchConfig
+from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 
-__all__ = ["PhaseState", "Ring", "next_phase", "radial_error_m", "switch_reason"]
+__all__ = ["PhaseState", "Ring", "approach_bearing_deg", "next_phase", "radial_error_m", "switch_reason",
+           "window_bearing_deg"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +52,8 @@ class PhaseState:
     phase: int = 1
     phase2_t_s: float = math.nan  # when Phase 2 started
     in_tol_since_s: float = math.nan  # since when radius and altitude are within tolerance (NaN: not now)
+    closest_m: float = math.nan  # in Phase 3: the least range to the target estimate since the switch
+    go_arounds: int = 0  # dives that did not close and went back to the loiter
 
 
 def radial_error_m(pos_enu_m, target: TargetState, radius_m: float) -> float:
@@ -50,12 +62,60 @@ def radial_error_m(pos_enu_m, target: TargetState, radius_m: float) -> float:
     return float(np.hypot(rel[0], rel[1])) - radius_m
 
 
+def _wrap360(deg: float) -> float:
+    b = float(deg) % 360.0
+    return 0.0 if b >= 360.0 else b  # a tiny negative angle rounds to 360.0
+
+
+def approach_bearing_deg(impact_heading_deg: float, impact_fpa_deg: float, airspeed_m_s: float,
+                         wind_enu_m_s, target_vel_enu_m_s) -> float:
+    """The bearing (deg, clockwise from North, in [0, 360)) along which the UAV closes on the target horizontally at the
+    end of the dive.
+
+    The UAV's ground velocity then points along the impact direction V_f (``impact_heading_deg``,
+    ``impact_fpa_deg``) and its air velocity, ground velocity less the wind, has the dive's airspeed:
+    ``|Vg V_f - wind| = airspeed``, the larger root. Relative to the target it moves along
+    ``Vg V_f - V_target``; that vector's horizontal bearing is returned. A still target in still air gives
+    the impact heading; a fast ship and a steep dive into a headwind can turn it by tens of degrees, or round
+    (the UAV's ground speed along the ship's course below the ship's: it must come from ahead). The impact
+    heading is returned where no ground speed meets the airspeed (a wind stronger than it) or the closing is
+    nearly vertical (under 0.5 m/s horizontally: any bearing will do).
+    """
+    psi, th = math.radians(impact_heading_deg), math.radians(impact_fpa_deg)
+    d = (math.cos(th) * math.sin(psi), math.cos(th) * math.cos(psi), math.sin(th))
+    w = [float(x) for x in wind_enu_m_s]
+    b = d[0] * w[0] + d[1] * w[1] + d[2] * w[2]
+    disc = b * b - (w[0] ** 2 + w[1] ** 2 + w[2] ** 2) + airspeed_m_s ** 2
+    vg = b + math.sqrt(disc) if disc >= 0.0 else -1.0
+    if not vg > 0.0 or not all(math.isfinite(float(x)) for x in target_vel_enu_m_s[:2]):
+        return _wrap360(impact_heading_deg)
+    e = vg * d[0] - float(target_vel_enu_m_s[0])
+    n = vg * d[1] - float(target_vel_enu_m_s[1])
+    if math.hypot(e, n) < 0.5:
+        return _wrap360(impact_heading_deg)
+    return _wrap360(math.degrees(math.atan2(e, n)))
+
+
+def window_bearing_deg(state: PhaseState, sw: SwitchConfig, bpng: BpngConfig, wind_enu_m_s,
+                       target: TargetState) -> float:
+    """The approach bearing the switch's window is centred on (before the lead) this tick: the impact heading,
+    or the closing bearing (:func:`approach_bearing_deg`) as ``sw.approach_from`` asks (by default once a
+    dive has gone round), in Phase 2 with a target estimate."""
+    closing = sw.approach_from == "closing" or (sw.approach_from == "closing_after_go_around"
+                                                 and state.go_arounds > 0)
+    if not (closing and state.phase == 2 and target.known):
+        return float(bpng.impact_heading_deg)
+    return approach_bearing_deg(bpng.impact_heading_deg, bpng.impact_flight_path_deg, bpng.airspeed_m_s,
+                                wind_enu_m_s, target.vel_enu_m_s)
+
+
 def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: float, target: TargetState,
-               locked: bool, ring: Ring | None, switch: SwitchConfig, impact_heading_deg: float,
+               locked: bool, ring: Ring | None, switch: SwitchConfig, approach_deg: float,
                loiter_name: str = "") -> tuple[PhaseState, tuple[str, ...]]:
     """The phase after this tick and the events that say why it changed (none: it did not).
 
-    ``ring``: the loiter's (None: no Phase 2); ``impact_heading_deg``: the mission's, clockwise from North.
+    ``ring``: the loiter's (None: no Phase 2); ``approach_deg``: the approach window's centre before the lead
+    (:func:`approach_bearing_deg`, or the mission's impact heading), clockwise from North.
     """
     events = []
     if state.phase == 1 and locked and ring is not None and target.known:
@@ -63,15 +123,24 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
         events.append(f"phase 1 -> 2 at t = {t_s:.2f} s: target locked, loiter ({loiter_name})")
     if state.phase == 2:
         state, why = switch_reason(state, t_s, pos_enu_m, vel_enu_m_s, height_m, target, ring, switch,
-                                   impact_heading_deg)
+                                   approach_deg)
         if why:
-            state = replace(state, phase=3)
+            state = replace(state, phase=3, closest_m=math.nan)
             events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {why}")
+    elif state.phase == 3 and switch.go_around_m is not None and target.known:
+        rng = float(np.linalg.norm(np.asarray(target.pos_enu_m, float) - np.asarray(pos_enu_m, float)))
+        if not rng >= state.closest_m:  # the first tick of Phase 3 (NaN), or closer than ever
+            state = replace(state, closest_m=rng)
+        elif rng - state.closest_m > switch.go_around_m and ring is not None:
+            events.append(f"phase 3 -> 2 at t = {t_s:.2f} s: the dive is not closing (range {rng:.0f} m, "
+                          f"{rng - state.closest_m:.0f} m above its least since the switch): going round, "
+                          f"back to the loiter ({loiter_name}), the switch armed again")
+            state = PhaseState(2, t_s, go_arounds=state.go_arounds + 1)
     return state, tuple(events)
 
 
 def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: float, target: TargetState,
-                  ring: Ring, sw: SwitchConfig, impact_heading_deg: float) -> tuple[PhaseState, str]:
+                  ring: Ring, sw: SwitchConfig, approach_deg: float) -> tuple[PhaseState, str]:
     """(state with the dwell's start updated, why Phase 3 starts now or "" while the condition does not hold)."""
     if not sw.enabled:
         return state, ""
@@ -86,7 +155,7 @@ def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_
         return state, ""
     rel = target.pos_enu_m[:2] - pos_enu_m[:2]
     bearing = math.degrees(math.atan2(rel[0], rel[1]))  # clockwise from North
-    off = (bearing - impact_heading_deg + 180.0) % 360.0 - 180.0
+    off = (bearing - approach_deg + 180.0) % 360.0 - 180.0
     rel_vel = np.asarray(vel_enu_m_s, float)[:2] - target.vel_enu_m_s[:2]
     clockwise = float(rel[0] * rel_vel[1] - rel[1] * rel_vel[0]) > 0.0  # the bearing grows
     lead = sw.approach_lead_deg if clockwise else -sw.approach_lead_deg
@@ -94,5 +163,5 @@ def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_
         return state, ""
     return state, (f"radius error {radial:+.1f} m (tol {sw.radius_tol_m:g}), altitude error {alt_err:+.1f} m "
                    f"(tol {sw.altitude_tol_m:g}) for {t_s - state.in_tol_since_s:.1f} s; bearing to target "
-                   f"{bearing % 360:.1f} deg, {off:+.1f} deg from the impact heading "
+                   f"{bearing % 360:.1f} deg, {off:+.1f} deg from the approach bearing {approach_deg % 360:.1f} deg "
                    f"({'clockwise' if clockwise else 'counter-clockwise'} round the target, lead {lead:+g} deg)")

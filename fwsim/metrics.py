@@ -26,7 +26,9 @@ the guidance was taking it; ``miss_bow_m``, ``miss_port_m`` and ``miss_up_m``
 are that closest approach's offset in the ship's frame (towards the bow, to
 port, up). The ship's aim point comes from the logged ship states
 (/target/state), so a ship moved by an event scores where it really was. ``hit`` is 1 when the run's last state is
-inside the hull or superstructure.
+inside the hull or superstructure. ``switch_time_s`` is the start of the last
+Phase 3 (the dive that ended the run); ``go_arounds`` counts the dives before
+it that did not close and went back to the loiter (``switch.go_around_m``).
 """
 from __future__ import annotations
 
@@ -217,8 +219,12 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     from fwsim.target import HullVolume, Ship
     if topics.FSW_STATUS in log.topics:
         fs = log.table(topics.FSW_STATUS)
-        p3 = np.flatnonzero(fs["phase"] == 3)
-        m["switch_time_s"] = float(fs["t_s"][p3[0]]) if p3.size else math.nan
+        # the start of the last Phase 3 (the dive that ended the run; earlier ones went round)
+        starts = np.flatnonzero((fs["phase"][1:] == 3) & (fs["phase"][:-1] != 3)) + 1
+        if fs["phase"].size and fs["phase"][0] == 3:
+            starts = np.concatenate([[0], starts])
+        m["switch_time_s"] = float(fs["t_s"][starts[-1]]) if starts.size else math.nan
+        m["go_arounds"] = float(np.sum((fs["phase"][1:] == 2) & (fs["phase"][:-1] == 3)))
     reason = str(log.reason)
     ended = reason.startswith("hit the ship") or reason.startswith("sea contact")
     st = log.table(topics.UAV_STATE)

@@ -5,12 +5,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import controllers
-from controllers.config import SwitchConfig
+from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 from controllers.mission import FlightSoftware
-from controllers.phases import PhaseState, Ring, next_phase
+from controllers.phases import PhaseState, Ring, approach_bearing_deg, next_phase, window_bearing_deg
 from fwsim.messages import Measurements, RateCommand
 from fwsim.scenario import parse_scenario
 
@@ -125,3 +127,106 @@ def test_the_phase_decision_is_a_pure_function_of_its_inputs():
     assert next_phase(s0, 1.0, *args, ship, False, Ring(500.0, 500.0), SwitchConfig(), 30.0)[0].phase == 1
     assert next_phase(s0, 1.0, *args, unknown, True, Ring(500.0, 500.0), SwitchConfig(), 30.0)[0].phase == 1
     assert next_phase(s0, 1.0, *args, ship, True, None, SwitchConfig(), 30.0) == (s0, ())
+
+
+def _closing_bearing_by_search(psi_f, theta_f, airspeed, wind, ship):
+    """The same bearing without the closed form: the larger ground speed along V_f whose air speed is the
+    dive's, found by bisection on |Vg V_f - wind| (convex in Vg)."""
+    d = np.array([math.cos(math.radians(theta_f)) * math.sin(math.radians(psi_f)),
+                  math.cos(math.radians(theta_f)) * math.cos(math.radians(psi_f)), math.sin(math.radians(theta_f))])
+    w = np.asarray(wind, float)
+    lo, hi = max(float(d @ w), 0.0), 500.0  # |Vg d - w| grows past its minimum at Vg = d.w
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.linalg.norm(mid * d - w) < airspeed else (lo, mid)
+    rel = lo * d[:2] - np.asarray(ship, float)[:2]
+    return math.degrees(math.atan2(rel[0], rel[1])), lo, np.linalg.norm(rel)
+
+
+def test_the_approach_bearing_is_the_impact_heading_for_a_still_ship_in_still_air():
+    for psi in (-170.0, 0.0, 30.0, 64.0, 300.0):
+        for theta in (-20.0, -45.0, -60.0):
+            assert approach_bearing_deg(psi, theta, 22.0, np.zeros(3), np.zeros(3)) == pytest.approx(psi % 360.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(psi=st.floats(-180, 360), theta=st.floats(-80, -5), airspeed=st.floats(15, 40),
+       wind=st.tuples(st.floats(-9, 9), st.floats(-9, 9)), ship_deg=st.floats(0, 360), ship_speed=st.floats(0, 12))
+def test_the_approach_bearing_is_the_closing_direction_at_the_end_of_the_dive(psi, theta, airspeed, wind, ship_deg,
+                                                                             ship_speed):
+    """Against a search for the ground speed: the bearing is that of the UAV's ground velocity along V_f (at the
+    dive's airspeed in the wind) less the ship's, where that closing is more than 0.5 m/s horizontally."""
+    ship = ship_speed * np.array([math.sin(math.radians(ship_deg)), math.cos(math.radians(ship_deg)), 0.0])
+    w = np.array([wind[0], wind[1], 0.0])
+    got = approach_bearing_deg(psi, theta, airspeed, w, ship)
+    want, vg, closing = _closing_bearing_by_search(psi, theta, airspeed, w, ship)
+    if closing > 0.6:
+        assert (got - want + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-6)
+    elif closing < 0.4:
+        assert got == pytest.approx(psi % 360.0) or got == 0.0
+    assert 0.0 <= got < 360.0
+
+
+def test_a_fast_ship_and_a_steep_dive_into_a_headwind_move_the_approach_round():
+    """A 9.9 m/s ship heading 84.5 deg, a 59 deg dive to 64 deg into a 6.8 m/s wind from the south-east: at 22 m/s
+    the UAV's ground velocity along the ship's course is about the ship's, so it closes from the south, ~70 deg
+    round from the impact heading (placed by the impact heading, the window put the UAV behind the ship, where
+    the dive never closed). A ship faster than the dive's ground speed along V_f is met from ahead."""
+    ship = 9.9 * np.array([math.sin(math.radians(84.5)), math.cos(math.radians(84.5)), 0.0])
+    b = approach_bearing_deg(64.35, -58.5, 22.0, np.array([-4.33, 5.30, 0.0]), ship)
+    assert 340.0 < b < 360.0
+    fast = 15.0 * np.array([math.sin(math.radians(64.35)), math.cos(math.radians(64.35)), 0.0])
+    assert (approach_bearing_deg(64.35, -60.0, 22.0, np.zeros(3), fast) - (64.35 + 180.0) + 180) % 360 - 180 == \
+        pytest.approx(0.0, abs=1e-9)
+    # a wind stronger than the airspeed along V_f leaves no ground speed: the impact heading
+    assert approach_bearing_deg(30.0, -30.0, 10.0, np.array([-20.0, -20.0, 0.0]), np.zeros(3)) == 30.0
+    assert approach_bearing_deg(-30.0, -30.0, 22.0, np.zeros(3), np.array([math.nan, 0.0, 0.0])) == 330.0
+
+
+def test_a_dive_that_does_not_close_goes_round_and_the_switch_is_armed_again():
+    """In Phase 3 the range to the estimate may shrink or hold; once it has grown go_around_m above its least
+    since the switch, the mission goes back to Phase 2 (one go-around counted, the dwell and minimum loiter
+    afresh); go_around_m: none keeps Phase 3; without a ring there is no loiter to go back to."""
+    ship = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
+    ring = Ring(500.0, 500.0)
+    sw = SwitchConfig(go_around_m=100.0)
+    vel = np.array([22.0, 0.0, 0.0])
+
+    def fly(ranges, sw=sw, ring=ring):
+        state, log = PhaseState(3, 0.0), []
+        for k, r in enumerate(ranges):
+            state, events = next_phase(state, 100.0 + k, np.array([0.0, -r, 0.0]), vel, 500.0, ship, True, ring,
+                                       sw, 30.0, "nmpc")
+            log += events
+        return state, log
+
+    state, log = fly([600.0, 550.0, 560.0, 640.0, 649.0])  # 99 m above the least (550 m)
+    assert state.phase == 3 and state.closest_m == 550.0 and not log
+    state, log = fly([600.0, 550.0, 560.0, 640.0, 651.0])
+    assert state == PhaseState(2, 104.0, go_arounds=1)
+    assert log and log[0].startswith("phase 3 -> 2 at t = 104.00 s: the dive is not closing (range 651 m, 101 m")
+    assert fly([600.0, 550.0, 900.0], sw=SwitchConfig(go_around_m=None))[0].phase == 3
+    assert fly([600.0, 550.0, 900.0], ring=None)[0].phase == 3
+    # back in Phase 2 the switch waits for the dwell and the minimum loiter again
+    again, _ = next_phase(state, 105.0, np.array([0.0, -500.0, 500.0]), vel, 500.0, ship, True, ring,
+                          SwitchConfig(go_around_m=100.0, approach_window_deg=None), 30.0)
+    assert again.phase == 2 and again.go_arounds == 1
+
+
+def test_the_window_is_placed_by_the_closing_bearing_after_a_go_around():
+    """approach_from: the impact heading always, the closing bearing always, or (the default) the impact heading
+    until a dive has gone round and the closing bearing after it; the impact heading without an estimate."""
+    bp = BpngConfig(impact_heading_deg=64.35, impact_flight_path_deg=-58.5, airspeed_m_s=22.0)
+    ship_vel = 9.9 * np.array([math.sin(math.radians(84.5)), math.cos(math.radians(84.5)), 0.0])
+    ship = TargetState(0.0, "estimator", np.zeros(3), ship_vel, 0.1, 0.0)
+    unknown = TargetState(0.0, "none", np.full(3, np.nan), np.full(3, np.nan), math.nan, 0.0)
+    wind = np.array([-4.33, 5.30, 0.0])
+    closing = approach_bearing_deg(64.35, -58.5, 22.0, wind, ship_vel)
+    first, later = PhaseState(2, 0.0), PhaseState(2, 0.0, go_arounds=1)
+    default = SwitchConfig()
+    assert default.approach_from == "closing_after_go_around"
+    assert window_bearing_deg(first, default, bp, wind, ship) == 64.35
+    assert window_bearing_deg(later, default, bp, wind, ship) == closing
+    assert window_bearing_deg(later, default, bp, wind, unknown) == 64.35
+    assert window_bearing_deg(first, SwitchConfig(approach_from="closing"), bp, wind, ship) == closing
+    assert window_bearing_deg(later, SwitchConfig(approach_from="impact_heading"), bp, wind, ship) == 64.35
