@@ -181,6 +181,7 @@ def test_a_fast_ship_and_a_steep_dive_into_a_headwind_move_the_approach_round():
     # a wind stronger than the airspeed along V_f leaves no ground speed: the impact heading
     assert approach_bearing_deg(30.0, -30.0, 10.0, np.array([-20.0, -20.0, 0.0]), np.zeros(3)) == 30.0
     assert approach_bearing_deg(-30.0, -30.0, 22.0, np.zeros(3), np.array([math.nan, 0.0, 0.0])) == 330.0
+    assert approach_bearing_deg(-30.0, -30.0, 22.0, np.full(3, np.nan), np.zeros(3)) == 330.0  # no wind estimate
 
 
 def test_a_dive_that_does_not_close_goes_round_and_the_switch_is_armed_again():
