@@ -294,6 +294,14 @@ class UkfConfig(StrictModel):
                     "estimate's reported position std through the latest view's geometry (a consider "
                     "covariance), so the std says how far off a ship unlike the class can be; 0: the class is "
                     "exact")
+    box_centre_height_std_m: float = Field(
+        2.2, ge=0, le=100,
+        description="1-sigma error of the height on the ship that the corrected box centre stands for, m: the "
+                    "real ship's height may be off the class's by up to +-30 % (25 m: +-7.5 m) and the box "
+                    "centre's height by half of that, 7.5 / (2 sqrt 3) = 2.2 m. A point seen that much higher or "
+                    "lower meets the target plane displaced along the line of sight by the height over tan of "
+                    "the elevation: metres from a steep view, tens of metres from 4 km at 15 deg. Not fused; "
+                    "carried into the reported position std like box_centre_bias_frac; 0: none")
     consider_heading_spread: bool = Field(
         True,
         description="add to the reported position std the shape correction's spread over the headings the ship "

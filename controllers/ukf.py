@@ -39,8 +39,13 @@ width and height (px) and ``J`` the pixel-to-plane Jacobian of that view
 shape correction is a weighted mean over the headings it may have, and the
 detection carries the spread of that mean (``DetectionFix.offset_spread_px2``,
 px^2): another error common to consecutive frames, added to ``diag(s^2)``
-(``consider_heading_spread``). The state and the filter's covariance
-(``cov``) are unchanged by either.
+(``consider_heading_spread``). A third such error is the height on the ship
+the corrected box centre stands for (the real ship's height is not the
+class's): a point seen higher or lower meets the target plane displaced along
+the line of sight by its height error over tan of the elevation, so far out
+at a shallow elevation it dominates (``box_centre_height_std_m``:
+:func:`height_consider_cov`). The state and the filter's covariance (``cov``)
+are unchanged by any of them.
 
 Interfaces: :class:`UkfTargetEstimator` implements the flight software's
 estimator Protocol (``controllers.blocks.TargetEstimator``), so a second filter
@@ -73,7 +78,7 @@ from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, Fu
 from fwsim.messages import Measurements
 
 __all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "UnscentedCore", "UkfTargetEstimator",
-           "fix_from_measurements"]
+           "fix_from_measurements", "height_consider_cov"]
 
 MIN_DEPTH_M = 1.0  # process model: camera-frame depth of a sigma point is floored here
 _MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floored here (|d_w| >= 1)
@@ -477,6 +482,19 @@ def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: fl
     return np.stack([cols[0] / fx, cols[1] / fy], axis=1)
 
 
+def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
+    """Horizontal covariance (2 x 2, m^2) on the target plane of an error ``height_std_m`` in the height of the
+    point seen through the normalised pixel (x1, x2): along the ray ``d = R [x1, x2, 1]`` a point ``dz`` higher
+    meets the plane ``dz / -d_z`` further on, horizontally ``dz d_h / -d_z`` (``|d_h| / -d_z`` = 1 / tan of the
+    elevation), so the covariance is ``height_std^2 g g^T`` with ``g = d_h / -d_z``; zeros where the ray does
+    not come down."""
+    d = np.asarray(R_enu_from_cam, dtype=float) @ np.array([x1, x2, 1.0])
+    if not d[2] < -1e-9:
+        return np.zeros((2, 2))
+    g = d[:2] / -d[2]
+    return (height_std_m * height_std_m) * np.outer(g, g)
+
+
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
     """:func:`controllers.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the plane)."""
     R = R_enu_from_cam
@@ -714,7 +732,8 @@ class UkfTargetEstimator:
         spread = np.asarray(fix.offset_spread_px2, dtype=float) if self.cfg.consider_heading_spread else None
         if spread is not None and not (spread.shape == (2, 2) and np.all(np.isfinite(spread)) and spread.any()):
             spread = None
-        if (k <= 0.0 and spread is None) or b.shape != (4,) or not np.all(np.isfinite(b)):
+        sh = self.cfg.box_centre_height_std_m
+        if (k <= 0.0 and spread is None and sh <= 0.0) or b.shape != (4,) or not np.all(np.isfinite(b)):
             return np.zeros((2, 2))
         cam = self.camera
         x1, x2 = (float(a) for a in cam.normalised(fix.u_px, fix.v_px))
@@ -724,8 +743,12 @@ class UkfTargetEstimator:
             return np.zeros((2, 2))
         s = np.array([k * (b[2] - b[0]), k * (b[3] - b[1])])
         if spread is None:
-            return (J * (s * s)) @ J.T
-        return J @ (np.diag(s * s) + spread) @ J.T
+            cov = (J * (s * s)) @ J.T
+        else:
+            cov = J @ (np.diag(s * s) + spread) @ J.T
+        if sh > 0.0:
+            cov = cov + height_consider_cov(x1, x2, motion.R_enu_from_cam, sh)
+        return cov
 
     def status(self, t_s: float) -> EstimatorStatus:
         """The counters since the start, as the log's ``/fsw/estimator_status``."""

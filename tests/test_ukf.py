@@ -415,7 +415,7 @@ def test_the_box_centre_bias_widens_the_reported_std_only():
     runs = {}
     for k in (0.0, 0.1):
         rng = np.random.default_rng(11)
-        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=k))
+        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=k, box_centre_height_std_m=0.0))
         for i in range(90):
             meas = truth.sample(i / 30.0, rng)
             meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
@@ -433,6 +433,56 @@ def test_the_box_centre_bias_widens_the_reported_std_only():
     assert e1.pos_std_m[2] == e0.pos_std_m[2] and np.all(e1.pos_std_m[:2] > e0.pos_std_m[:2])
 
 
+def test_the_height_consider_term_is_the_planes_displacement_of_a_point_seen_higher():
+    """height_consider_cov against finite differences: a point dz above the plane, seen from the camera, is where
+    its ray meets the plane displaced by g dz (|g| = 1 / tan of the elevation): the covariance is
+    height_std^2 g g^T; nothing for a ray that does not come down."""
+    from controllers.ukf import height_consider_cov
+    cam_pos = np.array([-3800.0, 900.0, 1000.0])
+    for target in (np.array([0.0, 0.0, 0.0]), np.array([-3400.0, 1100.0, 0.0]), np.array([-3700.0, 920.0, 0.0])):
+        rel = target - cam_pos
+        # a camera looking straight at the target: its optical axis (camera z) along rel
+        z = rel / np.linalg.norm(rel)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z], axis=1)  # columns: camera x, y, z in ENU
+        dz = 1e-3
+        p = target + np.array([0.0, 0.0, dz])
+        d = p - cam_pos
+        on_plane = cam_pos + d * (cam_pos[2] - target[2]) / -d[2]
+        g = (on_plane[:2] - target[:2]) / dz
+        c = R.T @ d
+        C = height_consider_cov(c[0] / c[2], c[1] / c[2], R, 2.0)
+        np.testing.assert_allclose(C, 4.0 * np.outer(g, g), rtol=1e-5)
+        elev = math.atan2(-rel[2], np.hypot(rel[0], rel[1]))
+        assert math.sqrt(np.trace(C)) == pytest.approx(2.0 / math.tan(elev), rel=1e-5)
+    assert not height_consider_cov(0.0, 0.0, np.eye(3), 2.0).any()  # looking up
+
+
+def test_the_height_error_widens_the_reported_std_along_the_line_of_sight_only():
+    """box_centre_height_std_m goes into the reported std (not the state, not the filter's covariance) as
+    height_consider_cov of the latest detection's view, beside the box fraction."""
+    from controllers.ukf import height_consider_cov
+    truth = OrbitTruth()
+    runs = {}
+    for sh in (0.0, 2.2):
+        rng = np.random.default_rng(11)
+        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.0, box_centre_height_std_m=sh))
+        for i in range(60):
+            meas = truth.sample(i / 30.0, rng)
+            meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
+                                                                  meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
+            motion = CameraMotion.from_measurements(meas, MOUNT)
+            est = ukf.step(meas, motion)
+        runs[sh] = (est, ukf.x, ukf.cov, meas, motion)
+    (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[2.2]
+    assert np.array_equal(x0, x1) and np.array_equal(P0, P1)
+    n1, n2 = (float(a) for a in CAM.normalised(meas.det_u_px, meas.det_v_px))
+    C = height_consider_cov(n1, n2, motion.R_enu_from_cam, 2.2)
+    np.testing.assert_allclose(e1.pos_std_m[:2] ** 2, np.diag(P0)[2:4] + np.diag(C), rtol=1e-9)
+    assert np.diag(C).max() > 0.1 and e1.pos_std_m[2] == e0.pos_std_m[2]
+
+
 def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only():
     """A fix's ``offset_spread_px2`` (the shape correction's spread over the headings the ship may have) goes
     into the reported position std through the view's geometry, beside box_centre_bias_frac:
@@ -444,7 +494,8 @@ def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only
     runs = {}
     for name, spread, use in (("none", np.zeros((2, 2)), True), ("spread", S, True), ("off", S, False)):
         rng = np.random.default_rng(11)
-        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.1, consider_heading_spread=use))
+        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.1, consider_heading_spread=use,
+                                                box_centre_height_std_m=0.0))
         for i in range(60):
             meas = truth.sample(i / 30.0, rng)
             meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
