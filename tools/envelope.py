@@ -63,7 +63,7 @@ def main(argv=None) -> int:
             return 2
     table = verdict(rows, args.by)
     print(f"| {args.by} | runs | " + " | ".join(f"{name} (bar {100 * bar:.0f} %)" for name, bar in BARS)
-          + " | estimate within 2 std, median run (honest: ~86 %) |")
+          + " | estimate within 2 std, median run (honest: 86 % for a round error, up to 95 % for a long thin one) |")
     print("|---|---|" + "---|" * (len(BARS) + 1))
     ok = True
     for name, n, shares, cover in table:
