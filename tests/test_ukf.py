@@ -406,23 +406,27 @@ def test_ground_from_pixel_jacobian_against_finite_differences():
     assert np.all(np.isnan(ground_from_pixel_jacobian(0.0, -2.0, np.eye(3), 100.0, 0.0, CAM.fx, CAM.fy)))
 
 
+def _fly_with_an_80_by_30_box(cfg: UkfConfig, n: int):
+    """The UKF on ``n`` frames of the orbit (seed 11), each detection with an 80 x 30 px box round its centre:
+    (the last estimate, state, covariance, measurements, camera motion)."""
+    truth, rng = OrbitTruth(), np.random.default_rng(11)
+    ukf = UkfTargetEstimator(CAM, cfg)
+    for i in range(n):
+        meas = truth.sample(i / 30.0, rng)
+        meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
+                                                              meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
+        motion = CameraMotion.from_measurements(meas, MOUNT)
+        est = ukf.step(meas, motion)
+    return est, ukf.x, ukf.cov, meas, motion
+
+
 def test_the_box_centre_bias_widens_the_reported_std_only():
     """box_centre_bias_frac: the estimate's position std carries the systematic box-centre error through the
     latest view's geometry (J diag(s^2) J^T, s a fraction of the box's size); the state and the filter's own
     covariance are those of box_centre_bias_frac = 0."""
     from controllers.ukf import ground_from_pixel_jacobian
-    truth = OrbitTruth()
-    runs = {}
-    for k in (0.0, 0.1):
-        rng = np.random.default_rng(11)
-        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=k, box_centre_height_std_m=0.0))
-        for i in range(90):
-            meas = truth.sample(i / 30.0, rng)
-            meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
-                                                                  meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
-            motion = CameraMotion.from_measurements(meas, MOUNT)
-            est = ukf.step(meas, motion)
-        runs[k] = (est, ukf.x, ukf.cov, meas, motion)
+    runs = {k: _fly_with_an_80_by_30_box(UkfConfig(box_centre_bias_frac=k, box_centre_height_std_m=0.0), 90)
+            for k in (0.0, 0.1)}
     (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[0.1]
     assert np.array_equal(x0, x1) and np.array_equal(P0, P1)
     np.testing.assert_allclose(e0.pos_std_m, np.sqrt(np.diag(P0)[2:5]))
@@ -463,18 +467,8 @@ def test_the_height_error_widens_the_reported_std_along_the_line_of_sight_only()
     """box_centre_height_std_m goes into the reported std (not the state, not the filter's covariance) as
     height_consider_cov of the latest detection's view, beside the box fraction."""
     from controllers.ukf import height_consider_cov
-    truth = OrbitTruth()
-    runs = {}
-    for sh in (0.0, 2.2):
-        rng = np.random.default_rng(11)
-        ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.0, box_centre_height_std_m=sh))
-        for i in range(60):
-            meas = truth.sample(i / 30.0, rng)
-            meas = dataclasses.replace(meas, det_bbox_px=np.array([meas.det_u_px - 40.0, meas.det_v_px - 15.0,
-                                                                  meas.det_u_px + 40.0, meas.det_v_px + 15.0]))
-            motion = CameraMotion.from_measurements(meas, MOUNT)
-            est = ukf.step(meas, motion)
-        runs[sh] = (est, ukf.x, ukf.cov, meas, motion)
+    runs = {sh: _fly_with_an_80_by_30_box(UkfConfig(box_centre_bias_frac=0.0, box_centre_height_std_m=sh), 60)
+            for sh in (0.0, 2.2)}
     (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[2.2]
     assert np.array_equal(x0, x1) and np.array_equal(P0, P1)
     n1, n2 = (float(a) for a in CAM.normalised(meas.det_u_px, meas.det_v_px))
