@@ -114,7 +114,7 @@ def _outcome(row: dict) -> str:
     if row.get("status") != "completed":
         return f"{row.get('status')}: {str(row.get('error') or row.get('reason') or '')[:80]}"
     if row.get("hit") == 1.0:
-        return "hit"
+        return "hit after going round" if (row.get("go_arounds") or 0) > 0 else "hit"
     reason = str(row.get("reason") or "")
     return "no hit: " + ("sea contact" if reason.startswith("sea contact") else reason[:80])
 

@@ -58,6 +58,11 @@ def test_summary_statistics_by_hand():
     assert summarise(_rows() + [never]).estimator_error_m["share_8m"] == pytest.approx(3 / 5)
     assert rep.within_3m_3deg == pytest.approx(3 / 6)  # r0, r1, r2 (r3 misses by 4 m; r4, r5 no hit)
     assert rep.outcomes == {"hit": 4, "no hit: duration reached": 1, "failed: AirframeError: trim failed": 1}
+    # a dive that went round (switch.go_around_m) and then hit is told apart
+    rows = _rows()
+    rows[0] = dict(rows[0], go_arounds=1.0)
+    assert summarise(rows).outcomes == {"hit": 3, "hit after going round": 1, "no hit: duration reached": 1,
+                                        "failed: AirframeError: trim failed": 1}
     assert [r["id"] for r in worst_runs(_rows(), 3)] == ["r5", "r4", "r3"]
 
 
