@@ -344,8 +344,8 @@ class Bpng:
         v = np.asarray(uav_vel_enu, dtype=float)
         q = self.aim_point(target_pos_enu) if aim_enu is None else np.asarray(aim_enu, dtype=float)
         vq = np.asarray(target_vel_enu, dtype=float)
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(q))
-                and np.all(np.isfinite(vq))):
+        if not (np.isfinite(p).all() and np.isfinite(v).all() and np.isfinite(q).all()
+                and np.isfinite(vq).all()):
             nan3 = np.full(3, np.nan)
             return (AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=np.zeros(3)),
                     BpngStatus(t_s, math.nan, math.nan, nan3, math.nan, nan3, nan3, np.zeros(3), aim_enu_m=nan3))

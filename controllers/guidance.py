@@ -92,7 +92,7 @@ class NmpcLoiter:
 
         t, nmpc = nav.t_s, self.nmpc
         v_q = target.vel_enu_m_s
-        if self.cfg.air_relative and np.all(np.isfinite(nav.wind_enu_m_s)):
+        if self.cfg.air_relative and np.isfinite(nav.wind_enu_m_s).all():
             v_q = v_q - nav.wind_enu_m_s  # the model flies in the air: the target drifts by minus the wind
         res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, v_q)
         self._cmd = nmpc.command(res)

@@ -461,7 +461,7 @@ class Ibvs:
         R_fc = R_frd_from_cam(pan, tilt)
         R_cf = R_fc.T
         w_p = np.asarray(meas.body_rates_frd_rad_s, dtype=float)
-        if not np.all(np.isfinite(w_p)):
+        if not np.isfinite(w_p).all():
             w_p = np.zeros(3)
         v_rel, z = self._relative_velocity(meas, target_vel_enu_m_s, depth_m, mount_offset_frd_m, R_cf, w_p)
 
@@ -488,11 +488,11 @@ class Ibvs:
         if depth_m is not None and math.isfinite(float(depth_m)) and float(depth_m) > 0.0:
             vel = np.asarray(meas.vel_enu_m_s, dtype=float)
             eul = np.asarray(meas.euler_ned_rad, dtype=float)
-            if np.all(np.isfinite(vel)) and np.all(np.isfinite(eul)):
+            if np.isfinite(vel).all() and np.isfinite(eul).all():
                 R_ef = dcm_enu_from_frd(eul)
                 v_c = vel + R_ef @ cross3(w_p, mount_offset_frd_m)
                 v_q = np.zeros(3) if target_vel_enu_m_s is None else np.asarray(target_vel_enu_m_s, dtype=float)
-                if np.all(np.isfinite(v_q)):
+                if np.isfinite(v_q).all():
                     v_rel = R_cf @ (R_ef.T @ (v_q - v_c))
         return v_rel, (float(depth_m) if v_rel is not None else math.nan)
 

@@ -76,7 +76,7 @@ class Navigation:
             return
         w = np.asarray(v_fix, dtype=float) - meas.airspeed_m_s * R_enu_from_frd[:, 0]
         w[2] = 0.0
-        if not np.all(np.isfinite(w)):
+        if not np.isfinite(w).all():
             return
         self.wind_enu_m_s = self.wind_enu_m_s + k * (w - self.wind_enu_m_s)
 
@@ -87,8 +87,8 @@ class Navigation:
             return meas
         t = meas.t_s
         v = np.asarray(meas.vel_enu_m_s, dtype=float)
-        if self.cfg.turn_velocity and np.all(np.isfinite(meas.body_rates_frd_rad_s)) \
-                and np.all(np.isfinite(meas.euler_ned_rad)):
+        if self.cfg.turn_velocity and np.isfinite(meas.body_rates_frd_rad_s).all() \
+                and np.isfinite(meas.euler_ned_rad).all():
             R = dcm_enu_from_frd(meas.euler_ned_rad)
             if meas.nav_t_s != self._fix_t:
                 self._update_wind(v, R, meas)

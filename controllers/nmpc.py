@@ -536,7 +536,7 @@ class Nmpc:
             h = self._hessian(Hs, HN)
             dw = self._qp(h, g, A, lbc - c, ubc - c, lbw - w, ubw - w)[0]
             st = self._qp.stats()
-            if not st.get("success", False) or not np.all(np.isfinite(dw)):
+            if not st.get("success", False) or not np.isfinite(dw).all():
                 return w, n, False, "qp:" + str(st.get("return_status", "failed"))
             w = w + dw
             if converge and np.max(np.abs(dw[iu])) < self.cfg.cold_start_tol:
@@ -551,7 +551,7 @@ class Nmpc:
         sol = self._nlp(**kw)
         st = self._nlp.stats()
         w_new = np.asarray(sol["x"]).ravel()
-        ok = bool(st.get("success", False)) and np.all(np.isfinite(w_new))
+        ok = bool(st.get("success", False)) and np.isfinite(w_new).all()
         return w_new, int(st.get("iter_count", -1)), ok, "ok" if ok else "nlp:" + str(st.get("return_status"))
 
     # ------------------------------------------------------------------ solve
