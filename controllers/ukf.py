@@ -478,8 +478,17 @@ def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: fl
     h = cam_z_m - plane_z_m
     if not (d[2] < -1e-9 and h > 0.0):
         return np.full((3, 2), np.nan)
-    cols = [h * (R[:, i] / -d[2] + d * R[2, i] / (d[2] * d[2])) for i in (0, 1)]
-    return np.stack([cols[0] / fx, cols[1] / fy], axis=1)
+    return np.array(_ground_jacobian_rows(R.tolist(), d.tolist(), h, fx, fy, 3))
+
+
+def _ground_jacobian_rows(R: list, d: list, h: float, fx: float, fy: float, rows: int) -> list[list[float]]:
+    """The first ``rows`` rows of :func:`ground_from_pixel_jacobian` (``R`` and the ray ``d`` as nested lists,
+    the ray coming down, ``h > 0``): ``h (R[j, i] / -d_z + d_j R[2, i] / d_z^2) / f_i``, element by element
+    (Python floats: a 2 x 2 block costs less than one numpy call on it)."""
+    nd, dd = -d[2], d[2] * d[2]
+    r2x, r2y = R[2][0], R[2][1]
+    return [[h * (R[j][0] / nd + d[j] * r2x / dd) / fx, h * (R[j][1] / nd + d[j] * r2y / dd) / fy]
+            for j in range(rows)]
 
 
 def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
@@ -491,8 +500,16 @@ def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: floa
     d = np.asarray(R_enu_from_cam, dtype=float) @ np.array([x1, x2, 1.0])
     if not d[2] < -1e-9:
         return np.zeros((2, 2))
-    g = d[:2] / -d[2]
-    return (height_std_m * height_std_m) * np.outer(g, g)
+    return np.array(_height_cov(d.tolist(), height_std_m))
+
+
+def _height_cov(d: list, height_std_m: float) -> list[list[float]]:
+    """:func:`height_consider_cov` of the ray ``d`` (a list, coming down), element by element: ``s^2 g_i g_j``,
+    ``g = d_h / -d_z``."""
+    nd = -d[2]
+    g0, g1 = d[0] / nd, d[1] / nd
+    s2 = height_std_m * height_std_m
+    return [[s2 * (g0 * g0), s2 * (g0 * g1)], [s2 * (g1 * g0), s2 * (g1 * g1)]]
 
 
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
@@ -500,6 +517,11 @@ def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane
     R = R_enu_from_cam
     dz = float(R[2, 0]) * x1 + float(R[2, 1]) * x2 + float(R[2, 2])
     return -dz / math.sqrt(x1 * x1 + x2 * x2 + 1.0) >= _CAMERA_MIN_RAY_DOWN and cam_z_m - plane_z_m > 0.0
+
+
+def _finite_and_any(values: list[float]) -> bool:
+    """All finite and not all zero (``np.isfinite(a).all() and a.any()`` of the array they came from)."""
+    return all(map(math.isfinite, values)) and any(values)
 
 
 def fix_from_measurements(meas: Measurements) -> DetectionFix:
@@ -728,26 +750,37 @@ class UkfTargetEstimator:
         ``box_centre_bias_frac`` of the box's width and height, plus (``consider_heading_spread``) the shape
         correction's spread over the headings the ship may have (``fix.offset_spread_px2``), seen from this
         detection's view (zero without a box or where the ray misses the plane)."""
-        k, b = self.cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
-        spread = np.asarray(fix.offset_spread_px2, dtype=float) if self.cfg.consider_heading_spread else None
-        if spread is not None and not (spread.shape == (2, 2) and np.all(np.isfinite(spread)) and spread.any()):
+        cfg = self.cfg
+        k, b = cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
+        spread = np.asarray(fix.offset_spread_px2, dtype=float) if cfg.consider_heading_spread else None
+        if spread is not None and not (spread.shape == (2, 2) and _finite_and_any(spread.ravel().tolist())):
             spread = None
-        sh = self.cfg.box_centre_height_std_m
-        if (k <= 0.0 and spread is None and sh <= 0.0) or b.shape != (4,) or not np.all(np.isfinite(b)):
+        sh = cfg.box_centre_height_std_m
+        box = b.tolist() if b.shape == (4,) else None
+        if (k <= 0.0 and spread is None and sh <= 0.0) or box is None or not all(map(math.isfinite, box)):
             return np.zeros((2, 2))
+        # the view's geometry as ground_from_pixel_jacobian (horizontal rows) and height_consider_cov, from
+        # one ray, on Python floats
         cam = self.camera
-        x1, x2 = (float(a) for a in cam.normalised(fix.u_px, fix.v_px))
-        J = ground_from_pixel_jacobian(x1, x2, motion.R_enu_from_cam, motion.height_m,
-                                       self.cfg.target_plane_height_m, cam.fx, cam.fy)[:2]
-        if not np.all(np.isfinite(J)):
+        x1, x2 = (float(fix.u_px) - cam.cx) / cam.fx, (float(fix.v_px) - cam.cy) / cam.fy  # cam.normalised
+        R = np.asarray(motion.R_enu_from_cam, dtype=float)
+        d = (R @ np.array([x1, x2, 1.0])).tolist()
+        h = motion.height_m - cfg.target_plane_height_m
+        if not (d[2] < -1e-9 and h > 0.0):  # the ray does not come down to the plane
             return np.zeros((2, 2))
-        s = np.array([k * (b[2] - b[0]), k * (b[3] - b[1])])
+        J = _ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
+        (j00, j01), (j10, j11) = J
+        if not (math.isfinite(j00) and math.isfinite(j01) and math.isfinite(j10) and math.isfinite(j11)):
+            return np.zeros((2, 2))
+        s0, s1 = k * (box[2] - box[0]), k * (box[3] - box[1])
+        s00, s11 = s0 * s0, s1 * s1
+        J = np.array(J)
         if spread is None:
-            cov = (J * (s * s)) @ J.T
+            cov = np.array([[j00 * s00, j01 * s11], [j10 * s00, j11 * s11]]) @ J.T  # (J diag(s^2)) J^T
         else:
-            cov = J @ (np.diag(s * s) + spread) @ J.T
+            cov = J @ (np.array([[s00, 0.0], [0.0, s11]]) + spread) @ J.T
         if sh > 0.0:
-            cov = cov + height_consider_cov(x1, x2, motion.R_enu_from_cam, sh)
+            cov += _height_cov(d, sh)
         return cov
 
     def status(self, t_s: float) -> EstimatorStatus:
@@ -775,14 +808,14 @@ class UkfTargetEstimator:
         return self.estimate() if self._initialised else None
 
     def estimate(self) -> TargetEstimate:
-        x, P = self._core._x, self._core._P  # read only (what is returned is copied)
-        var = np.diag(P).copy()
-        var[2:4] += np.diag(self._consider)  # the box centre's systematic error, in the reported std only
-        sd = np.sqrt(np.maximum(var, 0.0))
-        innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
         if not self._initialised:
             nan3 = np.full(3, np.nan)
             return TargetEstimate(self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan,
                                   np.full(2, np.nan))
+        x, P = self._core._x, self._core._P  # read only (what is returned is copied)
+        var = P.diagonal().copy()
+        var[2:4] += self._consider.diagonal()  # the box centre's systematic error, in the reported std only
+        sd = np.sqrt(np.maximum(var, 0.0))
+        innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
         return TargetEstimate(self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(),
                               float(x[0]), float(x[1]), innov)
