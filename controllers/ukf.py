@@ -164,7 +164,7 @@ class UnscentedCore:
         U = _safe_cholesky(self._scale * P)
         sigmas = np.empty((2 * n + 1, n))
         sigmas[0] = x
-        np.subtract(x, -U, out=sigmas[1:n + 1])
+        np.add(x, U, out=sigmas[1:n + 1])  # x - (-U), the same in IEEE arithmetic
         np.subtract(x, U, out=sigmas[n + 1:])
         return sigmas
 
@@ -233,7 +233,7 @@ class UnscentedCore:
     def _guard(self) -> None:
         if self._guarded:  # checked since it last changed (symmetrising a symmetric P changes nothing)
             return
-        if not np.isfinite(self._x).all():
+        if not all(map(math.isfinite, self._x.tolist())):  # (a short vector: cheaper on floats than in numpy)
             raise FloatingPointError("UKF state is not finite")
         P = 0.5 * (self._P + self._P.T)
         ok = bool(np.isfinite(P).all()) and _dpotrf(P, lower=1, clean=0)[1] == 0
@@ -360,11 +360,22 @@ class _CompiledProcess:
     def __call__(self, S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
         n = max(1, int(math.ceil(dt / max_step - 1e-9)))
         h = dt / n
-        R = np.asarray(R_ec0, dtype=float).T.ravel()  # column-major, as CasADi stores it
-        X = np.asarray(S, dtype=float).T.ravel()
+        # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
+        step = self._step
+        X, h_in, t0, r, R, V, w = step.inputs
+        X.reshape(self.dim_x, self.m)[:] = np.asarray(S, dtype=float).T
+        h_in[0] = h
+        r[:] = r_c0
+        R.reshape(3, 3)[:] = np.asarray(R_ec0, dtype=float).T
+        V[:] = V_c
+        w[:] = omega
+        out = step.outputs[0]
         for k in range(n):
-            X = self._step(X, h, k * h, r_c0, R, V_c, omega)[0]
-        return X.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
+            if k:
+                X[:] = out
+            t0[0] = k * h
+            step._eval()
+        return out.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
 
 
 def _sx_exp_so3(w, tau):
@@ -441,10 +452,19 @@ class _CompiledUpdate:
 
     def __call__(self, sigmas, x, P, z, r, f_u, f_v, c_u, c_v, R_ec, cam_h, plane_z):
         """(innovation (5,), chi-square over the pixel rows, updated x, updated P)."""
-        y, nis, x_new, P_new = self._fun(np.asarray(sigmas).T.ravel(), x, np.asarray(P).T.ravel(), z, r,
-                                         (f_u, f_v, c_u, c_v), np.asarray(R_ec, dtype=float).T.ravel(),
-                                         (cam_h, plane_z))
-        n = self._n
+        # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
+        fun, n = self._fun, self._n
+        X_in, x_in, P_in, z_in, r_in, k, R, hc = fun.inputs
+        X_in.reshape(n, -1)[:] = np.asarray(sigmas).T
+        x_in[:] = x
+        P_in.reshape(n, n)[:] = np.asarray(P).T
+        z_in[:] = z
+        r_in[:] = r
+        k[0], k[1], k[2], k[3] = f_u, f_v, c_u, c_v
+        R.reshape(3, 3)[:] = np.asarray(R_ec, dtype=float).T
+        hc[0], hc[1] = cam_h, plane_z
+        fun._eval()
+        y, nis, x_new, P_new = fun.outputs
         return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy()
 
 
