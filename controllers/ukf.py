@@ -85,6 +85,7 @@ _MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floo
 _VAR_FLOOR = 1e-12  # numerical reset: smallest variance kept on the diagonal
 _INIT_VERTICAL_POS_STD_M = 1.0
 _INIT_VERTICAL_VEL_STD_M_S = 0.5
+_NAN2 = np.full(2, np.nan)  # (copied: an estimate's innovation without an update at its time)
 
 
 def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
@@ -734,8 +735,8 @@ class UkfTargetEstimator:
         rng = math.sqrt(rel.dot(rel))
         h = max(motion.height_m - c.target_plane_height_m, 1.0)
         s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
-        r = np.array([c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2])
-        z = np.array([u, v, *motion.pos_enu_m])
+        r = [c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2]  # (copied into the compiled update's input)
+        z = [u, v, *motion.pos_enu_m]
         # the chi-square test on the pixel rows is always computed (for the log); it rejects only while
         # the gate is on and has not rejected innovation_gate_max_rejects detections in a row
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
@@ -828,14 +829,17 @@ class UkfTargetEstimator:
         return self.estimate() if self._initialised else None
 
     def estimate(self) -> TargetEstimate:
+        return TargetEstimate(*self._estimate_fields())
+
+    def _estimate_fields(self) -> tuple:
+        """The fields of :meth:`estimate`, in order (a subclass's estimate appends its own)."""
         if not self._initialised:
             nan3 = np.full(3, np.nan)
-            return TargetEstimate(self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan,
-                                  np.full(2, np.nan))
+            return self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan, np.full(2, np.nan)
         x, P = self._core._x, self._core._P  # read only (what is returned is copied)
         var = P.diagonal().copy()
         var[2:4] += self._consider.diagonal()  # the box centre's systematic error, in the reported std only
         sd = np.sqrt(np.maximum(var, 0.0))
-        innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
-        return TargetEstimate(self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(),
-                              float(x[0]), float(x[1]), innov)
+        innov = self._innov.copy() if self._innov_t == self._t else _NAN2.copy()
+        return (self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(), float(x[0]), float(x[1]),
+                innov)
