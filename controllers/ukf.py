@@ -86,6 +86,7 @@ _VAR_FLOOR = 1e-12  # numerical reset: smallest variance kept on the diagonal
 _INIT_VERTICAL_POS_STD_M = 1.0
 _INIT_VERTICAL_VEL_STD_M_S = 0.5
 _NAN2 = np.full(2, np.nan)  # (copied: an estimate's innovation without an update at its time)
+_NAN2.setflags(write=False)
 
 
 def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
