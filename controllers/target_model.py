@@ -287,7 +287,9 @@ class ShapeHeading:
         self.courses_enu_rad = 2.0 * math.pi * np.arange(cfg.headings) / cfg.headings
         lo, hi = cfg.size_bias_range
         self.size_biases = np.linspace(lo, hi, cfg.size_bias_steps) if hi > lo else np.array([lo])
-        self._loglik_bias = np.zeros((cfg.headings, len(self.size_biases), 2))  # heading, bias, (width, height)
+        # bias, heading, (width, height): bias-major, so that the marginalisation's reductions over the biases
+        # run down whole rows
+        self._loglik_bias = np.zeros((len(self.size_biases), cfg.headings, 2))
         self.loglik = np.zeros(cfg.headings)  # marginalised over the size bias
         self.updates = 0
         self._last_t = -math.inf
@@ -319,10 +321,10 @@ class ShapeHeading:
             self._course = None if course_enu_rad is None else float(course_enu_rad)
         size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
-        scaled = size_pred[:, None, :] * (1.0 + self.size_biases)[None, :, None]  # (headings, biases, 2)
+        scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
         r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
         self._loglik_bias -= np.log1p(0.5 * r * r)
-        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
+        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
         self.updates += 1
         self._weights = self._axis = None
         self._last_t = t_s
@@ -337,9 +339,9 @@ class ShapeHeading:
         i = math.floor(s)
         f = s - i
         # evidence that was at heading k - s now belongs to heading k
-        a = np.roll(self._loglik_bias, i, axis=0)
-        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * np.roll(self._loglik_bias, i + 1, axis=0)
-        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
+        a = np.roll(self._loglik_bias, i, axis=1)
+        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * np.roll(self._loglik_bias, i + 1, axis=1)
+        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
         self._weights = self._axis = None
 
     def weights(self) -> np.ndarray:
@@ -385,6 +387,24 @@ class ShapeHeading:
         """How far (rad, 0..pi/2) a direction lies off the ship's axis."""
         d = (course_enu_rad - self.axis_enu_rad()) % math.pi
         return min(d, math.pi - d)
+
+
+def _logsumexp_rows(a: np.ndarray) -> np.ndarray:
+    """``scipy.special.logsumexp(a, axis=0)``: for finite ``a`` its very operations (the same numbers, bit for
+    bit: the largest entries of a column taken out, counted and added back in log) without its array-API
+    dispatch, which costs most of its time on the posterior's few thousand entries; else scipy's own."""
+    if np.isfinite(a).all():
+        a_max = a.max(axis=0)
+        top = a == a_max
+        m = top.sum(axis=0, dtype=float)
+        e = np.exp(a - a_max)
+        e[top] = 0.0  # (scipy's exp(-inf - a_max))
+        s = e.sum(axis=0)
+        s = np.where(s == 0, s, s / m)
+        out = np.log1p(s) + np.log(m) + a_max
+        if np.isfinite(out).all():
+            return out
+    return scipy.special.logsumexp(a, axis=0)
 
 
 def _weighted_mean_rows(a: np.ndarray, weights) -> np.ndarray:
