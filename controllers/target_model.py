@@ -410,9 +410,9 @@ def _logsumexp_rows(a: np.ndarray) -> np.ndarray:
 def _weighted_mean_rows(a: np.ndarray, weights) -> np.ndarray:
     """``np.average(a, axis=0, weights=weights)`` for rows ``a`` (n, k), with its very reductions (the same
     numbers, bit for bit) but not its argument checks, which cost most of its time on a few rows.
-    ``weights=None``: the plain mean (np.average's own)."""
+    ``weights=None``: the plain mean (np.average's own: the array's mean)."""
     if weights is None:
-        return np.average(a, axis=0)
+        return a.mean(axis=(0,))
     w = np.asarray(weights, dtype=float).reshape(-1, 1)
     scl = w.sum(axis=(0,))
     if not scl.all():
@@ -425,7 +425,7 @@ def _weighted_cov_rows(a: np.ndarray, weights, mean: np.ndarray) -> np.ndarray:
     by their sum, not debiased: the spread of a known discrete set, not an estimate from samples)."""
     d = a - mean[None, :]
     w = np.full(a.shape[0], 1.0 / a.shape[0]) if weights is None else np.asarray(weights, dtype=float) / float(
-        np.sum(weights))
+        np.asarray(weights).sum())
     return (d * w[:, None]).T @ d
 
 
@@ -458,20 +458,21 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     uv_tracked = np.array([camera.fx * tracked[0] / tracked[2] + camera.cx,
                            camera.fy * tracked[1] / tracked[2] + camera.cy])
     weights = None
-    if course_enu_rad is not None:
-        courses = [course_enu_rad]
-    elif courses_weights is not None:
-        courses, weights = list(courses_weights[0]), np.asarray(courses_weights[1], dtype=float)
-    else:
-        courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
+    if course_enu_rad is None and courses_weights is not None:
+        weights = np.asarray(courses_weights[1], dtype=float)
     if boxes_px is not None:  # all at once (the same numbers as one by one below)
         b = np.asarray(boxes_px, dtype=float)
         if not np.isfinite(b).all():
             return None
-        offsets = np.stack([0.5 * (b[:, 0] + b[:, 2]) - uv_tracked[0], 0.5 * (b[:, 1] + b[:, 3]) - uv_tracked[1]],
-                           axis=1)
+        offsets = 0.5 * (b[:, 0:2] + b[:, 2:4]) - uv_tracked  # (n, 2): the box centres' (u, v) offsets
         mean = _weighted_mean_rows(offsets, weights)
         return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean
+    if course_enu_rad is not None:
+        courses = [course_enu_rad]
+    elif courses_weights is not None:
+        courses = list(courses_weights[0])
+    else:
+        courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
     offsets = []
     for i, course in enumerate(courses):
         box = boxes_px[i] if boxes_px is not None else \
