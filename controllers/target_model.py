@@ -152,7 +152,7 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
     R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ship x (bow) along the course
     pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
     p = (pts @ R_es.T + (np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) @ R_ce.T
-    if np.any(p[:, 2] < _MIN_DEPTH_M):
+    if (p[:, 2] < _MIN_DEPTH_M).any():
         return None
     u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
     v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
@@ -244,19 +244,33 @@ def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_po
     pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
     cs, sn = np.cos(c)[:, None], np.sin(c)[:, None]
     rel = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
-    enu = np.stack([cs * pts[None, :, 0] - sn * pts[None, :, 1] + rel[0],
-                    sn * pts[None, :, 0] + cs * pts[None, :, 1] + rel[1],
-                    np.broadcast_to(pts[None, :, 2] + rel[2], (len(c), len(pts)))], axis=-1)  # (n, m, 3)
+    px, py = pts[:, 0], pts[:, 1]
+    # the outline turned and moved, (n, m, 3), written in place (the elementwise operations of
+    # cs px - sn py + rel_e, sn px + cs py + rel_n, pz + rel_u)
+    enu = np.empty((len(c), len(pts), 3))
+    np.subtract(cs * px, sn * py, out=enu[..., 0])
+    enu[..., 0] += rel[0]
+    np.add(sn * px, cs * py, out=enu[..., 1])
+    enu[..., 1] += rel[1]
+    enu[..., 2] = pts[:, 2] + rel[2]
     p = enu @ R_ce.T
     z = p[..., 2]
-    ok = np.all(z >= _MIN_DEPTH_M, axis=1)
-    zs = np.where(z >= _MIN_DEPTH_M, z, 1.0)
-    u = camera.fx * p[..., 0] / zs + camera.cx
-    v = camera.fy * p[..., 1] / zs + camera.cy
+    front = z >= _MIN_DEPTH_M
+    ok = front.all(axis=1)
+    zs = np.where(front, z, 1.0)
+    u = camera.fx * p[..., 0]  # fx x / z + cx, in place
+    u /= zs
+    u += camera.cx
+    v = camera.fy * p[..., 1]
+    v /= zs
+    v += camera.cy
     W = camera.width_px if camera.width_px > 0 else math.inf
     H = camera.height_px if camera.height_px > 0 else math.inf
-    box = np.stack([np.maximum(u.min(axis=1), 0.0), np.maximum(v.min(axis=1), 0.0),
-                    np.minimum(u.max(axis=1), W - 1.0), np.minimum(v.max(axis=1), H - 1.0)], axis=1)
+    box = np.empty((len(c), 4))
+    np.maximum(u.min(axis=1), 0.0, out=box[:, 0])
+    np.maximum(v.min(axis=1), 0.0, out=box[:, 1])
+    np.minimum(u.max(axis=1), W - 1.0, out=box[:, 2])
+    np.minimum(v.max(axis=1), H - 1.0, out=box[:, 3])
     ok &= (box[:, 0] <= box[:, 2]) & (box[:, 1] <= box[:, 3])
     box[~ok] = np.nan
     return box
@@ -339,8 +353,8 @@ class ShapeHeading:
         i = math.floor(s)
         f = s - i
         # evidence that was at heading k - s now belongs to heading k
-        a = np.roll(self._loglik_bias, i, axis=1)
-        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * np.roll(self._loglik_bias, i + 1, axis=1)
+        a = _roll_headings(self._loglik_bias, i)
+        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * _roll_headings(self._loglik_bias, i + 1)
         self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
         self._weights = self._axis = None
 
@@ -387,6 +401,13 @@ class ShapeHeading:
         """How far (rad, 0..pi/2) a direction lies off the ship's axis."""
         d = (course_enu_rad - self.axis_enu_rad()) % math.pi
         return min(d, math.pi - d)
+
+
+def _roll_headings(a: np.ndarray, k: int) -> np.ndarray:
+    """``np.roll(a, k, axis=1)`` (the same array) by two slices, without its general-case overhead."""
+    n = a.shape[1]
+    k %= n
+    return np.concatenate((a[:, n - k:], a[:, :n - k]), axis=1)
 
 
 def _logsumexp_rows(a: np.ndarray) -> np.ndarray:
@@ -513,6 +534,7 @@ class ShipSize:
     """
 
     _STEP = 0.02  # finite-difference step of the log scales
+    _STEP_FACTORS = np.exp(_STEP * np.eye(3))  # a step in each log scale, as factors of the scales
 
     def __init__(self, cfg: SizeFitConfig, outline: ShipOutline, camera: PinholeCamera, edge_px: float = 6.0):
         self.cfg = cfg
@@ -560,28 +582,29 @@ class ShipSize:
             return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px
-        if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] - b[0] < 2.0 or b[3] - b[1] < 2.0:
+        if b.shape != (4,) or not np.isfinite(b).all() or b[2] - b[0] < 2.0 or b[3] - b[1] < 2.0:
             return False
         if cam.width_px > 0 and (b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e
                                  or b[3] >= cam.height_px - 1.0 - e):
             return False  # a box at the image's edge is cut: not the ship's size
-        if float(np.linalg.norm(np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) < cfg.min_range_m:
+        d = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
+        if math.sqrt(d.dot(d)) < cfg.min_range_m:  # (np.linalg.norm's numbers, without its wrapper)
             return False
         s0 = np.exp(self.x[:3])
         # the fit and a step in each log scale (the outline without its mast), and the fit with its mast
-        scales = np.vstack([s0, s0 * np.exp(self._STEP * np.eye(3)), s0])
+        scales = np.vstack([s0, s0 * self._STEP_FACTORS, s0])
         outlines = [self.outline.body] * 4 + [self.outline]
         sizes = np.empty((len(scales), 2))
         for i, (sc, o) in enumerate(zip(scales, outlines)):
             pb = predicted_box_px(o, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad, sc)
-            if pb is None or not np.all(np.isfinite(pb)):
+            if pb is None or not np.isfinite(pb).all():
                 return False
             if cam.width_px > 0 and (pb[0] <= 0.0 or pb[1] <= 0.0 or pb[2] >= cam.width_px - 1.0
                                      or pb[3] >= cam.height_px - 1.0):
                 return False  # the predicted box is clipped: its size is not the outline's
             sizes[i] = (pb[2] - pb[0], pb[3] - pb[1])
         sizes *= cfg.box_scale  # what the detector draws round that silhouette
-        if np.any(sizes <= 1.0):
+        if (sizes <= 1.0).any():
             return False
         logs = np.log(sizes)
         J = (logs[1:4] - logs[0]).T / self._STEP  # (2, 3): d log(width, height) / d log scales
@@ -613,7 +636,7 @@ class ShipSize:
         I_KJ = np.eye(3) - K @ J
         self.P = I_KJ @ self.P @ I_KJ.T + K @ Rn @ K.T  # Joseph form
         lim = math.log(cfg.max_scale)
-        self.x = np.clip(self.x + K @ y, -lim, lim)
+        self.x = (self.x + K @ y).clip(-lim, lim)  # (np.clip's call)
         self.updates += 1
         return True
 
