@@ -117,24 +117,27 @@ class ShipOutline:
         #: (the mast is too thin to count on)
         self.solid_boxes_ship_m = [(np.array([-0.5 * L, -0.5 * W, 0.0]), np.array([0.5 * L, 0.5 * W, hh]))] + [
             (np.array([b[0], b[2], b[4]]), np.array([b[1], b[3], b[5]])) for b in solids]
+        self._solid_lo = np.array([lo for lo, _ in self.solid_boxes_ship_m])  # (k, 3): all the boxes at once
+        self._solid_hi = np.array([hi for _, hi in self.solid_boxes_ship_m])
 
     def entry_depth_m(self, point_ship_m, dir_ship) -> float:
         """How far before ``point_ship_m`` a straight path along ``dir_ship`` (unit, ship frame) first meets
         the ship's solid outline: 0 when the point lies outside it and nothing is in the way."""
         p = np.asarray(point_ship_m, dtype=float)
         d = np.asarray(dir_ship, dtype=float)
+        lo, hi = self._solid_lo, self._solid_hi  # a row per box (the boxes' elementwise maths at once)
+        # slabs: the ray p - s d, s >= 0, inside the box for s in [a, b]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (p - lo) / d, (p - hi) / d  # s where p - s d crosses each face
+        inside = (p >= lo) & (p <= hi)
+        par = d == 0.0
+        missed = (par & ~inside).any(axis=1)  # parallel to a face pair and outside it
+        a = np.where(par, -np.inf, np.minimum(t0, t1)).max(axis=1)
+        b = np.where(par, np.inf, np.maximum(t0, t1)).min(axis=1)
         depth = 0.0
-        for lo, hi in self.solid_boxes_ship_m:  # slabs: the ray p - s d, s >= 0, inside the box for s in [a, b]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t0, t1 = (p - lo) / d, (p - hi) / d  # s where p - s d crosses each face
-            inside = (p >= lo) & (p <= hi)
-            par = d == 0.0
-            if np.any(par & ~inside):
-                continue
-            a = float(np.max(np.where(par, -np.inf, np.minimum(t0, t1))))
-            b = float(np.min(np.where(par, np.inf, np.maximum(t0, t1))))
-            if b >= max(a, 0.0):
-                depth = max(depth, b)
+        for miss, ak, bk in zip(missed.tolist(), a.tolist(), b.tolist()):
+            if not miss and bk >= max(ak, 0.0):
+                depth = max(depth, bk)
         return depth
 
 
