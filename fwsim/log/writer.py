@@ -296,6 +296,7 @@ class LogWriter:
         self._quat = None  # fwsim.frames.quat_enu_from_frd, imported on first use
         # Reused protobuf messages (set fields, serialise; no per-call allocation).
         self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
+        self._transforms: dict[tuple[str, str], FrameTransform] = {}  # write_transform's, by (parent, child)
         self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
         self._fix = None  # the LocationFix reused by write_location
         self._log = Log()
@@ -386,8 +387,8 @@ class LogWriter:
             from fwsim.frames import quat_enu_from_frd
 
             quat = self._quat = quat_enu_from_frd
-        w, x, y, z = (float(c) for c in quat(state.euler_ned_rad))
-        px, py, pz = (float(c) for c in state.pos_enu_m)
+        w, x, y, z = quat(state.euler_ned_rad).tolist()
+        px, py, pz = map(float, state.pos_enu_m)
         ns = self._t0 + _ns(state.t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
 
@@ -418,11 +419,15 @@ class LogWriter:
                         parent_frame_id: str = topics.WORLD_FRAME) -> None:
         """A foxglove.FrameTransform on /tf: ``child`` posed in ``parent`` (e.g. the camera, the ship)."""
         ns = self._t0 + _ns(t_s)
-        msg = FrameTransform(parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
+        msg = self._transforms.get((parent_frame_id, child_frame_id))
+        if msg is None:  # one reused message per pair of frames (every field is set below)
+            msg = self._transforms[(parent_frame_id, child_frame_id)] = FrameTransform(
+                parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
         msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
-        msg.translation.x, msg.translation.y, msg.translation.z = (float(c) for c in pos)
+        tr = msg.translation
+        tr.x, tr.y, tr.z = map(float, pos)
         r = msg.rotation
-        r.w, r.x, r.y, r.z = (float(c) for c in quat_wxyz)
+        r.w, r.x, r.y, r.z = map(float, quat_wxyz)
         self._write_proto(topics.TF, msg, ns)
 
     def write_location(self, t_s: float, frame_id: str, lat_deg: float, lon_deg: float, alt_m: float) -> None:
