@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fwsim.frames import camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
+from fwsim.frames import R_frd_from_cam, camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
 from fwsim.messages import Measurements
 
 __all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "rotation_matrix",
@@ -223,10 +223,12 @@ class CameraMotion:
         if not (math.isfinite(pan) and math.isfinite(tilt)):
             raise ValueError("CameraMotion needs the gimbal encoders (pan_rad, tilt_rad are NaN)")
         m = np.asarray(mount_offset_frd_m, dtype=float)
-        cam_pos, R = camera_pose_world(meas.pos_enu_m, meas.euler_ned_rad, m, pan, tilt)
-        if np.all(np.isfinite(meas.cam_pos_enu_m)):
-            cam_pos = np.array(meas.cam_pos_enu_m, dtype=float)
         R_ef = dcm_enu_from_frd(meas.euler_ned_rad)
+        R = R_ef @ R_frd_from_cam(pan, tilt)  # camera_pose_world's rotation, R_ef built once for both
+        if np.isfinite(meas.cam_pos_enu_m).all():
+            cam_pos = np.array(meas.cam_pos_enu_m, dtype=float)
+        else:
+            cam_pos = camera_pose_world(meas.pos_enu_m, meas.euler_ned_rad, m, pan, tilt)[0]
         vel = np.asarray(meas.vel_enu_m_s, dtype=float) + R_ef @ cross3(meas.body_rates_frd_rad_s, m)
         pan_rate = float(meas.pan_rate_rad_s) if math.isfinite(meas.pan_rate_rad_s) else 0.0
         tilt_rate = float(meas.tilt_rate_rad_s) if math.isfinite(meas.tilt_rate_rad_s) else 0.0

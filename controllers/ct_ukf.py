@@ -320,14 +320,12 @@ class CtUkfTargetEstimator(UkfTargetEstimator):
         return predict_ctra(x[2:5], x[5:8], x[I_TURN], x[I_ACCEL], dt_s, *self._params)
 
     def estimate(self) -> ManoeuvreEstimate:
-        e = super().estimate()
+        fields = self._estimate_fields()  # the UKF's estimate
         if not self._initialised:
-            return ManoeuvreEstimate(e.t_s, e.pos_enu_m, e.vel_enu_m_s, e.pos_std_m, e.vel_std_m_s, e.x1, e.x2,
-                                     e.innovation_px)
+            return ManoeuvreEstimate(*fields)
         x = self._core._x  # read only
-        var = np.diag(self._core._P).copy()
+        var = self._core._P.diagonal().copy()
         if self.held:  # a held state's std is the one it had when it was held
-            var[list(self._hold_idx)] = np.diag(self._held_cov)
-        return ManoeuvreEstimate(e.t_s, e.pos_enu_m, e.vel_enu_m_s, e.pos_std_m, e.vel_std_m_s, e.x1, e.x2,
-                                 e.innovation_px, float(x[I_TURN]), math.sqrt(max(var[I_TURN], 0.0)),
+            var[list(self._hold_idx)] = self._held_cov.diagonal()
+        return ManoeuvreEstimate(*fields, float(x[I_TURN]), math.sqrt(max(var[I_TURN], 0.0)),
                                  float(x[I_ACCEL]), math.sqrt(max(var[I_ACCEL], 0.0)), self.held)

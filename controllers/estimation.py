@@ -23,7 +23,9 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import operator
 
 import numpy as np
 
@@ -120,8 +122,8 @@ class Estimation:
         h = float(self.filter.tracked_height_m)
         if self.filter.initialised:
             est = self.filter.estimate()
-            vel_std = float(np.asarray(est.vel_std_m_s, dtype=float)[:2].max())
-            turn, accel = (float(getattr(est, name, 0.0)) for name in ("turn_rate_rad_s", "accel_along_m_s2"))
+            vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
+            turn, accel = float(getattr(est, "turn_rate_rad_s", 0.0)), float(getattr(est, "accel_along_m_s2", 0.0))
             return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,
                                turn if math.isfinite(turn) else 0.0, accel if math.isfinite(accel) else 0.0), est
         if self._last is not None:
@@ -131,10 +133,28 @@ class Estimation:
 
     def _log_status(self, t_s: float) -> None:
         status = self.filter.status(t_s)
-        key = tuple(getattr(status, f.name) for f in dataclasses.fields(status)[1:])
+        key = _counters_of(type(status))(status)
         if key != self._status:
             self._status = key
             self._record.log(topics.FSW_ESTIMATOR_STATUS, status)
+
+
+def _larger_of_first_two(v: np.ndarray) -> float:
+    """``float(v[:2].max())`` (the larger horizontal std); numpy's reduction only for a tie or a NaN."""
+    if len(v) >= 2:
+        a, b = v[0], v[1]
+        if a > b:
+            return float(a)
+        if b > a:
+            return float(b)
+    return float(v[:2].max())
+
+
+@functools.cache
+def _counters_of(status_type: type):
+    """A status message's counters (its fields after ``t_s``) as one getter: status -> tuple."""
+    names = [f.name for f in dataclasses.fields(status_type)[1:]]
+    return operator.attrgetter(*names) if len(names) > 1 else lambda status: tuple(getattr(status, n) for n in names)
 
 
 def _fusion(fix: DetectionFix, result: FusionResult | None, cam) -> DetectionFusion:

@@ -152,12 +152,13 @@ class Perception:
     def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
         """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
         g = self.cfg
-        if g.min_range_m > 0.0 and np.all(np.isfinite(nav.cam_pos_enu_m)):
-            if float(np.linalg.norm(np.asarray(prior.pos_enu_m, float) - nav.cam_pos_enu_m)) < g.min_range_m:
+        if g.min_range_m > 0.0 and np.isfinite(nav.cam_pos_enu_m).all():
+            d = np.asarray(prior.pos_enu_m, float) - nav.cam_pos_enu_m
+            if math.sqrt(d.dot(d)) < g.min_range_m:  # (np.linalg.norm's numbers, without its wrapper)
                 return FusionReason.TOO_CLOSE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         c, e = self.camera, g.edge_px
-        if g.skip_overflowing_box and np.all(np.isfinite(b)) and c.width_px > 0 and (
+        if g.skip_overflowing_box and np.isfinite(b).all() and c.width_px > 0 and (
                 (b[0] <= e and b[2] >= c.width_px - 1.0 - e) or (b[1] <= e and b[3] >= c.height_px - 1.0 - e)):
             return FusionReason.OVERFLOWING_BOX
         return ""
@@ -183,18 +184,19 @@ class Perception:
         if fit_size:
             self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
         scale = self.ship.size.scale
-        if known and np.all(np.isfinite(b)):
+        if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
-            if not np.all(np.isfinite(boxes)):
+            if not np.isfinite(boxes).all():
                 boxes = None
             else:
-                pred = boxes[int(np.argmax(weights))].copy()
+                best = int(weights.argmax())
+                pred = boxes[best].copy()
                 sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 mismatch = self._no_heading_fits(det, sizes)
-                ratio = det / np.maximum(sizes[int(np.argmax(weights))], 1.0)
-                if np.all(ratio > 0.0):
+                ratio = det / np.maximum(sizes[best], 1.0)
+                if (ratio > 0.0).all():
                     self._ratios.append(np.log(ratio))
                 if self._class_check(nav.t_s, mismatch):  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
@@ -221,8 +223,12 @@ class Perception:
         """True when the box's (width, height) ``det`` differs from every heading's predicted ``sizes`` (n, 2)
         by more than the tolerance in width or height: no heading the ship may have explains it."""
         g = self.cfg
-        off = np.abs(det[None, :] - sizes) > g.box_size_tolerance * sizes + g.box_size_tolerance_px
-        return bool(np.all(np.any(off, axis=1)))
+        tol, tol_px = g.box_size_tolerance, g.box_size_tolerance_px
+        dw, dh = det.tolist()
+        for w, h in sizes.tolist():  # (a few headings: plain floats, the same IEEE operations as numpy's)
+            if not (abs(dw - w) > tol * w + tol_px or abs(dh - h) > tol * h + tol_px):
+                return False  # this heading explains the box
+        return True
 
     def _to_now(self, nav: Measurements, cam: CameraMotion | None, prior: TargetState) -> tuple[float, float]:
         """The detection's box centre brought from its exposure to now (``propagate_feature``): its ray, from

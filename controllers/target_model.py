@@ -117,24 +117,27 @@ class ShipOutline:
         #: (the mast is too thin to count on)
         self.solid_boxes_ship_m = [(np.array([-0.5 * L, -0.5 * W, 0.0]), np.array([0.5 * L, 0.5 * W, hh]))] + [
             (np.array([b[0], b[2], b[4]]), np.array([b[1], b[3], b[5]])) for b in solids]
+        self._solid_lo = np.array([lo for lo, _ in self.solid_boxes_ship_m])  # (k, 3): all the boxes at once
+        self._solid_hi = np.array([hi for _, hi in self.solid_boxes_ship_m])
 
     def entry_depth_m(self, point_ship_m, dir_ship) -> float:
         """How far before ``point_ship_m`` a straight path along ``dir_ship`` (unit, ship frame) first meets
         the ship's solid outline: 0 when the point lies outside it and nothing is in the way."""
         p = np.asarray(point_ship_m, dtype=float)
         d = np.asarray(dir_ship, dtype=float)
+        lo, hi = self._solid_lo, self._solid_hi  # a row per box (the boxes' elementwise maths at once)
+        # slabs: the ray p - s d, s >= 0, inside the box for s in [a, b]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (p - lo) / d, (p - hi) / d  # s where p - s d crosses each face
+        inside = (p >= lo) & (p <= hi)
+        par = d == 0.0
+        missed = (par & ~inside).any(axis=1)  # parallel to a face pair and outside it
+        a = np.where(par, -np.inf, np.minimum(t0, t1)).max(axis=1)
+        b = np.where(par, np.inf, np.maximum(t0, t1)).min(axis=1)
         depth = 0.0
-        for lo, hi in self.solid_boxes_ship_m:  # slabs: the ray p - s d, s >= 0, inside the box for s in [a, b]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t0, t1 = (p - lo) / d, (p - hi) / d  # s where p - s d crosses each face
-            inside = (p >= lo) & (p <= hi)
-            par = d == 0.0
-            if np.any(par & ~inside):
-                continue
-            a = float(np.max(np.where(par, -np.inf, np.minimum(t0, t1))))
-            b = float(np.min(np.where(par, np.inf, np.maximum(t0, t1))))
-            if b >= max(a, 0.0):
-                depth = max(depth, b)
+        for miss, ak, bk in zip(missed.tolist(), a.tolist(), b.tolist()):
+            if not miss and bk >= max(ak, 0.0):
+                depth = max(depth, bk)
         return depth
 
 
@@ -152,7 +155,7 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
     R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ship x (bow) along the course
     pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
     p = (pts @ R_es.T + (np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) @ R_ce.T
-    if np.any(p[:, 2] < _MIN_DEPTH_M):
+    if (p[:, 2] < _MIN_DEPTH_M).any():
         return None
     u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
     v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
@@ -244,19 +247,33 @@ def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_po
     pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
     cs, sn = np.cos(c)[:, None], np.sin(c)[:, None]
     rel = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
-    enu = np.stack([cs * pts[None, :, 0] - sn * pts[None, :, 1] + rel[0],
-                    sn * pts[None, :, 0] + cs * pts[None, :, 1] + rel[1],
-                    np.broadcast_to(pts[None, :, 2] + rel[2], (len(c), len(pts)))], axis=-1)  # (n, m, 3)
+    px, py = pts[:, 0], pts[:, 1]
+    # the outline turned and moved, (n, m, 3), written in place (the elementwise operations of
+    # cs px - sn py + rel_e, sn px + cs py + rel_n, pz + rel_u)
+    enu = np.empty((len(c), len(pts), 3))
+    np.subtract(cs * px, sn * py, out=enu[..., 0])
+    enu[..., 0] += rel[0]
+    np.add(sn * px, cs * py, out=enu[..., 1])
+    enu[..., 1] += rel[1]
+    enu[..., 2] = pts[:, 2] + rel[2]
     p = enu @ R_ce.T
     z = p[..., 2]
-    ok = np.all(z >= _MIN_DEPTH_M, axis=1)
-    zs = np.where(z >= _MIN_DEPTH_M, z, 1.0)
-    u = camera.fx * p[..., 0] / zs + camera.cx
-    v = camera.fy * p[..., 1] / zs + camera.cy
+    front = z >= _MIN_DEPTH_M
+    ok = front.all(axis=1)
+    zs = np.where(front, z, 1.0)
+    u = camera.fx * p[..., 0]  # fx x / z + cx, in place
+    u /= zs
+    u += camera.cx
+    v = camera.fy * p[..., 1]
+    v /= zs
+    v += camera.cy
     W = camera.width_px if camera.width_px > 0 else math.inf
     H = camera.height_px if camera.height_px > 0 else math.inf
-    box = np.stack([np.maximum(u.min(axis=1), 0.0), np.maximum(v.min(axis=1), 0.0),
-                    np.minimum(u.max(axis=1), W - 1.0), np.minimum(v.max(axis=1), H - 1.0)], axis=1)
+    box = np.empty((len(c), 4))
+    np.maximum(u.min(axis=1), 0.0, out=box[:, 0])
+    np.maximum(v.min(axis=1), 0.0, out=box[:, 1])
+    np.minimum(u.max(axis=1), W - 1.0, out=box[:, 2])
+    np.minimum(v.max(axis=1), H - 1.0, out=box[:, 3])
     ok &= (box[:, 0] <= box[:, 2]) & (box[:, 1] <= box[:, 3])
     box[~ok] = np.nan
     return box
@@ -287,7 +304,9 @@ class ShapeHeading:
         self.courses_enu_rad = 2.0 * math.pi * np.arange(cfg.headings) / cfg.headings
         lo, hi = cfg.size_bias_range
         self.size_biases = np.linspace(lo, hi, cfg.size_bias_steps) if hi > lo else np.array([lo])
-        self._loglik_bias = np.zeros((cfg.headings, len(self.size_biases), 2))  # heading, bias, (width, height)
+        # bias, heading, (width, height): bias-major, so that the marginalisation's reductions over the biases
+        # run down whole rows
+        self._loglik_bias = np.zeros((len(self.size_biases), cfg.headings, 2))
         self.loglik = np.zeros(cfg.headings)  # marginalised over the size bias
         self.updates = 0
         self._last_t = -math.inf
@@ -319,10 +338,10 @@ class ShapeHeading:
             self._course = None if course_enu_rad is None else float(course_enu_rad)
         size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
-        scaled = size_pred[:, None, :] * (1.0 + self.size_biases)[None, :, None]  # (headings, biases, 2)
+        scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
         r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
         self._loglik_bias -= np.log1p(0.5 * r * r)
-        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
+        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
         self.updates += 1
         self._weights = self._axis = None
         self._last_t = t_s
@@ -337,9 +356,9 @@ class ShapeHeading:
         i = math.floor(s)
         f = s - i
         # evidence that was at heading k - s now belongs to heading k
-        a = np.roll(self._loglik_bias, i, axis=0)
-        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * np.roll(self._loglik_bias, i + 1, axis=0)
-        self.loglik = np.sum(scipy.special.logsumexp(self._loglik_bias, axis=1), axis=1)
+        a = _roll_headings(self._loglik_bias, i)
+        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * _roll_headings(self._loglik_bias, i + 1)
+        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
         self._weights = self._axis = None
 
     def weights(self) -> np.ndarray:
@@ -387,12 +406,37 @@ class ShapeHeading:
         return min(d, math.pi - d)
 
 
+def _roll_headings(a: np.ndarray, k: int) -> np.ndarray:
+    """``np.roll(a, k, axis=1)`` (the same array) by two slices, without its general-case overhead."""
+    n = a.shape[1]
+    k %= n
+    return np.concatenate((a[:, n - k:], a[:, :n - k]), axis=1)
+
+
+def _logsumexp_rows(a: np.ndarray) -> np.ndarray:
+    """``scipy.special.logsumexp(a, axis=0)``: for finite ``a`` its very operations (the same numbers, bit for
+    bit: the largest entries of a column taken out, counted and added back in log) without its array-API
+    dispatch, which costs most of its time on the posterior's few thousand entries; else scipy's own."""
+    if np.isfinite(a).all():
+        a_max = a.max(axis=0)
+        top = a == a_max
+        m = top.sum(axis=0, dtype=float)
+        e = np.exp(a - a_max)
+        e[top] = 0.0  # (scipy's exp(-inf - a_max))
+        s = e.sum(axis=0)
+        s = np.where(s == 0, s, s / m)
+        out = np.log1p(s) + np.log(m) + a_max
+        if np.isfinite(out).all():
+            return out
+    return scipy.special.logsumexp(a, axis=0)
+
+
 def _weighted_mean_rows(a: np.ndarray, weights) -> np.ndarray:
     """``np.average(a, axis=0, weights=weights)`` for rows ``a`` (n, k), with its very reductions (the same
     numbers, bit for bit) but not its argument checks, which cost most of its time on a few rows.
-    ``weights=None``: the plain mean (np.average's own)."""
+    ``weights=None``: the plain mean (np.average's own: the array's mean)."""
     if weights is None:
-        return np.average(a, axis=0)
+        return a.mean(axis=(0,))
     w = np.asarray(weights, dtype=float).reshape(-1, 1)
     scl = w.sum(axis=(0,))
     if not scl.all():
@@ -405,7 +449,7 @@ def _weighted_cov_rows(a: np.ndarray, weights, mean: np.ndarray) -> np.ndarray:
     by their sum, not debiased: the spread of a known discrete set, not an estimate from samples)."""
     d = a - mean[None, :]
     w = np.full(a.shape[0], 1.0 / a.shape[0]) if weights is None else np.asarray(weights, dtype=float) / float(
-        np.sum(weights))
+        np.asarray(weights).sum())
     return (d * w[:, None]).T @ d
 
 
@@ -438,20 +482,21 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     uv_tracked = np.array([camera.fx * tracked[0] / tracked[2] + camera.cx,
                            camera.fy * tracked[1] / tracked[2] + camera.cy])
     weights = None
-    if course_enu_rad is not None:
-        courses = [course_enu_rad]
-    elif courses_weights is not None:
-        courses, weights = list(courses_weights[0]), np.asarray(courses_weights[1], dtype=float)
-    else:
-        courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
+    if course_enu_rad is None and courses_weights is not None:
+        weights = np.asarray(courses_weights[1], dtype=float)
     if boxes_px is not None:  # all at once (the same numbers as one by one below)
         b = np.asarray(boxes_px, dtype=float)
         if not np.isfinite(b).all():
             return None
-        offsets = np.stack([0.5 * (b[:, 0] + b[:, 2]) - uv_tracked[0], 0.5 * (b[:, 1] + b[:, 3]) - uv_tracked[1]],
-                           axis=1)
+        offsets = 0.5 * (b[:, 0:2] + b[:, 2:4]) - uv_tracked  # (n, 2): the box centres' (u, v) offsets
         mean = _weighted_mean_rows(offsets, weights)
         return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean
+    if course_enu_rad is not None:
+        courses = [course_enu_rad]
+    elif courses_weights is not None:
+        courses = list(courses_weights[0])
+    else:
+        courses = [2.0 * math.pi * k / headings_when_unknown for k in range(headings_when_unknown)]
     offsets = []
     for i, course in enumerate(courses):
         box = boxes_px[i] if boxes_px is not None else \
@@ -492,6 +537,7 @@ class ShipSize:
     """
 
     _STEP = 0.02  # finite-difference step of the log scales
+    _STEP_FACTORS = np.exp(_STEP * np.eye(3))  # a step in each log scale, as factors of the scales
 
     def __init__(self, cfg: SizeFitConfig, outline: ShipOutline, camera: PinholeCamera, edge_px: float = 6.0):
         self.cfg = cfg
@@ -539,28 +585,29 @@ class ShipSize:
             return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px
-        if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] - b[0] < 2.0 or b[3] - b[1] < 2.0:
+        if b.shape != (4,) or not np.isfinite(b).all() or b[2] - b[0] < 2.0 or b[3] - b[1] < 2.0:
             return False
         if cam.width_px > 0 and (b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e
                                  or b[3] >= cam.height_px - 1.0 - e):
             return False  # a box at the image's edge is cut: not the ship's size
-        if float(np.linalg.norm(np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) < cfg.min_range_m:
+        d = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
+        if math.sqrt(d.dot(d)) < cfg.min_range_m:  # (np.linalg.norm's numbers, without its wrapper)
             return False
         s0 = np.exp(self.x[:3])
         # the fit and a step in each log scale (the outline without its mast), and the fit with its mast
-        scales = np.vstack([s0, s0 * np.exp(self._STEP * np.eye(3)), s0])
+        scales = np.vstack([s0, s0 * self._STEP_FACTORS, s0])
         outlines = [self.outline.body] * 4 + [self.outline]
         sizes = np.empty((len(scales), 2))
         for i, (sc, o) in enumerate(zip(scales, outlines)):
             pb = predicted_box_px(o, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad, sc)
-            if pb is None or not np.all(np.isfinite(pb)):
+            if pb is None or not np.isfinite(pb).all():
                 return False
             if cam.width_px > 0 and (pb[0] <= 0.0 or pb[1] <= 0.0 or pb[2] >= cam.width_px - 1.0
                                      or pb[3] >= cam.height_px - 1.0):
                 return False  # the predicted box is clipped: its size is not the outline's
             sizes[i] = (pb[2] - pb[0], pb[3] - pb[1])
         sizes *= cfg.box_scale  # what the detector draws round that silhouette
-        if np.any(sizes <= 1.0):
+        if (sizes <= 1.0).any():
             return False
         logs = np.log(sizes)
         J = (logs[1:4] - logs[0]).T / self._STEP  # (2, 3): d log(width, height) / d log scales
@@ -592,7 +639,7 @@ class ShipSize:
         I_KJ = np.eye(3) - K @ J
         self.P = I_KJ @ self.P @ I_KJ.T + K @ Rn @ K.T  # Joseph form
         lim = math.log(cfg.max_scale)
-        self.x = np.clip(self.x + K @ y, -lim, lim)
+        self.x = (self.x + K @ y).clip(-lim, lim)  # (np.clip's call)
         self.updates += 1
         return True
 

@@ -85,6 +85,8 @@ _MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floo
 _VAR_FLOOR = 1e-12  # numerical reset: smallest variance kept on the diagonal
 _INIT_VERTICAL_POS_STD_M = 1.0
 _INIT_VERTICAL_VEL_STD_M_S = 0.5
+_NAN2 = np.full(2, np.nan)  # (copied: an estimate's innovation without an update at its time)
+_NAN2.setflags(write=False)
 
 
 def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
@@ -164,7 +166,7 @@ class UnscentedCore:
         U = _safe_cholesky(self._scale * P)
         sigmas = np.empty((2 * n + 1, n))
         sigmas[0] = x
-        np.subtract(x, -U, out=sigmas[1:n + 1])
+        np.add(x, U, out=sigmas[1:n + 1])  # x - (-U), the same in IEEE arithmetic
         np.subtract(x, U, out=sigmas[n + 1:])
         return sigmas
 
@@ -233,7 +235,7 @@ class UnscentedCore:
     def _guard(self) -> None:
         if self._guarded:  # checked since it last changed (symmetrising a symmetric P changes nothing)
             return
-        if not np.isfinite(self._x).all():
+        if not all(map(math.isfinite, self._x.tolist())):  # (a short vector: cheaper on floats than in numpy)
             raise FloatingPointError("UKF state is not finite")
         P = 0.5 * (self._P + self._P.T)
         ok = bool(np.isfinite(P).all()) and _dpotrf(P, lower=1, clean=0)[1] == 0
@@ -360,11 +362,22 @@ class _CompiledProcess:
     def __call__(self, S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
         n = max(1, int(math.ceil(dt / max_step - 1e-9)))
         h = dt / n
-        R = np.asarray(R_ec0, dtype=float).T.ravel()  # column-major, as CasADi stores it
-        X = np.asarray(S, dtype=float).T.ravel()
+        # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
+        step = self._step
+        X, h_in, t0, r, R, V, w = step.inputs
+        X.reshape(self.dim_x, self.m)[:] = np.asarray(S, dtype=float).T
+        h_in[0] = h
+        r[:] = r_c0
+        R.reshape(3, 3)[:] = np.asarray(R_ec0, dtype=float).T
+        V[:] = V_c
+        w[:] = omega
+        out = step.outputs[0]
         for k in range(n):
-            X = self._step(X, h, k * h, r_c0, R, V_c, omega)[0]
-        return X.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
+            if k:
+                X[:] = out
+            t0[0] = k * h
+            step._eval()
+        return out.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
 
 
 def _sx_exp_so3(w, tau):
@@ -441,10 +454,19 @@ class _CompiledUpdate:
 
     def __call__(self, sigmas, x, P, z, r, f_u, f_v, c_u, c_v, R_ec, cam_h, plane_z):
         """(innovation (5,), chi-square over the pixel rows, updated x, updated P)."""
-        y, nis, x_new, P_new = self._fun(np.asarray(sigmas).T.ravel(), x, np.asarray(P).T.ravel(), z, r,
-                                         (f_u, f_v, c_u, c_v), np.asarray(R_ec, dtype=float).T.ravel(),
-                                         (cam_h, plane_z))
-        n = self._n
+        # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
+        fun, n = self._fun, self._n
+        X_in, x_in, P_in, z_in, r_in, k, R, hc = fun.inputs
+        X_in.reshape(n, -1)[:] = np.asarray(sigmas).T
+        x_in[:] = x
+        P_in.reshape(n, n)[:] = np.asarray(P).T
+        z_in[:] = z
+        r_in[:] = r
+        k[0], k[1], k[2], k[3] = f_u, f_v, c_u, c_v
+        R.reshape(3, 3)[:] = np.asarray(R_ec, dtype=float).T
+        hc[0], hc[1] = cam_h, plane_z
+        fun._eval()
+        y, nis, x_new, P_new = fun.outputs
         return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy()
 
 
@@ -478,8 +500,17 @@ def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: fl
     h = cam_z_m - plane_z_m
     if not (d[2] < -1e-9 and h > 0.0):
         return np.full((3, 2), np.nan)
-    cols = [h * (R[:, i] / -d[2] + d * R[2, i] / (d[2] * d[2])) for i in (0, 1)]
-    return np.stack([cols[0] / fx, cols[1] / fy], axis=1)
+    return np.array(_ground_jacobian_rows(R.tolist(), d.tolist(), h, fx, fy, 3))
+
+
+def _ground_jacobian_rows(R: list, d: list, h: float, fx: float, fy: float, rows: int) -> list[list[float]]:
+    """The first ``rows`` rows of :func:`ground_from_pixel_jacobian` (``R`` and the ray ``d`` as nested lists,
+    the ray coming down, ``h > 0``): ``h (R[j, i] / -d_z + d_j R[2, i] / d_z^2) / f_i``, element by element
+    (Python floats: a 2 x 2 block costs less than one numpy call on it)."""
+    nd, dd = -d[2], d[2] * d[2]
+    r2x, r2y = R[2][0], R[2][1]
+    return [[h * (R[j][0] / nd + d[j] * r2x / dd) / fx, h * (R[j][1] / nd + d[j] * r2y / dd) / fy]
+            for j in range(rows)]
 
 
 def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
@@ -491,8 +522,16 @@ def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: floa
     d = np.asarray(R_enu_from_cam, dtype=float) @ np.array([x1, x2, 1.0])
     if not d[2] < -1e-9:
         return np.zeros((2, 2))
-    g = d[:2] / -d[2]
-    return (height_std_m * height_std_m) * np.outer(g, g)
+    return np.array(_height_cov(d.tolist(), height_std_m))
+
+
+def _height_cov(d: list, height_std_m: float) -> list[list[float]]:
+    """:func:`height_consider_cov` of the ray ``d`` (a list, coming down), element by element: ``s^2 g_i g_j``,
+    ``g = d_h / -d_z``."""
+    nd = -d[2]
+    g0, g1 = d[0] / nd, d[1] / nd
+    s2 = height_std_m * height_std_m
+    return [[s2 * (g0 * g0), s2 * (g0 * g1)], [s2 * (g1 * g0), s2 * (g1 * g1)]]
 
 
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
@@ -500,6 +539,11 @@ def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane
     R = R_enu_from_cam
     dz = float(R[2, 0]) * x1 + float(R[2, 1]) * x2 + float(R[2, 2])
     return -dz / math.sqrt(x1 * x1 + x2 * x2 + 1.0) >= _CAMERA_MIN_RAY_DOWN and cam_z_m - plane_z_m > 0.0
+
+
+def _finite_and_any(values: list[float]) -> bool:
+    """All finite and not all zero (``np.isfinite(a).all() and a.any()`` of the array they came from)."""
+    return all(map(math.isfinite, values)) and any(values)
 
 
 def fix_from_measurements(meas: Measurements) -> DetectionFix:
@@ -692,8 +736,8 @@ class UkfTargetEstimator:
         rng = math.sqrt(rel.dot(rel))
         h = max(motion.height_m - c.target_plane_height_m, 1.0)
         s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
-        r = np.array([c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2])
-        z = np.array([u, v, *motion.pos_enu_m])
+        r = [c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2]  # (copied into the compiled update's input)
+        z = [u, v, *motion.pos_enu_m]
         # the chi-square test on the pixel rows is always computed (for the log); it rejects only while
         # the gate is on and has not rejected innovation_gate_max_rejects detections in a row
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
@@ -728,26 +772,37 @@ class UkfTargetEstimator:
         ``box_centre_bias_frac`` of the box's width and height, plus (``consider_heading_spread``) the shape
         correction's spread over the headings the ship may have (``fix.offset_spread_px2``), seen from this
         detection's view (zero without a box or where the ray misses the plane)."""
-        k, b = self.cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
-        spread = np.asarray(fix.offset_spread_px2, dtype=float) if self.cfg.consider_heading_spread else None
-        if spread is not None and not (spread.shape == (2, 2) and np.all(np.isfinite(spread)) and spread.any()):
+        cfg = self.cfg
+        k, b = cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
+        spread = np.asarray(fix.offset_spread_px2, dtype=float) if cfg.consider_heading_spread else None
+        if spread is not None and not (spread.shape == (2, 2) and _finite_and_any(spread.ravel().tolist())):
             spread = None
-        sh = self.cfg.box_centre_height_std_m
-        if (k <= 0.0 and spread is None and sh <= 0.0) or b.shape != (4,) or not np.all(np.isfinite(b)):
+        sh = cfg.box_centre_height_std_m
+        box = b.tolist() if b.shape == (4,) else None
+        if (k <= 0.0 and spread is None and sh <= 0.0) or box is None or not all(map(math.isfinite, box)):
             return np.zeros((2, 2))
+        # the view's geometry as ground_from_pixel_jacobian (horizontal rows) and height_consider_cov, from
+        # one ray, on Python floats
         cam = self.camera
-        x1, x2 = (float(a) for a in cam.normalised(fix.u_px, fix.v_px))
-        J = ground_from_pixel_jacobian(x1, x2, motion.R_enu_from_cam, motion.height_m,
-                                       self.cfg.target_plane_height_m, cam.fx, cam.fy)[:2]
-        if not np.all(np.isfinite(J)):
+        x1, x2 = (float(fix.u_px) - cam.cx) / cam.fx, (float(fix.v_px) - cam.cy) / cam.fy  # cam.normalised
+        R = np.asarray(motion.R_enu_from_cam, dtype=float)
+        d = (R @ np.array([x1, x2, 1.0])).tolist()
+        h = motion.height_m - cfg.target_plane_height_m
+        if not (d[2] < -1e-9 and h > 0.0):  # the ray does not come down to the plane
             return np.zeros((2, 2))
-        s = np.array([k * (b[2] - b[0]), k * (b[3] - b[1])])
+        J = _ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
+        (j00, j01), (j10, j11) = J
+        if not (math.isfinite(j00) and math.isfinite(j01) and math.isfinite(j10) and math.isfinite(j11)):
+            return np.zeros((2, 2))
+        s0, s1 = k * (box[2] - box[0]), k * (box[3] - box[1])
+        s00, s11 = s0 * s0, s1 * s1
+        J = np.array(J)
         if spread is None:
-            cov = (J * (s * s)) @ J.T
+            cov = np.array([[j00 * s00, j01 * s11], [j10 * s00, j11 * s11]]) @ J.T  # (J diag(s^2)) J^T
         else:
-            cov = J @ (np.diag(s * s) + spread) @ J.T
+            cov = J @ (np.array([[s00, 0.0], [0.0, s11]]) + spread) @ J.T
         if sh > 0.0:
-            cov = cov + height_consider_cov(x1, x2, motion.R_enu_from_cam, sh)
+            cov += _height_cov(d, sh)
         return cov
 
     def status(self, t_s: float) -> EstimatorStatus:
@@ -775,14 +830,17 @@ class UkfTargetEstimator:
         return self.estimate() if self._initialised else None
 
     def estimate(self) -> TargetEstimate:
-        x, P = self._core._x, self._core._P  # read only (what is returned is copied)
-        var = np.diag(P).copy()
-        var[2:4] += np.diag(self._consider)  # the box centre's systematic error, in the reported std only
-        sd = np.sqrt(np.maximum(var, 0.0))
-        innov = self._innov.copy() if self._innov_t == self._t else np.full(2, np.nan)
+        return TargetEstimate(*self._estimate_fields())
+
+    def _estimate_fields(self) -> tuple:
+        """The fields of :meth:`estimate`, in order (a subclass's estimate appends its own)."""
         if not self._initialised:
             nan3 = np.full(3, np.nan)
-            return TargetEstimate(self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan,
-                                  np.full(2, np.nan))
-        return TargetEstimate(self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(),
-                              float(x[0]), float(x[1]), innov)
+            return self._t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan, np.full(2, np.nan)
+        x, P = self._core._x, self._core._P  # read only (what is returned is copied)
+        var = P.diagonal().copy()
+        var[2:4] += self._consider.diagonal()  # the box centre's systematic error, in the reported std only
+        sd = np.sqrt(np.maximum(var, 0.0))
+        innov = self._innov.copy() if self._innov_t == self._t else _NAN2.copy()
+        return (self._t, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(), float(x[0]), float(x[1]),
+                innov)

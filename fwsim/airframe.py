@@ -224,13 +224,13 @@ class Airframe:
         return AirframeState(
             t_s=self.t_s,
             pos_enu_m=pos,
-            vel_enu_m_s=enu_from_ned(np.array([vn, ve, vd]) * FT),
+            vel_enu_m_s=np.array([ve * FT, vn * FT, -(vd * FT)]),  # enu_from_ned of the NED velocity in m/s
             euler_ned_rad=np.array([phi, theta, psi]),
             body_rates_frd_rad_s=np.array([p, q, r]),
             airspeed_m_s=vt * FT,
             alpha_rad=alpha,
             beta_rad=beta,
-            specific_force_frd_m_s2=np.array([fx, fy, fz]) * FT,
+            specific_force_frd_m_s2=np.array([fx * FT, fy * FT, fz * FT]),
             throttle_norm=thr,
             surfaces_rad=np.array([ail, elev, rud]),
             height_above_sea_m=float(pos[2]),

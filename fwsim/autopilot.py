@@ -47,6 +47,11 @@ from fwsim.messages import AccelCommand, ActuatorCommand, AirframeState, Autopil
 
 G_M_S2 = 9.80665
 _NAN3 = np.full(3, np.nan)
+_GRAVITY_ENU = np.array([0.0, 0.0, -G_M_S2])
+_UP_ENU = np.array([0.0, 0.0, 1.0])
+for _c in (_GRAVITY_ENU, _UP_ENU):
+    _c.setflags(write=False)  # shared constants
+del _c
 
 
 class Gain(StrictModel):
@@ -124,9 +129,10 @@ class _PI:
 
     def step(self, err: float, dt: float, ff: float = 0.0, scale: float = 1.0) -> float:
         out = ff + scale * (self.kp * err + self.integ)
-        if self.lo < out < self.hi or (out >= self.hi and err < 0) or (out <= self.lo and err > 0):
+        lo, hi = self.lo, self.hi
+        if lo < out < hi or (out >= hi and err < 0) or (out <= lo and err > 0):
             self.integ += self.ki * err * dt
-        return _clip(out, self.lo, self.hi)
+        return lo if out < lo else hi if out > hi else out  # _clip
 
 
 def bank_from_specific_force(fl: float, fr: float, bank: float, max_bank: float,
@@ -169,6 +175,9 @@ class Autopilot:
         self._last = None  # (command, state, set-points) of the last actuate, for status()
         gains = {name: v(name) for name in type(params).model_fields}  # looked up once, not per tick
         self._gain = gains.__getitem__
+        self._tick_gains = tuple(gains[n] for n in (  # the gains every tick uses, unpacked at once
+            "max_roll_rate_rad_s", "max_roll_accel_rad_s2", "max_pitch_rate_rad_s", "stall_alpha_rad",
+            "stall_pitch_rate_gain", "roll_rate_ff", "pitch_rate_ff", "yaw_rate_kp", "airspeed_climb_ff"))
 
     # ------------------------------------------------------------------ modes
     def _rates_from_rate_command(self, cmd: RateCommand, st: AirframeState, V: float):
@@ -188,7 +197,7 @@ class Autopilot:
     def _rates_from_accel_command(self, cmd: AccelCommand, st: AirframeState, V: float):
         pv = self._gain
         vel = st.vel_enu_m_s
-        speed = float(np.linalg.norm(vel))
+        speed = math.sqrt(float(vel.dot(vel)))  # np.linalg.norm(vel): its own sum, without its wrapper
         if speed < 1.0:
             vel, speed = dcm_enu_from_frd(st.euler_ned_rad)[:, 0] * V, V
         vhat = vel / speed
@@ -196,13 +205,13 @@ class Autopilot:
         x_b, y_b, z_b = R[:, 0], R[:, 1], R[:, 2]
         a = np.asarray(cmd.accel_enu_m_s2, dtype=float)
         a_perp = a - (a @ vhat) * vhat
-        g_vec = np.array([0.0, 0.0, -G_M_S2])
+        g_vec = _GRAVITY_ENU
         g_perp = g_vec - (g_vec @ vhat) * vhat
         f_req = a_perp - g_perp  # specific force the wing must make
         # zero-bank lift direction ("up" perpendicular to the velocity) and right
-        up = np.array([0.0, 0.0, 1.0])
+        up = _UP_ENU
         l0 = up - (up @ vhat) * vhat
-        n_l0 = float(np.linalg.norm(l0))
+        n_l0 = math.sqrt(float(l0.dot(l0)))  # np.linalg.norm(l0)
         l0 = l0 / n_l0 if n_l0 > 1e-3 else -z_b
         r0 = cross3(vhat, l0)
         fl, fr = float(f_req @ l0), float(f_req @ r0)
@@ -241,7 +250,8 @@ class Autopilot:
     def actuate(self, cmd: AutopilotCommand, st: AirframeState) -> ActuatorCommand:
         """One tick of the loops: the actuator commands. The loops' status of this tick is built only when
         asked for (:meth:`status`): the loop logs it at the log rate, a quarter of the ticks or fewer."""
-        pv = self._gain
+        (max_p, max_roll_accel, max_q, stall_alpha, stall_gain, roll_ff, pitch_ff, yaw_kp,
+         climb_ff) = self._tick_gains
         dt = self.dt_s
         V = max(st.airspeed_m_s, 5.0)
         fb = (self.v_ref / V) ** 2  # feedback scaling with dynamic pressure
@@ -252,27 +262,28 @@ class Autopilot:
             self._normal_accel_integ = 0.0
         else:
             p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_accel_command(cmd, st, V)
-        p_sp = _clip(p_sp, -pv("max_roll_rate_rad_s"), pv("max_roll_rate_rad_s"))
-        dp = pv("max_roll_accel_rad_s2") * dt  # the roll-rate set-point slews: a step asks what no aileron gives
+        p_sp = _clip(p_sp, -max_p, max_p)
+        dp = max_roll_accel * dt  # the roll-rate set-point slews: a step asks what no aileron gives
         p_sp = self._p_sp = _clip(p_sp, self._p_sp - dp, self._p_sp + dp)
-        q_sp = _clip(q_sp, -pv("max_pitch_rate_rad_s"), pv("max_pitch_rate_rad_s"))
-        excess = st.alpha_rad - pv("stall_alpha_rad")
+        q_sp = _clip(q_sp, -max_q, max_q)
+        excess = st.alpha_rad - stall_alpha
         if excess > 0.0:  # near the stall: no pitch-up, and nose down in proportion (both modes)
-            q_sp = min(q_sp, -pv("stall_pitch_rate_gain") * excess)
+            q_sp = min(q_sp, -stall_gain * excess)
         p, q, r = st.body_rates_frd_rad_s.tolist()
 
-        aileron = self.aileron_from_roll_rate.step(p_sp - p, dt, ff=pv("roll_rate_ff") * ff * p_sp, scale=fb)
+        # (the loops' step(err, dt, ff, scale))
+        aileron = self.aileron_from_roll_rate.step(p_sp - p, dt, roll_ff * ff * p_sp, fb)
         # positive elevator pitches nose down: the loop works on -elevator
-        elevator = -self.elevator_from_pitch_rate.step(q_sp - q, dt, ff=pv("pitch_rate_ff") * ff * q_sp, scale=fb)
+        elevator = -self.elevator_from_pitch_rate.step(q_sp - q, dt, pitch_ff * ff * q_sp, fb)
         # rudder: yaw-rate damping toward the coordinated rate, sideslip to zero
         # (positive sideslip needs a yaw to the right, i.e. negative rudder)
-        yaw_demand = pv("yaw_rate_kp") * fb * (r_sp - r)
-        rudder = -self.rudder_from_sideslip.step(st.beta_rad, dt, ff=yaw_demand, scale=fb)
+        yaw_demand = yaw_kp * fb * (r_sp - r)
+        rudder = -self.rudder_from_sideslip.step(st.beta_rad, dt, yaw_demand, fb)
 
         vel = st.vel_enu_m_s
         sin_gamma = float(vel[2]) / max(math.sqrt(float(vel.dot(vel))), 1.0)  # np.linalg.norm's own sum
         throttle = self.airspeed_from_throttle.step(
-            cmd.airspeed_m_s - st.airspeed_m_s, dt, ff=self._throttle_trim + pv("airspeed_climb_ff") * sin_gamma)
+            cmd.airspeed_m_s - st.airspeed_m_s, dt, self._throttle_trim + climb_ff * sin_gamma)
 
         self._last = (cmd, st, p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach)
         return ActuatorCommand(st.t_s, aileron, elevator, rudder, throttle)

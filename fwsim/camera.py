@@ -162,9 +162,7 @@ class Pose:
         float32 rows, as the ray caster takes them)."""
         o = (origins - self.t) @ self.R
         if o.ndim == 1:  # one contiguous float32 row per ray (a broadcast view would be copied by the caster)
-            rows = np.empty(dirs.shape, dtype=np.float32)
-            rows[:] = o
-            o = rows
+            o = np.repeat(o.astype(np.float32)[None, :], len(dirs), axis=0)  # (cheaper than a broadcast copy)
         return o, dirs @ self.R
 
 

@@ -158,8 +158,8 @@ class _Trails:
         self.count = 0
 
     def add(self, log: LogWriter, t_s: float, uav_pos, ship_pos) -> None:
-        self.points["uav"].append(tuple(float(c) for c in uav_pos))
-        self.points["ship"].append(tuple(float(c) for c in ship_pos))
+        self.points["uav"].append(tuple(uav_pos.tolist()))  # (positions as arrays: Python floats)
+        self.points["ship"].append(tuple(ship_pos.tolist()))
         if t_s - self.t_sent >= self.EVERY_S:
             self.flush(log, t_s)
 

@@ -21,6 +21,9 @@ from fwsim.scenario import Scenario
 from fwsim.sensors import rng_for
 from fwsim.target import HullVolume, Ship, TargetState, r_enu_from_ship
 
+#: the UAV farther than this from the ship's origin cannot be inside it (uav_inside_ship's quick test)
+_NEAR_SHIP_M = 60.0
+
 
 @dataclass(slots=True)
 class Truth:
@@ -102,8 +105,12 @@ class World:
     def uav_inside_ship(self) -> bool:
         """True once the UAV's centre of gravity is inside the ship's hull or superstructure."""
         tr = self.truth
-        rel = tr.uav.pos_enu_m - tr.target.pos_enu_m  # the ship's state of this tick, already computed
-        if rel @ rel > 60.0 ** 2:  # far from the ship: skip the exact test
+        ux, uy, _ = tr.uav.pos_enu_m.tolist()
+        sx, sy, _ = tr.target.pos_enu_m.tolist()  # the ship's state of this tick, already computed
+        if abs(ux - sx) > _NEAR_SHIP_M or abs(uy - sy) > _NEAR_SHIP_M:  # then rel @ rel is above its square too
+            return False
+        rel = tr.uav.pos_enu_m - tr.target.pos_enu_m
+        if rel @ rel > _NEAR_SHIP_M ** 2:  # far from the ship: skip the exact test
             return False
         return self._hull.contains(r_enu_from_ship(tr.target.heading_ned_rad).T @ rel)
 
@@ -111,8 +118,8 @@ class World:
         """Current poses of the UAV (body FRD) and the ship (ship frame) in the world."""
         tr = self.truth
         uav = Pose(dcm_enu_from_frd(tr.uav.euler_ned_rad), tr.uav.pos_enu_m)
-        pos, R = self.ship.pose(tr.uav.t_s)
-        return uav, Pose(R, pos)
+        ship = tr.target  # Ship.pose of this tick, from the state already computed
+        return uav, Pose(r_enu_from_ship(ship.heading_ned_rad), ship.pos_enu_m)
 
     def look(self) -> FrameGeometry:
         """One camera frame: what the camera sees of the ship right now."""

@@ -7,6 +7,7 @@ import struct
 import sys
 import time
 import traceback
+from itertools import chain
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -73,16 +74,22 @@ def _ns(t_s: float) -> int:
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
 
 
-def _time_range(start: int, end: int, count: int, log_time: int) -> tuple[int, int]:
-    """(start, end) of a message time range after one more message at ``log_time`` (``count`` before it)."""
-    if count == 0 or log_time < start:
-        start = log_time
-    return start, (log_time if log_time > end else end)
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, records' length
+
+
+class _MessageIndex(MessageIndex):
+    """mcap's MessageIndex written in one ``struct`` call (the library packs each time and offset apart)."""
+
+    def write(self, stream) -> None:
+        n = len(self.records)
+        stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * n, self.channel_id, 16 * n))
+        stream.write(struct.pack(f"<{2 * n}Q", *chain.from_iterable(self.records)))
 
 
 class _FastChunkBuilder:
     """mcap's ChunkBuilder with the message records packed in one ``struct`` call into a bytearray (the
-    library builds each through a BytesIO, five packs and a seek: most of a message's cost)."""
+    library builds each through a BytesIO, five packs and a seek: most of a message's cost). The records
+    are added by :meth:`_FastWriter.add_message`."""
 
     def __init__(self) -> None:
         self.buf = bytearray()
@@ -94,18 +101,6 @@ class _FastChunkBuilder:
     @property
     def count(self) -> int:
         return len(self.buf)
-
-    def add(self, channel_id: int, sequence: int, log_time: int, publish_time: int, data: bytes) -> None:
-        self.message_start_time, self.message_end_time = _time_range(
-            self.message_start_time, self.message_end_time, self.num_messages, log_time)
-        index = self.message_indices.get(channel_id)
-        if index is None:
-            index = self.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-        buf = self.buf
-        index.records.append((log_time, len(buf)))
-        self.num_messages += 1
-        buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence, log_time, publish_time)
-        buf += data
 
     def _record(self, record) -> None:
         rb = RecordBuilder()
@@ -150,15 +145,36 @@ class _FastWriter(Writer):
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0):
         if not self.fast:
             return super().add_message(channel_id, log_time, data, publish_time, sequence)
-        st = self._stats
-        st.message_start_time, st.message_end_time = _time_range(
-            st.message_start_time, st.message_end_time, st.message_count, log_time)
-        st.channel_message_counts[channel_id] += 1
-        st.message_count += 1
+        # the chunk's time range, message index and record (the file's statistics: when the chunk is finished)
         chunk = self._chunk
-        chunk.add(channel_id, sequence, log_time, publish_time, data)
-        if len(chunk.buf) > self._chunk_size:
+        if chunk.num_messages == 0 or log_time < chunk.message_start_time:
+            chunk.message_start_time = log_time
+        if log_time > chunk.message_end_time:
+            chunk.message_end_time = log_time
+        chunk.num_messages += 1
+        buf = chunk.buf
+        index = chunk.message_indices.get(channel_id)
+        if index is None:
+            index = chunk.message_indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
+        index.records.append((log_time, len(buf)))
+        buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence, log_time, publish_time)
+        buf += data
+        if len(buf) > self._chunk_size:
             self._Writer__finalize_chunk()
+
+    def _Writer__finalize_chunk(self):
+        chunk = self._chunk if self.fast else None
+        if chunk is not None and chunk.num_messages:  # its messages into the file's statistics, as add_message's
+            st = self._stats
+            if st.message_count == 0 or chunk.message_start_time < st.message_start_time:
+                st.message_start_time = chunk.message_start_time
+            if chunk.message_end_time > st.message_end_time:
+                st.message_end_time = chunk.message_end_time
+            counts = st.channel_message_counts
+            for channel_id, index in chunk.message_indices.items():
+                counts[channel_id] += len(index.records)
+            st.message_count += chunk.num_messages
+        super()._Writer__finalize_chunk()
 
 
 class _FlushingFile:
@@ -257,6 +273,7 @@ class LogWriter:
             )
             from fwsim import __version__
 
+            self._add_message = self._mcap.add_message  # (channel id, log time, data, publish time, sequence)
             self._mcap.start(profile="", library=f"fwsim/{__version__}")
             self._mcap.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
             self._mcap.add_attachment(
@@ -279,6 +296,7 @@ class LogWriter:
         self._quat = None  # fwsim.frames.quat_enu_from_frd, imported on first use
         # Reused protobuf messages (set fields, serialise; no per-call allocation).
         self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
+        self._transforms: dict[tuple[str, str], FrameTransform] = {}  # write_transform's, by (parent, child)
         self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
         self._fix = None  # the LocationFix reused by write_location
         self._log = Log()
@@ -318,13 +336,7 @@ class LogWriter:
     def _write_proto(self, topic: str, msg: Any, log_time: int) -> None:
         entry = self._proto_channels.get(topic) or self._proto_channel(topic, type(msg))
         entry[1] += 1
-        self._mcap.add_message(
-            channel_id=entry[0],
-            log_time=log_time,
-            publish_time=log_time,
-            data=msg.SerializeToString(),
-            sequence=entry[1],
-        )
+        self._add_message(entry[0], log_time, msg.SerializeToString(), log_time, entry[1])
         if self._listeners:
             self._notify(topic, (log_time - self._t0) * 1e-9, msg)
 
@@ -363,13 +375,7 @@ class LogWriter:
         if t_s > self.last_t_s:
             self.last_t_s = t_s
         ns = self._t0 + _ns(t_s)
-        self._mcap.add_message(
-            channel_id=entry[0],
-            log_time=ns,
-            publish_time=ns,
-            data=entry[1].encode(msg),
-            sequence=entry[2],
-        )
+        self._add_message(entry[0], ns, entry[1].encode(msg), ns, entry[2])
         if self._listeners:
             self._notify(topic, t_s, msg)
 
@@ -381,8 +387,8 @@ class LogWriter:
             from fwsim.frames import quat_enu_from_frd
 
             quat = self._quat = quat_enu_from_frd
-        w, x, y, z = (float(c) for c in quat(state.euler_ned_rad))
-        px, py, pz = (float(c) for c in state.pos_enu_m)
+        w, x, y, z = quat(state.euler_ned_rad).tolist()
+        px, py, pz = map(float, state.pos_enu_m)
         ns = self._t0 + _ns(state.t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
 
@@ -413,11 +419,15 @@ class LogWriter:
                         parent_frame_id: str = topics.WORLD_FRAME) -> None:
         """A foxglove.FrameTransform on /tf: ``child`` posed in ``parent`` (e.g. the camera, the ship)."""
         ns = self._t0 + _ns(t_s)
-        msg = FrameTransform(parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
+        msg = self._transforms.get((parent_frame_id, child_frame_id))
+        if msg is None:  # one reused message per pair of frames (every field is set below)
+            msg = self._transforms[(parent_frame_id, child_frame_id)] = FrameTransform(
+                parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
         msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
-        msg.translation.x, msg.translation.y, msg.translation.z = (float(c) for c in pos)
+        tr = msg.translation
+        tr.x, tr.y, tr.z = map(float, pos)
         r = msg.rotation
-        r.w, r.x, r.y, r.z = (float(c) for c in quat_wxyz)
+        r.w, r.x, r.y, r.z = map(float, quat_wxyz)
         self._write_proto(topics.TF, msg, ns)
 
     def write_location(self, t_s: float, frame_id: str, lat_deg: float, lon_deg: float, alt_m: float) -> None:
