@@ -70,8 +70,9 @@ class NmpcLoiter:
     """
 
     def __init__(self, nmpc_cfg, recorder):
-        from controllers.nmpc import Nmpc  # CasADi: loaded only when the NMPC flies
+        from controllers.nmpc import Nmpc, NmpcStatus  # CasADi: loaded only when the NMPC flies
 
+        self._status = NmpcStatus.from_result
         self.cfg = nmpc_cfg
         self.nmpc = Nmpc(nmpc_cfg)
         self.radius_m, self.altitude_m = nmpc_cfg.radius_m, nmpc_cfg.altitude_m
@@ -88,8 +89,6 @@ class NmpcLoiter:
         return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m)
 
     def _solve(self, nav: Measurements, target: TargetState) -> None:
-        from controllers.nmpc import NmpcStatus
-
         t, nmpc = nav.t_s, self.nmpc
         v_q = target.vel_enu_m_s
         if self.cfg.air_relative and np.isfinite(nav.wind_enu_m_s).all():
@@ -97,7 +96,7 @@ class NmpcLoiter:
         res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, v_q)
         self._cmd = nmpc.command(res)
         self._next_t = t + self.cfg.step_s
-        self._record.log(topics.FSW_NMPC, NmpcStatus.from_result(res, nmpc.fallback_count))
+        self._record.log(topics.FSW_NMPC, self._status(res, nmpc.fallback_count))
         if res.fallback:
             self._record.event(f"NMPC fallback at t = {t:.2f} s: {res.status}")
 
