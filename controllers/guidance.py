@@ -155,8 +155,9 @@ class BpngTerminal:
         if not b.aim_at_contact:
             return None
         aim = self.law.aim_point(target)
-        speed = max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0)
+        v = np.asarray(nav.vel_enu_m_s, dtype=float)
+        speed = max(math.sqrt(v.dot(v)), 1.0)  # |v| (np.linalg.norm's own sum)
         d = speed * self.law.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
-        d = d / max(float(np.linalg.norm(d)), 1e-9)
+        d = d / max(math.sqrt(d.dot(d)), 1e-9)
         depth = self.ship.entry_depth_m(aim, target, d, target_vel)
         return aim - (depth + b.contact_standoff_m) * d

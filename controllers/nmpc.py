@@ -433,7 +433,7 @@ class Nmpc:
 
     def state_from_measurements(self, meas: Measurements) -> np.ndarray:
         """x0 = [pos_enu (3), phi, theta, psi_enu] with psi_enu = pi/2 - psi_ned, unwrapped across calls."""
-        phi, theta, psi_ned = (float(v) for v in meas.euler_ned_rad)
+        phi, theta, psi_ned = map(float, meas.euler_ned_rad)
         if self.cfg.pitch_from == "flight_path":
             v = meas.vel_enu_m_s
             theta = math.atan2(float(v[2]), max(math.hypot(float(v[0]), float(v[1])), 1e-3))
@@ -443,7 +443,7 @@ class Nmpc:
         else:
             psi = wrap_pi(psi)
         self._psi_meas = psi
-        return np.array([*(float(v) for v in meas.pos_enu_m), phi, theta, psi])
+        return np.array([*map(float, meas.pos_enu_m), phi, theta, psi])
 
     @staticmethod
     def command(result: NmpcResult) -> RateCommand:
@@ -546,7 +546,7 @@ class Nmpc:
         (perf_counter seconds) or, with ``converge``, once the largest input step is below
         ``cold_start_tol``; returns (w, n_iter, ok, why)."""
         pb = self.problem
-        iu = pb.iu[:, :3].ravel()
+        iu = pb.iu[:, :3].ravel() if converge else None
         n = 0
         for n in range(1, iters + 1):
             t_it = time.perf_counter()
@@ -604,7 +604,7 @@ class Nmpc:
         late = cfg.budget == "wall_clock" and solve_ms > cfg.max_solve_ms
         X, U = w[pb.ix], w[pb.iu]
         if ok and not late:
-            u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
+            u0 = U[0, :3].clip(self._u_lo[:3], self._u_hi[:3])
             self._plan = (t_s, U[:, :3].copy())
             status, fallback = "ok", False
         else:
