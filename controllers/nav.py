@@ -94,7 +94,7 @@ class Navigation:
             return
         w = np.asarray(v_fix, dtype=float) - meas.airspeed_m_s * R_enu_from_frd[:, 0]
         w[2] = 0.0
-        if not np.isfinite(w).all():
+        if not _finite3(w):
             return
         self.wind_enu_m_s = self.wind_enu_m_s + k * (w - self.wind_enu_m_s)
 
