@@ -233,7 +233,9 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
     r = np.asarray(r, dtype=float)
     r_dot = np.asarray(r_dot, dtype=float)
     v_p = np.asarray(v_p, dtype=float)
-    v_f = np.broadcast_to(np.asarray(v_f, dtype=float), v_p.shape)
+    v_f = np.asarray(v_f, dtype=float)
+    if v_f.shape != v_p.shape:
+        v_f = np.broadcast_to(v_f, v_p.shape)
 
     rng = _norm(r)
     speed = _norm(v_p)
@@ -255,7 +257,7 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
     regular = s > _PARALLEL_EPS
     n = np.where(regular[..., None], c / np.where(regular, s, 1.0)[..., None], 0.0)
     anti = ~regular & (theta > 0.5 * math.pi)
-    if np.any(anti):
+    if anti.any():
         n = np.where(anti[..., None], _antiparallel_axis(v_hat, r), n)
 
     a_pn = n_sigma * _cross(omega, v_p)
@@ -354,7 +356,7 @@ class Bpng:
                        bias_angle_cap_rad=math.inf if cfg.bias_angle_cap_deg is None
                        else math.radians(cfg.bias_angle_cap_deg))
         # once inside, stay inside: past the steering point the range grows again and the LOS turns round
-        endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * float(np.linalg.norm(v))
+        endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * math.sqrt(v.dot(v))
         a = self._endgame_accel(v, float(k.theta_err_rad)) if endgame else k.accel_cmd.copy()
         cmd = AccelCommand(t_s=t_s, airspeed_m_s=cfg.airspeed_m_s, accel_enu_m_s2=a)
         status = BpngStatus(t_s=t_s, t_go_s=float(k.t_go_s), range_m=float(k.range_m),

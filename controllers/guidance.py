@@ -70,8 +70,9 @@ class NmpcLoiter:
     """
 
     def __init__(self, nmpc_cfg, recorder):
-        from controllers.nmpc import Nmpc  # CasADi: loaded only when the NMPC flies
+        from controllers.nmpc import Nmpc, NmpcStatus  # CasADi: loaded only when the NMPC flies
 
+        self._status = NmpcStatus.from_result
         self.cfg = nmpc_cfg
         self.nmpc = Nmpc(nmpc_cfg)
         self.radius_m, self.altitude_m = nmpc_cfg.radius_m, nmpc_cfg.altitude_m
@@ -88,8 +89,6 @@ class NmpcLoiter:
         return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m)
 
     def _solve(self, nav: Measurements, target: TargetState) -> None:
-        from controllers.nmpc import NmpcStatus
-
         t, nmpc = nav.t_s, self.nmpc
         v_q = target.vel_enu_m_s
         if self.cfg.air_relative and np.isfinite(nav.wind_enu_m_s).all():
@@ -97,7 +96,7 @@ class NmpcLoiter:
         res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, v_q)
         self._cmd = nmpc.command(res)
         self._next_t = t + self.cfg.step_s
-        self._record.log(topics.FSW_NMPC, NmpcStatus.from_result(res, nmpc.fallback_count))
+        self._record.log(topics.FSW_NMPC, self._status(res, nmpc.fallback_count))
         if res.fallback:
             self._record.event(f"NMPC fallback at t = {t:.2f} s: {res.status}")
 
@@ -156,8 +155,9 @@ class BpngTerminal:
         if not b.aim_at_contact:
             return None
         aim = self.law.aim_point(target)
-        speed = max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0)
+        v = np.asarray(nav.vel_enu_m_s, dtype=float)
+        speed = max(math.sqrt(v.dot(v)), 1.0)  # |v| (np.linalg.norm's own sum)
         d = speed * self.law.v_f_enu - np.asarray(target_vel, float)  # impact velocity relative to the ship
-        d = d / max(float(np.linalg.norm(d)), 1e-9)
+        d = d / max(math.sqrt(d.dot(d)), 1e-9)
         depth = self.ship.entry_depth_m(aim, target, d, target_vel)
         return aim - (depth + b.contact_standoff_m) * d

@@ -181,9 +181,14 @@ def joint_jacobian(x1: float, x2: float, tilt_rad: float) -> np.ndarray:
 
     Finite everywhere; ``det J = (1 + x1^2 + x2^2)(cos t + x2 sin t)``.
     """
+    a, c, d, f = _jacobian_entries(x1, x2, tilt_rad)
+    return np.array([[a, c], [d, f]])
+
+
+def _jacobian_entries(x1, x2, tilt_rad: float) -> tuple:
+    """J's entries, row by row (the one place they are written)."""
     ct, st = math.cos(tilt_rad), math.sin(tilt_rad)
-    return np.array([[x1 * x2, -ct * (1.0 + x1 * x1) - st * x2],
-                     [1.0 + x2 * x2, -ct * x1 * x2 + st * x1]])
+    return x1 * x2, -ct * (1.0 + x1 * x1) - st * x2, 1.0 + x2 * x2, -ct * x1 * x2 + st * x1
 
 
 def damped_solve(J: np.ndarray, b, mu: float) -> tuple[np.ndarray, float]:
@@ -192,9 +197,14 @@ def damped_solve(J: np.ndarray, b, mu: float) -> tuple[np.ndarray, float]:
     Exact inverse while the smallest singular value sigma_min of the 2x2 J is at
     least mu; continuous across; ``|q| <= |b| / mu`` always.
     """
-    a, c = float(J[0, 0]), float(J[0, 1])
-    d, f = float(J[1, 0]), float(J[1, 1])
-    b0, b1 = float(b[0]), float(b[1])
+    q0, q1, sigma_min = _damped_solve(float(J[0, 0]), float(J[0, 1]), float(J[1, 0]), float(J[1, 1]),
+                                      float(b[0]), float(b[1]), mu)
+    return np.array([q0, q1]), sigma_min
+
+
+def _damped_solve(a: float, c: float, d: float, f: float, b0: float, b1: float, mu: float
+                  ) -> tuple[float, float, float]:
+    """:func:`damped_solve` on J = [[a, c], [d, f]] and b = [b0, b1] as numbers: (q0, q1, sigma_min)."""
     # A = J^T J = [[p, r], [r, s]]
     p, r, s = a * a + d * d, a * c + d * f, c * c + f * f
     half_tr = 0.5 * (p + s)
@@ -206,8 +216,8 @@ def damped_solve(J: np.ndarray, b, mu: float) -> tuple[np.ndarray, float]:
     g0, g1 = a * b0 + d * b1, c * b0 + f * b1  # J^T b
     det = p * s - r * r
     if det <= 0.0:  # only when mu = 0 and J is singular: no motion
-        return np.zeros(2), math.sqrt(sig2_min)
-    return np.array([(s * g0 - r * g1) / det, (p * g1 - r * g0) / det]), math.sqrt(sig2_min)
+        return 0.0, 0.0, math.sqrt(sig2_min)
+    return (s * g0 - r * g1) / det, (p * g1 - r * g0) / det, math.sqrt(sig2_min)
 
 
 def joint_rates_direct(x1: float, x2: float, tilt_rad: float, lambda_1_s: float, known_rate=(0.0, 0.0),
@@ -326,6 +336,11 @@ def _finite(*xs) -> bool:
     return all(math.isfinite(float(x)) for x in xs)
 
 
+def _finite3(v) -> bool:
+    """Every component of the 3-vector finite (``np.isfinite(v).all()`` without the temporaries)."""
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
+
+
 class Ibvs:
     """IBVS pan-tilt controller: ``step(meas, target_vel, depth, mount_offset) -> (GimbalCommand, IbvsStatus)``."""
 
@@ -379,10 +394,10 @@ class Ibvs:
         cfg = self.cfg
         lo, hi = cfg.pan_limits_rad
         d = R_fc @ np.array([float(s[0]), float(s[1]), 1.0])  # target direction, body FRD (per unit depth)
-        dz = float(d[2])
+        dx, dy, dz = d.tolist()
         tan_k = self._tan_keyhole[0 if dz > 0.0 else 1]
-        rho = math.hypot(d[0], d[1]) / abs(dz) if dz != 0.0 else math.inf  # tan(angle off the pan axis)
-        w = wrap_pi(math.atan2(d[1], d[0]) - pan)  # target azimuth relative to the pan
+        rho = math.hypot(dx, dy) / abs(dz) if dz != 0.0 else math.inf  # tan(angle off the pan axis)
+        w = wrap_pi(math.atan2(dy, dx) - pan)  # target azimuth relative to the pan
 
         def travel() -> float | None:
             """Pan motion that faces the target within the pan limits (shortest), None if none can."""
@@ -454,14 +469,14 @@ class Ibvs:
         prev_t = self._last_t
         self._last_t = t
         pan, tilt = float(meas.pan_rad), float(meas.tilt_rad)
-        if not _finite(pan, tilt):
+        if not (math.isfinite(pan) and math.isfinite(tilt)):
             self._s = None
             return self._hold(t)
 
         R_fc = R_frd_from_cam(pan, tilt)
         R_cf = R_fc.T
         w_p = np.asarray(meas.body_rates_frd_rad_s, dtype=float)
-        if not np.isfinite(w_p).all():
+        if not _finite3(w_p):
             w_p = np.zeros(3)
         v_rel, z = self._relative_velocity(meas, target_vel_enu_m_s, depth_m, mount_offset_frd_m, R_cf, w_p)
 
@@ -488,11 +503,11 @@ class Ibvs:
         if depth_m is not None and math.isfinite(float(depth_m)) and float(depth_m) > 0.0:
             vel = np.asarray(meas.vel_enu_m_s, dtype=float)
             eul = np.asarray(meas.euler_ned_rad, dtype=float)
-            if np.isfinite(vel).all() and np.isfinite(eul).all():
+            if _finite3(vel) and _finite3(eul):
                 R_ef = dcm_enu_from_frd(eul)
                 v_c = vel + R_ef @ cross3(w_p, mount_offset_frd_m)
                 v_q = np.zeros(3) if target_vel_enu_m_s is None else np.asarray(target_vel_enu_m_s, dtype=float)
-                if np.isfinite(v_q).all():
+                if _finite3(v_q):
                     v_rel = R_cf @ (R_ef.T @ (v_q - v_c))
         return v_rel, (float(depth_m) if v_rel is not None else math.nan)
 
@@ -502,10 +517,10 @@ class Ibvs:
         cfg = self.cfg
         # measured joint rates for the propagation (encoders; else the last command)
         pr_m, tr_m = float(meas.pan_rate_rad_s), float(meas.tilt_rate_rad_s)
-        if not _finite(pr_m, tr_m):
+        if not (math.isfinite(pr_m) and math.isfinite(tr_m)):
             pr_m, tr_m = self._last_cmd
         u, v = float(meas.det_u_px), float(meas.det_v_px)
-        valid = bool(meas.det_valid) and _finite(u, v)
+        valid = bool(meas.det_valid) and math.isfinite(u) and math.isfinite(v)
         key = (float(meas.det_exposure_t_s), u, v)
         if valid and key != self._det_key:  # a new detection (NaN exposure: every tick is new)
             self._det_key = key
@@ -518,8 +533,11 @@ class Ibvs:
             self._s = s
         elif self._s is not None and cfg.propagate_feature and prev_t is not None:
             self._s = self._s + dt * self._sdot(self._s, tilt, R_cf, w_p, pr_m, tr_m, T_fn)
-        if self._s is not None:
-            np.clip(self._s, -_FEATURE_CAP, _FEATURE_CAP, out=self._s)
+        s = self._s
+        if s is not None:
+            x1, x2 = s.tolist()
+            if not (-_FEATURE_CAP <= x1 <= _FEATURE_CAP and -_FEATURE_CAP <= x2 <= _FEATURE_CAP):  # else a no-op
+                np.clip(s, -_FEATURE_CAP, _FEATURE_CAP, out=s)
         return valid
 
     def _mode(self, t: float, valid: bool, age: float) -> str:
@@ -541,17 +559,20 @@ class Ibvs:
         Returns (pan_rate, tilt_rate, rate scale, sigma_min of J, swing direction)."""
         cfg = self.cfg
         s = self._s
-        x1, x2 = float(s[0]), float(s[1])
-        b = np.zeros(2)
+        x1, x2 = s.tolist()
+        b0 = b1 = 0.0  # b = -lambda e - known rate, term by term
         if mode == "track":
-            b -= cfg.lambda_1_s * s
+            lam = cfg.lambda_1_s
+            b0, b1 = b0 - lam * x1, b1 - lam * x2
         if cfg.feedforward:
-            b -= l1_matrix(x1, x2) @ (R_cf @ w_p)
+            r0, r1 = (l1_matrix(x1, x2) @ (R_cf @ w_p)).tolist()
+            b0, b1 = b0 - r0, b1 - r1
             T = T_fn(s)
             if T is not None:
-                b -= T
-        J = joint_jacobian(x1, x2, tilt)
-        q, sigma_min = damped_solve(J, b, cfg.singularity_damping)
+                T0, T1 = T.tolist()
+                b0, b1 = b0 - T0, b1 - T1
+        a, c, d, f = _jacobian_entries(x1, x2, tilt)
+        q0, q1, sigma_min = _damped_solve(a, c, d, f, b0, b1, cfg.singularity_damping)
         swing = 0
         if cfg.keyhole_swing:
             v_rel_body = None if v_rel is None else R_fc @ v_rel
@@ -559,10 +580,11 @@ class Ibvs:
         if swing:
             # the pan at full rate; the tilt does what it can for the image error given that pan rate
             pan_rate = swing * cfg.max_pan_rate_rad_s
+            J = np.array([[a, c], [d, f]])
             j0, j1 = J[:, 0], J[:, 1]
-            tilt_rate = float(j0 @ (b - j1 * pan_rate)) / float(j0 @ j0)
+            tilt_rate = float(j0 @ (np.array([b0, b1]) - j1 * pan_rate)) / float(j0 @ j0)
             pan_rate = limit_joint_rates(pan, tilt, pan_rate, 0.0, cfg, dt)[0]
             tilt_rate, scale = limit_joint_rates(pan, tilt, 0.0, tilt_rate, cfg, dt)[1:]
         else:
-            pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, float(q[1]), float(q[0]), cfg, dt)
+            pan_rate, tilt_rate, scale = limit_joint_rates(pan, tilt, q1, q0, cfg, dt)
         return pan_rate, tilt_rate, scale, sigma_min, swing

@@ -46,6 +46,8 @@ from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand
 
 __all__ = ["FlightSoftware", "FlightSoftwareOutput", "ScriptedFlightSoftware", "flight_software"]
 
+_NO_RING = Ring(math.nan, math.nan)  # Phase 1's (no loiter yet)
+
 
 @dataclass(frozen=True, slots=True)
 class FlightSoftwareOutput:
@@ -105,7 +107,7 @@ class FlightSoftware:
                 gimbal: GimbalCommand) -> FlightSoftwareOutput:
         phase = self.phase.phase
         name = "acquisition:" + ("path" if fix.locked else "search") if phase == 1 else guide.name
-        ring = self.ring if phase > 1 else Ring(math.nan, math.nan)
+        ring = self.ring if phase > 1 else _NO_RING
         radial = radial_error_m(nav.pos_enu_m, est, ring.radius_m) if phase > 1 else math.nan
         status = FlightSoftwareStatus(nav.t_s, phase, name, guide.command.mode, guide.course_sp_rad,
                                       guide.bank_sp_rad, guide.altitude_sp_m, guide.cross_track_m, fix.locked,

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 
 import numpy as np
 
@@ -52,6 +53,23 @@ __all__ = ["NavigationConfig", "Navigation"]
 
 _LEVEL_PITCH_RAD = math.radians(15.0)  # the wind is estimated only below this pitch
 _LEVEL_BANK_RAD = math.radians(45.0)  # and this bank
+_MEAS_FIELDS = tuple(f.name for f in dataclasses.fields(Measurements))
+_meas_values = operator.attrgetter(*_MEAS_FIELDS)  # every field, in the constructor's order
+_I_POS, _I_VEL, _I_WIND = (_MEAS_FIELDS.index(n) for n in ("pos_enu_m", "vel_enu_m_s", "wind_enu_m_s"))
+
+
+def _finite3(v) -> bool:
+    """Every component of the 3-vector finite (``np.isfinite(v).all()`` without the temporaries)."""
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
+
+
+def _with_navigation(meas: Measurements, pos, vel, wind) -> Measurements:
+    """``dataclasses.replace(meas, pos_enu_m=pos, vel_enu_m_s=vel, wind_enu_m_s=wind)``, built positionally."""
+    if type(meas) is not Measurements:
+        return dataclasses.replace(meas, pos_enu_m=pos, vel_enu_m_s=vel, wind_enu_m_s=wind)
+    values = list(_meas_values(meas))
+    values[_I_POS], values[_I_VEL], values[_I_WIND] = pos, vel, wind
+    return Measurements(*values)
 
 
 class Navigation:
@@ -76,7 +94,7 @@ class Navigation:
             return
         w = np.asarray(v_fix, dtype=float) - meas.airspeed_m_s * R_enu_from_frd[:, 0]
         w[2] = 0.0
-        if not np.isfinite(w).all():
+        if not _finite3(w):
             return
         self.wind_enu_m_s = self.wind_enu_m_s + k * (w - self.wind_enu_m_s)
 
@@ -87,8 +105,7 @@ class Navigation:
             return meas
         t = meas.t_s
         v = np.asarray(meas.vel_enu_m_s, dtype=float)
-        if self.cfg.turn_velocity and np.isfinite(meas.body_rates_frd_rad_s).all() \
-                and np.isfinite(meas.euler_ned_rad).all():
+        if self.cfg.turn_velocity and _finite3(meas.body_rates_frd_rad_s) and _finite3(meas.euler_ned_rad):
             R = dcm_enu_from_frd(meas.euler_ned_rad)
             if meas.nav_t_s != self._fix_t:
                 self._update_wind(v, R, meas)
@@ -109,5 +126,4 @@ class Navigation:
             if meas.nav_t_s != self._fix_t:  # a new fix: blend it in
                 self._pos = self._pos + self.cfg.fix_gain * (fix - self._pos)
         self._t, self._fix_t, self._v_out = t, meas.nav_t_s, np.array(v_now, dtype=float)
-        return dataclasses.replace(meas, pos_enu_m=self._pos.copy(), vel_enu_m_s=np.array(v_now, dtype=float),
-                                   wind_enu_m_s=self.wind_enu_m_s.copy())
+        return _with_navigation(meas, self._pos.copy(), np.array(v_now, dtype=float), self.wind_enu_m_s.copy())

@@ -372,6 +372,7 @@ class Nmpc:
             self._h_sp = pb.hessian_sparsity()
             # _HESS_REG on the diagonal entries of the block-diagonal pattern (column-major within blocks)
             self._h_reg = np.concatenate([(_HESS_REG * np.eye(len(b))).reshape(-1) for b in pb.blocks])
+            self._hessian_maps()
             qp_sp = {"h": self._h_sp, "a": qp_fun.sparsity_out(3)}
             if cfg.solver == "rti_hpipm":
                 opts = {"N": N, "nx": [NX] * (N + 1), "nu": [pb.nu] * N + [0],
@@ -412,6 +413,13 @@ class Nmpc:
         self._phi_max = math.radians(cfg.roll_max_deg)
         self._theta_max = math.radians(cfg.pitch_max_deg)
         self._u_lo, self._u_hi = np.array(ulo), np.array(uhi)
+        # the attitude bounds of X_1..X_N: (state index, limit, what the funnel's rate reaches by each stage,
+        # the bounds' positions in w)
+        t = np.arange(1, pb.N + 1) * cfg.step_s
+        self._funnels = tuple((j, lim, _FUNNEL * rate * t, pb.ix[1:, j].copy())
+                              for j, lim, rate in ((3, self._phi_max, cfg.roll_rate_max_rad_s),
+                                                   (4, self._theta_max,
+                                                    cfg.pitch_rate_max_rad_s * math.cos(self._phi_max))))
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -425,7 +433,7 @@ class Nmpc:
 
     def state_from_measurements(self, meas: Measurements) -> np.ndarray:
         """x0 = [pos_enu (3), phi, theta, psi_enu] with psi_enu = pi/2 - psi_ned, unwrapped across calls."""
-        phi, theta, psi_ned = (float(v) for v in meas.euler_ned_rad)
+        phi, theta, psi_ned = map(float, meas.euler_ned_rad)
         if self.cfg.pitch_from == "flight_path":
             v = meas.vel_enu_m_s
             theta = math.atan2(float(v[2]), max(math.hypot(float(v[0]), float(v[1])), 1e-3))
@@ -435,7 +443,7 @@ class Nmpc:
         else:
             psi = wrap_pi(psi)
         self._psi_meas = psi
-        return np.array([*(float(v) for v in meas.pos_enu_m), phi, theta, psi])
+        return np.array([*map(float, meas.pos_enu_m), phi, theta, psi])
 
     @staticmethod
     def command(result: NmpcResult) -> RateCommand:
@@ -463,32 +471,28 @@ class Nmpc:
         return w
 
     def _shifted(self, w: np.ndarray, m: int) -> np.ndarray:
+        """The plan w moved on by m steps: stages m..N become 0..N-m (w is stage-major, [x_k, u_k] per
+        stage, so that is one slice), the last input held and the states after it rolled out."""
         pb = self.problem
         if m <= 0:
             return w.copy()
-        X, U = w[pb.ix], w[pb.iu]
-        Xs = np.empty_like(X)
-        Us = np.empty_like(U)
-        N = pb.N
-        Us[: N - m] = U[m:]
-        Us[N - m:] = U[-1]
-        Xs[: N + 1 - m] = X[m:]
-        for k in range(N + 1 - m, N + 1):
-            Xs[k] = _np_step(Xs[k - 1], Us[k - 1], self.cfg.step_s, self.cfg.integrator)
-        return self._pack(Xs, Us)
+        N, ns = pb.N, pb.ns
+        ws = np.empty_like(w)
+        ws[: (N - m) * ns + NX] = w[m * ns:]
+        u_last = w[(N - 1) * ns + NX: N * ns]
+        for k in range(N - m, N):
+            ws[k * ns + NX: (k + 1) * ns] = u_last
+            ws[(k + 1) * ns: (k + 1) * ns + NX] = _np_step(ws[k * ns: k * ns + NX], u_last, self.cfg.step_s,
+                                                           self.cfg.integrator)
+        return ws
 
     def _bounds(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        pb, cfg = self.problem, self.cfg
         lbw, ubw = self._lbw.copy(), self._ubw.copy()
-        lbw[pb.ix[0]] = x0
-        ubw[pb.ix[0]] = x0
-        t = np.arange(1, pb.N + 1) * cfg.step_s
-        for j, lim, rate in ((3, self._phi_max, cfg.roll_rate_max_rad_s),
-                             (4, self._theta_max, cfg.pitch_rate_max_rad_s * math.cos(self._phi_max))):
-            hi = np.maximum(lim, x0[j] - _FUNNEL * rate * t)
-            lo = np.minimum(-lim, x0[j] + _FUNNEL * rate * t)
-            ubw[pb.ix[1:, j]] = hi
-            lbw[pb.ix[1:, j]] = lo
+        lbw[:NX] = x0  # x_0 leads w
+        ubw[:NX] = x0
+        for j, lim, reach, idx in self._funnels:
+            ubw[idx] = np.maximum(lim, x0[j] - reach)
+            lbw[idx] = np.minimum(-lim, x0[j] + reach)
         return lbw, ubw
 
     def _cbf_bounds(self, x0: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -502,33 +506,47 @@ class Nmpc:
             ubc[drop] = np.inf
         return pb.lbc, ubc
 
-    def _hessian(self, Hs: np.ndarray, HN: np.ndarray) -> np.ndarray:
-        """Nonzeros of the QP Hessian from the blocks: symmetrised, eigenvalues floored per group (exact)."""
+    def _hessian_maps(self) -> None:
+        """Flat indices (into [Hs, HN] and the QP Hessian's nonzeros, the same layout) of each convexification
+        group of every block: the singletons of all blocks together, and per multi-variable group its entries
+        (batch, i, j) and their transposes (batch, j, i)."""
         pb = self.problem
-        blocks = [Hs.reshape(pb.N, pb.ns, pb.ns), HN.reshape(1, NX, NX)]  # column-major = transposed blocks
-        if self.cfg.hessian == "exact":
-            floor = self.cfg.hessian_min_eig
-            out = []
-            for M, groups in zip(blocks, (pb.stage_groups, pb.term_groups)):
-                M = 0.5 * (M + M.transpose(0, 2, 1))
-                C = np.zeros_like(M)
-                for g in groups:
-                    if len(g) == 1:
-                        C[:, g[0], g[0]] = np.maximum(M[:, g[0], g[0]], floor)
-                        continue
-                    lam, V = np.linalg.eigh(M[:, g[:, None], g[None, :]])
-                    np.maximum(lam, floor, out=lam)
-                    C[:, g[:, None], g[None, :]] = (V * lam[:, None, :]) @ V.transpose(0, 2, 1)
-                out.append(C)
-            blocks = out
-        return np.concatenate([blocks[0].reshape(-1), blocks[1].reshape(-1)]) + self._h_reg
+        singles, groups = [], []
+        for off, nb, n, grp in ((0, pb.N, pb.ns, pb.stage_groups), (pb.N * pb.ns * pb.ns, 1, NX, pb.term_groups)):
+            base = off + n * n * np.arange(nb)[:, None, None]
+            for g in grp:
+                if len(g) == 1:
+                    singles.append((base + g[0] * (n + 1)).ravel())
+                else:
+                    groups.append((base + g[:, None] * n + g[None, :], base + g[None, :] * n + g[:, None]))
+        self._h_single = np.concatenate(singles) if singles else np.zeros(0, dtype=int)
+        self._h_groups = groups
+        self._h_conv = np.zeros(self._h_reg.size)  # entries outside the groups stay zero
+
+    def _hessian(self, Hs: np.ndarray, HN: np.ndarray) -> np.ndarray:
+        """Nonzeros of the QP Hessian from the blocks: symmetrised, eigenvalues floored per group (exact).
+
+        The blocks come column-major (transposed); the symmetric part is taken on the groups' entries only,
+        the rest of the Hessian being zero (plus the regularisation)."""
+        raw = np.concatenate((Hs, HN))
+        if self.cfg.hessian != "exact":
+            return raw + self._h_reg
+        floor = self.cfg.hessian_min_eig
+        out = self._h_conv
+        d = raw.take(self._h_single)
+        out[self._h_single] = np.maximum(0.5 * (d + d), floor)
+        for ia, ib in self._h_groups:
+            lam, V = np.linalg.eigh(0.5 * (raw.take(ia) + raw.take(ib)))
+            np.maximum(lam, floor, out=lam)
+            out[ia] = (V * lam[:, None, :]) @ V.transpose(0, 2, 1)
+        return out + self._h_reg
 
     def _rti(self, w, p, lbw, ubw, lbc, ubc, iters: int, converge: bool, deadline: float):
         """Up to ``iters`` full SQP steps, fewer if the next one would end after ``deadline``
         (perf_counter seconds) or, with ``converge``, once the largest input step is below
         ``cold_start_tol``; returns (w, n_iter, ok, why)."""
         pb = self.problem
-        iu = pb.iu[:, :3].ravel()
+        iu = pb.iu[:, :3].ravel() if converge else None
         n = 0
         for n in range(1, iters + 1):
             t_it = time.perf_counter()
@@ -586,7 +604,7 @@ class Nmpc:
         late = cfg.budget == "wall_clock" and solve_ms > cfg.max_solve_ms
         X, U = w[pb.ix], w[pb.iu]
         if ok and not late:
-            u0 = np.clip(U[0, :3], self._u_lo[:3], self._u_hi[:3])
+            u0 = U[0, :3].clip(self._u_lo[:3], self._u_hi[:3])
             self._plan = (t_s, U[:, :3].copy())
             status, fallback = "ok", False
         else:
@@ -650,13 +668,12 @@ class Nmpc:
             else:
                 self._w, self._t_prev = w0, t_s  # keep the shifted plan as the warm start
             return math.nan, math.nan, False
-        J, rows, hmin = self._eval(w, p)
-        rows = rows.copy()
+        J, rows, hmin = self._eval(w, p)  # the evaluator's buffers: read here, not kept
         if pb.use_cbf and cfg.cbf.sides == "solve_time":
             rows = np.where(np.isfinite(ubc[pb.icbf.ravel()]), rows, -np.inf)
         self._w, self._t_prev = w, t_s
         self._failures = 0
-        return float(J[0]), float(np.min(np.asarray(hmin))), bool(rows.size and np.max(rows) > -_CBF_ACTIVE_TOL)
+        return float(J[0]), float(hmin.min()), bool(rows.size and rows.max() > -_CBF_ACTIVE_TOL)
 
     def plan_cost(self, x0, target_pos_enu, target_vel_enu, inputs, u_prev=None) -> float:
         """The NLP cost of an input sequence (N, >=3) flown from x0 on the model (the dynamics then hold exactly).

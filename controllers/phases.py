@@ -58,8 +58,8 @@ class PhaseState:
 
 def radial_error_m(pos_enu_m, target: TargetState, radius_m: float) -> float:
     """Horizontal distance from the UAV to the target estimate minus R."""
-    rel = pos_enu_m[:2] - target.pos_enu_m[:2]
-    return float(np.hypot(rel[0], rel[1])) - radius_m
+    q = target.pos_enu_m
+    return float(np.hypot(pos_enu_m[0] - q[0], pos_enu_m[1] - q[1])) - radius_m
 
 
 def _wrap360(deg: float) -> float:
@@ -128,7 +128,8 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
             state = replace(state, phase=3, closest_m=math.nan)
             events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {why}")
     elif state.phase == 3 and switch.go_around_m is not None and target.known:
-        rng = float(np.linalg.norm(np.asarray(target.pos_enu_m, float) - np.asarray(pos_enu_m, float)))
+        d = np.asarray(target.pos_enu_m, float) - np.asarray(pos_enu_m, float)
+        rng = math.sqrt(d.dot(d))  # np.linalg.norm's own sum for a vector
         if not rng >= state.closest_m:  # the first tick of Phase 3 (NaN), or closer than ever
             state = replace(state, closest_m=rng)
         elif rng - state.closest_m > switch.go_around_m and ring is not None:
@@ -147,6 +148,8 @@ def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_
     radial = radial_error_m(pos_enu_m, target, ring.radius_m)
     alt_err = float(height_m) - ring.altitude_m
     if abs(radial) > sw.radius_tol_m or abs(alt_err) > sw.altitude_tol_m:
+        if math.isnan(state.in_tol_since_s):
+            return state, ""  # out of tolerance already (the state is immutable: no copy needed)
         return replace(state, in_tol_since_s=math.nan), ""
     if math.isnan(state.in_tol_since_s):
         state = replace(state, in_tol_since_s=t_s)
