@@ -391,6 +391,8 @@ class Detector:
         self.cfg = cfg
         self.rng = rng
         self.size = (width_px, height_px)
+        self._box_lo = np.array([0, 0, 0, 0])  # a box's clip bounds (the image), made once
+        self._box_hi = np.array([width_px - 1, height_px - 1, width_px - 1, height_px - 1])
         self._queue: list[Detection] = []
 
     def observe(self, frame: FrameGeometry, blackout: bool = False, clutter: np.ndarray | None = None) -> None:
@@ -409,8 +411,7 @@ class Detector:
         else:
             b = frame.bbox_px + c.box_noise_px * noise[:4]
             centre = frame.centre_px + c.pixel_noise_px * noise[4:]
-            W, H = self.size
-            b = np.clip(b, [0, 0, 0, 0], [W - 1, H - 1, W - 1, H - 1])
+            b = np.clip(b, self._box_lo, self._box_hi)
             det = Detection(t_arrive, frame.t_s, True, float(centre[0]), float(centre[1]), b)
         self._queue.append(det)
 
