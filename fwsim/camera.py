@@ -321,12 +321,12 @@ class Camera:
             d_sea = np.where(down, -np.float32(cam_pos[2]) / dz, np.float32(np.inf))
         elev = np.clip(dz, 0.0, 1.0)
         haze = np.clip(d_sea / 4000.0, 0.0, 1.0)
-        # the ship's pixels: only rays cast at the ship can have hit it (d_ship is inf elsewhere)
-        ship_px = np.zeros(len(dz), dtype=bool)
+        # the ship's pixels (indices, ascending): only rays cast at the ship can have hit it (d_ship is inf
+        # elsewhere)
         ds = d_ship[ship_rays]
-        ship_px[ship_rays] = np.isfinite(ds) & (ds < d_sea[ship_rays] + 1.0) & ~(d_uav[ship_rays] < ds)
+        ship_px = ship_rays[np.isfinite(ds) & (ds < d_sea[ship_rays] + 1.0) & ~(d_uav[ship_rays] < ds)]
         shade = None
-        if ship_px.any():
+        if ship_px.size:
             shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ _SUN)
             shade = shade.astype(np.float32)
         uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
