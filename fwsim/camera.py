@@ -329,7 +329,8 @@ class Camera:
         if ship_px.size:
             shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ _SUN)
             shade = shade.astype(np.float32)
-        uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
+        uav_px = np.flatnonzero(np.isfinite(d_uav))  # the UAV's pixels (indices): where it is hit before the ship
+        uav_px = uav_px[~(d_ship[uav_px] < d_uav[uav_px])]
         # one colour plane at a time: numpy's loops run along the pixels (not along 3 channels), and each
         # plane goes into the interleaved image as it is done
         out = np.empty((len(dz), 3), dtype=np.uint8)
