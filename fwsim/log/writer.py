@@ -7,14 +7,11 @@ import struct
 import sys
 import time
 import traceback
-import zlib
-from concurrent.futures import Future, ThreadPoolExecutor
 from itertools import chain
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
-import zstandard
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
@@ -24,8 +21,8 @@ from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import Chunk, ChunkIndex, MessageIndex
-from mcap.writer import CompressionType, IndexType, Writer
+from mcap.records import MessageIndex
+from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from fwsim import topics
@@ -134,32 +131,16 @@ class _FastChunkBuilder:
         self.num_messages = 0
 
 
-def _compress_chunk(data: bytes, crc: bool) -> tuple[bytes, int]:
-    """What mcap's writer makes of a finished chunk: zstd at its default level and the CRC of the data (both
-    release the GIL: they run beside the simulation)."""
-    return zstandard.compress(data), (zlib.crc32(data) if crc else 0)
-
-
 class _FastWriter(Writer):
-    """``mcap.writer.Writer`` whose ``add_message`` packs each record in one call (:class:`_FastChunkBuilder`)
-    and whose finished chunks are compressed on a worker thread while the next one fills: the same file,
-    byte for byte. A chunk goes to the file as soon as its compression is done (at the next message), and
-    always before anything else is written (attachments, metadata, the next chunk, the summary), so the
-    records keep mcap's order. It reaches into the writer's private state (its statistics, chunk builder,
-    chunk size, stream and indexes); ``fast`` is False, and the library's own path is used, if a future
-    ``mcap`` lays them out otherwise or the compression is not zstd."""
-
-    _PRIVATE = ("_Writer__statistics", "_Writer__chunk_builder", "_Writer__chunk_size", "_Writer__finalize_chunk",
-                "_Writer__compression", "_Writer__enable_crcs", "_Writer__stream", "_Writer__record_builder",
-                "_Writer__index_types", "_Writer__chunk_indices", "_Writer__flush")
+    """``mcap.writer.Writer`` whose ``add_message`` packs each record in one call (:class:`_FastChunkBuilder`):
+    the same file, byte for byte. It reaches into the writer's private state (its statistics, chunk
+    builder and chunk size); ``fast`` is False, and the library's own path is used, if a future ``mcap``
+    lays them out otherwise."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.fast = (all(hasattr(self, n) for n in self._PRIVATE) and self._Writer__chunk_builder is not None
-                     and self._Writer__compression == CompressionType.ZSTD)
-        self._pending: tuple | None = None  # the chunk being compressed: (future, size, start, end, indexes)
-        self._compressed = False  # its compression is done: write it at the next message
-        self._pool: ThreadPoolExecutor | None = None
+        names = ("_Writer__statistics", "_Writer__chunk_builder", "_Writer__chunk_size", "_Writer__finalize_chunk")
+        self.fast = all(hasattr(self, n) for n in names) and self._Writer__chunk_builder is not None
         if self.fast:
             self._Writer__chunk_builder = _FastChunkBuilder()
             self._stats = self._Writer__statistics
@@ -183,98 +164,22 @@ class _FastWriter(Writer):
         index.records.append((log_time, len(buf)))
         buf += _MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence, log_time, publish_time)
         buf += data
-        if self._compressed:
-            self._write_pending()
         if len(buf) > self._chunk_size:
             self._Writer__finalize_chunk()
 
     def _Writer__finalize_chunk(self):
-        if not self.fast:
-            return super()._Writer__finalize_chunk()
-        chunk = self._chunk
-        if chunk.num_messages == 0:  # as mcap's: no chunk (its channels and schemas stay for the next one)
-            return
-        # its messages into the file's statistics, as add_message's
-        st = self._stats
-        if st.message_count == 0 or chunk.message_start_time < st.message_start_time:
-            st.message_start_time = chunk.message_start_time
-        if chunk.message_end_time > st.message_end_time:
-            st.message_end_time = chunk.message_end_time
-        counts = st.channel_message_counts
-        for channel_id, index in chunk.message_indices.items():
-            counts[channel_id] += len(index.records)
-        st.message_count += chunk.num_messages
-        st.chunk_count += 1
-        data = chunk.end()
-        self._write_pending()  # one chunk in compression at a time: the file keeps their order
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(1, thread_name_prefix="fwsim-log-zstd")
-        future = self._pool.submit(_compress_chunk, data, self._Writer__enable_crcs)
-        self._pending = (future, len(data), chunk.message_start_time, chunk.message_end_time,
-                         chunk.message_indices)
-        future.add_done_callback(self._mark_compressed)
-        chunk.message_indices = {}  # (the pending chunk keeps its own)
-        chunk.reset()
-
-    def _mark_compressed(self, future: Future) -> None:
-        """(worker thread) The pending chunk's compression is done."""
-        pending = self._pending
-        if pending is not None and pending[0] is future:
-            self._compressed = True
-
-    def _write_pending(self) -> None:
-        """Write the chunk being compressed (waiting for it if need be) as mcap's writer writes a finished
-        chunk: the chunk record, then its message indexes, and its chunk index for the summary."""
-        pending, self._pending, self._compressed = self._pending, None, False
-        if pending is None:
-            return
-        future, size, start, end, indices = pending
-        compressed, crc = future.result()
-        chunk = Chunk(compression="zstd", data=compressed, message_start_time=start, message_end_time=end,
-                      uncompressed_crc=crc, uncompressed_size=size)
-        stream, rb = self._Writer__stream, self._Writer__record_builder
-        self._Writer__flush()
-        chunk_start_offset = stream.tell()
-        chunk.write(rb)
-        chunk_index = ChunkIndex(message_start_time=start, message_end_time=end,
-                                 chunk_start_offset=chunk_start_offset, chunk_length=rb.count,
-                                 message_index_offsets={}, message_index_length=0, compression="zstd",
-                                 compressed_size=len(compressed), uncompressed_size=size)
-        self._Writer__flush()
-        message_index_start_offset = stream.tell()
-        if self._Writer__index_types & IndexType.MESSAGE:
-            for channel_id, index in indices.items():
-                chunk_index.message_index_offsets[channel_id] = message_index_start_offset + rb.count
-                index.write(rb)
-        chunk_index.message_index_length = rb.count
-        self._Writer__flush()
-        self._Writer__chunk_indices.append(chunk_index)
-
-    # records written straight to the file: the chunk being compressed goes first
-    def add_attachment(self, *args, **kwargs):
-        self._write_pending()
-        return super().add_attachment(*args, **kwargs)
-
-    def add_metadata(self, *args, **kwargs):
-        self._write_pending()
-        return super().add_metadata(*args, **kwargs)
-
-    def flush(self):
-        if self.fast:
-            self._Writer__finalize_chunk()
-            self._write_pending()
-        return super().flush()
-
-    def finish(self):
-        try:
-            if self.fast:
-                self._Writer__finalize_chunk()
-                self._write_pending()
-            return super().finish()  # (its own finalize finds the chunk empty)
-        finally:
-            if self._pool is not None:
-                self._pool.shutdown()
-                self._pool = None
+        chunk = self._chunk if self.fast else None
+        if chunk is not None and chunk.num_messages:  # its messages into the file's statistics, as add_message's
+            st = self._stats
+            if st.message_count == 0 or chunk.message_start_time < st.message_start_time:
+                st.message_start_time = chunk.message_start_time
+            if chunk.message_end_time > st.message_end_time:
+                st.message_end_time = chunk.message_end_time
+            counts = st.channel_message_counts
+            for channel_id, index in chunk.message_indices.items():
+                counts[channel_id] += len(index.records)
+            st.message_count += chunk.num_messages
+        super()._Writer__finalize_chunk()
 
 
 class _FlushingFile:
