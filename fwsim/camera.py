@@ -208,9 +208,7 @@ class RayCaster:
             if below and idx.size:  # then only a ray heading up (body z) can meet the UAV
                 idx = idx[dirs_w[idx] @ uav.R[:, 2] < 0.0]
         else:
-            idx = np.arange(n)
-            if below:
-                idx = np.flatnonzero(dirs_w @ uav.R[:, 2] < 0.0)
+            idx = np.flatnonzero(dirs_w @ uav.R[:, 2] < 0.0) if below else np.arange(n)
         if idx.size:
             d_uav[idx] = _first_hit(self._uav, *uav.to_local(origin_w, dirs_w[idx]))
         return d_ship, d_uav
@@ -248,7 +246,6 @@ class Camera:
         rc = cfg.render
         self.K_render = self.K.scaled(rc.width_px, rc.height_px)
         self._render_rays = self._table(self.K_render).reshape(-1, 3)
-        self._render_uv = np.meshgrid(np.arange(rc.width_px), np.arange(rc.height_px))  # each pixel's column, row
 
     @staticmethod
     def _table(K: Intrinsics) -> np.ndarray:
@@ -315,14 +312,7 @@ class Camera:
         rc = self.cfg.render
         dirs_w = self._render_rays @ R_enu_cam.T
         box = self.roi(cam_pos, R_enu_cam, ship)  # full-resolution pixels where the ship can be
-        if box is None:
-            ship_rays = np.empty(0, dtype=int)
-        else:
-            s = rc.width_px / self.cfg.width_px
-            uu, vv = self._render_uv
-            inside = ((uu >= box[0] * s - 1) & (uu <= box[2] * s + 1) & (vv >= box[1] * s - 1)
-                      & (vv <= box[3] * s + 1))
-            ship_rays = np.flatnonzero(inside.ravel())
+        ship_rays = np.empty(0, dtype=np.intp) if box is None else self._render_pixels_near(box)
         d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship, ship_rays=ship_rays, uav_only_where_ship=False)
         dz = dirs_w[:, 2].astype(np.float32)
         # sky: lighter toward the horizon; the sea plane z = 0, fading into haze with distance
@@ -331,16 +321,30 @@ class Camera:
             d_sea = np.where(down, -np.float32(cam_pos[2]) / dz, np.float32(np.inf))
         elev = np.clip(dz, 0.0, 1.0)
         haze = np.clip(d_sea / 4000.0, 0.0, 1.0)
-        # colour planes first (3, n): numpy's loops then run along the pixels, not along 3 channels
-        img = np.where(down, _SEA[:, None] * (1 - haze) + _HAZE[:, None] * haze,
-                       _SKY[:, None] - elev * _SKY_FADE[:, None]).T
-        ship_px = np.isfinite(d_ship) & (d_ship < d_sea + 1.0) & ~(d_uav < d_ship)
-        if ship_px.any():
+        # the ship's pixels (indices, ascending): only rays cast at the ship can have hit it (d_ship is inf
+        # elsewhere)
+        ds = d_ship[ship_rays]
+        ship_px = ship_rays[np.isfinite(ds) & (ds < d_sea[ship_rays] + 1.0) & ~(d_uav[ship_rays] < ds)]
+        shade = None
+        if ship_px.size:
             shade = 0.45 + 0.55 * np.abs(self._normals(self.caster._ship, ship, cam_pos, dirs_w[ship_px]) @ _SUN)
-            img[ship_px] = _HULL * shade[:, None].astype(np.float32)
-        uav_px = np.isfinite(d_uav) & ~(d_ship < d_uav)
-        img[uav_px] = _AIRFRAME
-        out = img.reshape(rc.height_px, rc.width_px, 3).astype(np.uint8, order="C")
+            shade = shade.astype(np.float32)
+        uav_px = np.flatnonzero(np.isfinite(d_uav))  # the UAV's pixels (indices): where it is hit before the ship
+        uav_px = uav_px[~(d_ship[uav_px] < d_uav[uav_px])]
+        # one colour plane at a time: numpy's loops run along the pixels (not along 3 channels), and each
+        # plane goes into the interleaved image as it is done
+        out = np.empty((len(dz), 3), dtype=np.uint8)
+        fog = 1 - haze
+        for c in range(3):
+            plane = _SKY[c] - elev * _SKY_FADE[c]
+            sea = _SEA[c] * fog
+            sea += _HAZE[c] * haze
+            np.copyto(plane, sea, where=down)
+            if shade is not None:
+                plane[ship_px] = _HULL[c] * shade
+            plane[uav_px] = _AIRFRAME[c]
+            out[:, c] = plane
+        out = out.reshape(rc.height_px, rc.width_px, 3)
         if bbox_px is not None and np.all(np.isfinite(bbox_px)):
             s = np.array([rc.width_px / self.cfg.width_px, rc.height_px / self.cfg.height_px] * 2)
             b = np.round(bbox_px * s).astype(int)
@@ -348,6 +352,17 @@ class Camera:
 
             cv2.rectangle(out, (b[0], b[1]), (b[2], b[3]), (0, 255, 0), 1)
         return out
+
+    def _render_pixels_near(self, box: tuple[int, int, int, int]) -> np.ndarray:
+        """Indices (row by row) of the render's pixels within one render pixel of ``box`` (full-resolution
+        pixels, scaled by the width ratio): the rows and columns of a rectangle, no per-pixel test."""
+        W, H = self.cfg.render.width_px, self.cfg.render.height_px
+        s = W / self.cfg.width_px
+        c0, c1 = max(math.ceil(box[0] * s - 1), 0), min(math.floor(box[2] * s + 1), W - 1)
+        r0, r1 = max(math.ceil(box[1] * s - 1), 0), min(math.floor(box[3] * s + 1), H - 1)
+        if c0 > c1 or r0 > r1:
+            return np.empty(0, dtype=np.intp)
+        return (np.arange(r0, r1 + 1, dtype=np.intp)[:, None] * W + np.arange(c0, c1 + 1, dtype=np.intp)).ravel()
 
     @staticmethod
     def _normals(scene, pose: Pose, origin_w, dirs_w) -> np.ndarray:
@@ -377,6 +392,8 @@ class Detector:
         self.cfg = cfg
         self.rng = rng
         self.size = (width_px, height_px)
+        self._box_lo = np.array([0, 0, 0, 0])  # a box's clip bounds (the image), made once
+        self._box_hi = np.array([width_px - 1, height_px - 1, width_px - 1, height_px - 1])
         self._queue: list[Detection] = []
 
     def observe(self, frame: FrameGeometry, blackout: bool = False, clutter: np.ndarray | None = None) -> None:
@@ -395,8 +412,7 @@ class Detector:
         else:
             b = frame.bbox_px + c.box_noise_px * noise[:4]
             centre = frame.centre_px + c.pixel_noise_px * noise[4:]
-            W, H = self.size
-            b = np.clip(b, [0, 0, 0, 0], [W - 1, H - 1, W - 1, H - 1])
+            b = np.clip(b, self._box_lo, self._box_hi)
             det = Detection(t_arrive, frame.t_s, True, float(centre[0]), float(centre[1]), b)
         self._queue.append(det)
 

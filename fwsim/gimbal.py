@@ -170,10 +170,10 @@ class Gimbal:
         tr = 0.0 if math.isnan(tr) else _clip(tr, -self._max_tilt_rate, self._max_tilt_rate)
         pan = _clip(s.pan_rad + pr * dt, self._pan_lo, self._pan_hi)
         tilt = _clip(s.tilt_rad + tr * dt, self._tilt_lo, self._tilt_hi)
-        self._state = GimbalState(
-            t_s=float(t_s), pan_rad=pan, tilt_rad=tilt,
-            pan_rate_rad_s=(pan - s.pan_rad) / dt, tilt_rate_rad_s=(tilt - s.tilt_rad) / dt,
-            at_pan_limit=pan == self._pan_lo or pan == self._pan_hi,
-            at_tilt_limit=tilt == self._tilt_lo or tilt == self._tilt_hi,
+        self._state = GimbalState(  # the fields in order (positional: a quarter of the call's cost, at 120 Hz)
+            float(t_s), pan, tilt,  # t_s, pan_rad, tilt_rad
+            (pan - s.pan_rad) / dt, (tilt - s.tilt_rad) / dt,  # pan_rate_rad_s, tilt_rate_rad_s
+            pan == self._pan_lo or pan == self._pan_hi,  # at_pan_limit
+            tilt == self._tilt_lo or tilt == self._tilt_hi,  # at_tilt_limit
         )
         return self._state

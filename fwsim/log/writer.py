@@ -71,6 +71,11 @@ def _ns(t_s: float) -> int:
     return ns if ns > 0 else 0
 
 
+def _floats(v) -> list[float]:
+    """A vector's elements as Python floats (an array's ``tolist``: iterating it makes a numpy scalar of each)."""
+    return v.tolist() if type(v) is np.ndarray and v.dtype == np.float64 else [float(x) for x in v]
+
+
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
 
 
@@ -374,7 +379,8 @@ class LogWriter:
         t_s = msg.t_s
         if t_s > self.last_t_s:
             self.last_t_s = t_s
-        ns = self._t0 + _ns(t_s)
+        ns = int(t_s * 1e9)  # _ns(t_s), inline: every message passes here
+        ns = self._t0 + (ns if ns > 0 else 0)
         self._add_message(entry[0], ns, entry[1].encode(msg), ns, entry[2])
         if self._listeners:
             self._notify(topic, t_s, msg)
@@ -388,7 +394,7 @@ class LogWriter:
 
             quat = self._quat = quat_enu_from_frd
         w, x, y, z = quat(state.euler_ned_rad).tolist()
-        px, py, pz = map(float, state.pos_enu_m)
+        px, py, pz = _floats(state.pos_enu_m)
         ns = self._t0 + _ns(state.t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
 
@@ -425,9 +431,9 @@ class LogWriter:
                 parent_frame_id=parent_frame_id, child_frame_id=child_frame_id)
         msg.timestamp.seconds, msg.timestamp.nanos = divmod(ns, 1_000_000_000)
         tr = msg.translation
-        tr.x, tr.y, tr.z = map(float, pos)
+        tr.x, tr.y, tr.z = _floats(pos)
         r = msg.rotation
-        r.w, r.x, r.y, r.z = map(float, quat_wxyz)
+        r.w, r.x, r.y, r.z = _floats(quat_wxyz)
         self._write_proto(topics.TF, msg, ns)
 
     def write_location(self, t_s: float, frame_id: str, lat_deg: float, lon_deg: float, alt_m: float) -> None:
