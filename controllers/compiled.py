@@ -20,9 +20,10 @@ __all__ = ["Buffered"]
 class Buffered:
     """A CasADi Function evaluated on preallocated numpy arrays (``Function.buffer``: no DM conversions).
 
-    ``inputs[i]`` / ``outputs[i]`` hold the nonzeros (column-major) of input/output i. ``rebind``: bind the
-    arrays again before each evaluation and zero the outputs (the QP plugins consume the output pointers
-    on evaluation and accumulate into them; 15 us).
+    ``inputs[i]`` / ``outputs[i]`` hold the nonzeros (column-major) of input/output i; a call copies its
+    arguments into them (None: left as it stands, so a caller may write an input in place and call with no
+    arguments) and evaluates. ``rebind``: bind the arrays again before each evaluation and zero the outputs
+    (the QP plugins consume the output pointers on evaluation and accumulate into them; 15 us).
     """
 
     def __init__(self, f: ca.Function, rebind: bool = False):

@@ -157,7 +157,7 @@ import numpy as np
 
 from controllers.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from controllers.config import IbvsConfig
-from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, wrap_pi
+from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, finite3, wrap_pi
 from fwsim.messages import GimbalCommand, Measurements
 
 _PI = math.pi
@@ -336,11 +336,6 @@ def _finite(*xs) -> bool:
     return all(math.isfinite(float(x)) for x in xs)
 
 
-def _finite3(v) -> bool:
-    """Every component of the 3-vector finite (``np.isfinite(v).all()`` without the temporaries)."""
-    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
-
-
 class Ibvs:
     """IBVS pan-tilt controller: ``step(meas, target_vel, depth, mount_offset) -> (GimbalCommand, IbvsStatus)``."""
 
@@ -476,7 +471,7 @@ class Ibvs:
         R_fc = R_frd_from_cam(pan, tilt)
         R_cf = R_fc.T
         w_p = np.asarray(meas.body_rates_frd_rad_s, dtype=float)
-        if not _finite3(w_p):
+        if not finite3(w_p):
             w_p = np.zeros(3)
         v_rel, z = self._relative_velocity(meas, target_vel_enu_m_s, depth_m, mount_offset_frd_m, R_cf, w_p)
 
@@ -503,11 +498,11 @@ class Ibvs:
         if depth_m is not None and math.isfinite(float(depth_m)) and float(depth_m) > 0.0:
             vel = np.asarray(meas.vel_enu_m_s, dtype=float)
             eul = np.asarray(meas.euler_ned_rad, dtype=float)
-            if _finite3(vel) and _finite3(eul):
+            if finite3(vel) and finite3(eul):
                 R_ef = dcm_enu_from_frd(eul)
                 v_c = vel + R_ef @ cross3(w_p, mount_offset_frd_m)
                 v_q = np.zeros(3) if target_vel_enu_m_s is None else np.asarray(target_vel_enu_m_s, dtype=float)
-                if _finite3(v_q):
+                if finite3(v_q):
                     v_rel = R_cf @ (R_ef.T @ (v_q - v_c))
         return v_rel, (float(depth_m) if v_rel is not None else math.nan)
 

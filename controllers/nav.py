@@ -46,7 +46,7 @@ import operator
 import numpy as np
 
 from controllers.config import NavigationConfig
-from fwsim.frames import cross3, dcm_enu_from_frd
+from fwsim.frames import cross3, dcm_enu_from_frd, finite3
 from fwsim.messages import Measurements
 
 __all__ = ["NavigationConfig", "Navigation"]
@@ -56,11 +56,6 @@ _LEVEL_BANK_RAD = math.radians(45.0)  # and this bank
 _MEAS_FIELDS = tuple(f.name for f in dataclasses.fields(Measurements))
 _meas_values = operator.attrgetter(*_MEAS_FIELDS)  # every field, in the constructor's order
 _I_POS, _I_VEL, _I_WIND = (_MEAS_FIELDS.index(n) for n in ("pos_enu_m", "vel_enu_m_s", "wind_enu_m_s"))
-
-
-def _finite3(v) -> bool:
-    """Every component of the 3-vector finite (``np.isfinite(v).all()`` without the temporaries)."""
-    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
 
 
 def _with_navigation(meas: Measurements, pos, vel, wind) -> Measurements:
@@ -94,7 +89,7 @@ class Navigation:
             return
         w = np.asarray(v_fix, dtype=float) - meas.airspeed_m_s * R_enu_from_frd[:, 0]
         w[2] = 0.0
-        if not _finite3(w):
+        if not finite3(w):
             return
         self.wind_enu_m_s = self.wind_enu_m_s + k * (w - self.wind_enu_m_s)
 
@@ -105,7 +100,7 @@ class Navigation:
             return meas
         t = meas.t_s
         v = np.asarray(meas.vel_enu_m_s, dtype=float)
-        if self.cfg.turn_velocity and _finite3(meas.body_rates_frd_rad_s) and _finite3(meas.euler_ned_rad):
+        if self.cfg.turn_velocity and finite3(meas.body_rates_frd_rad_s) and finite3(meas.euler_ned_rad):
             R = dcm_enu_from_frd(meas.euler_ned_rad)
             if meas.nav_t_s != self._fix_t:
                 self._update_wind(v, R, meas)

@@ -175,6 +175,7 @@ class _Problem:
         nu, ns = self.nu, NX + self.nu
         self.ns = ns
         self.nw = N * ns + NX
+        # w is stage-major, [x_0, u_0, x_1, u_1, ..., x_N]: Nmpc._shifted and Nmpc._bounds move it by slices
         self.ix = np.array([k * ns + np.arange(NX) for k in range(N + 1)])
         self.iu = np.array([k * ns + NX + np.arange(nu) for k in range(N)])
         # parameters: target position (3), velocity (3), previous input [u_p, u_q] (2), f4 on/off (1)

@@ -376,7 +376,7 @@ class _CompiledProcess:
             if k:
                 X[:] = out
             t0[0] = k * h
-            step._eval()
+            step()  # (on the inputs written above)
         return out.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
 
 
@@ -465,8 +465,7 @@ class _CompiledUpdate:
         k[0], k[1], k[2], k[3] = f_u, f_v, c_u, c_v
         R.reshape(3, 3)[:] = np.asarray(R_ec, dtype=float).T
         hc[0], hc[1] = cam_h, plane_z
-        fun._eval()
-        y, nis, x_new, P_new = fun.outputs
+        y, nis, x_new, P_new = fun()  # (on the inputs written above)
         return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy()
 
 

@@ -363,6 +363,11 @@ class GeoOrigin:
         )
 
 
+def finite3(v) -> bool:
+    """Every component of the 3-vector finite (``np.isfinite(v).all()`` without its temporaries)."""
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
+
+
 def cross3(a, b) -> np.ndarray:
     """Cross product of two 3-vectors (np.cross costs ~20 us per call on single vectors)."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])

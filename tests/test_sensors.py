@@ -42,3 +42,24 @@ def test_gnss_holds_between_its_updates():
     fixes = np.unique(pos, axis=0)
     assert len(fixes) == 10
     assert np.array_equal(pos[0], pos[2]) and not np.array_equal(pos[2], pos[3])
+
+
+def test_the_per_tick_messages_keep_the_field_order_their_positional_builders_use():
+    """Sensors.sample, Airframe.state and Gimbal.step build their messages positionally (the per-tick path):
+    a reordered message type must fail here, not mislabel a field in flight."""
+    import dataclasses
+
+    from fwsim.gimbal import GimbalState
+    from fwsim.messages import Measurements
+
+    names = lambda cls: tuple(f.name for f in dataclasses.fields(cls))  # noqa: E731
+    assert names(Measurements) == (
+        "t_s", "pos_enu_m", "vel_enu_m_s", "euler_ned_rad", "body_rates_frd_rad_s", "airspeed_m_s",
+        "height_above_sea_m", "nav_t_s", "pan_rad", "tilt_rad", "pan_rate_rad_s", "tilt_rate_rad_s",
+        "cam_pos_enu_m", "det_new", "det_valid", "det_exposure_t_s", "det_u_px", "det_v_px", "det_bbox_px",
+        "wind_enu_m_s")
+    assert names(AirframeState) == (
+        "t_s", "pos_enu_m", "vel_enu_m_s", "euler_ned_rad", "body_rates_frd_rad_s", "airspeed_m_s", "alpha_rad",
+        "beta_rad", "specific_force_frd_m_s2", "throttle_norm", "surfaces_rad", "height_above_sea_m")
+    assert names(GimbalState) == (
+        "t_s", "pan_rad", "tilt_rad", "pan_rate_rad_s", "tilt_rate_rad_s", "at_pan_limit", "at_tilt_limit")
