@@ -478,6 +478,12 @@ class NmpcConfig(StrictModel):
         description="iterations: a solve is bounded by its iteration counts only, so a run is the same on any "
                     "machine and load (same seed, same log); wall_clock: also by max_solve_ms of the wall "
                     "clock, as on a real-time mission computer (results then depend on the machine)")
+    solve_ahead_s: float = Field(
+        0.067, ge=0.0, le=1.0,
+        description="start each solve after a loiter's first this long before its time (at the first flight-"
+                    "software tick within it), from the state and target predicted to its time, and apply it at "
+                    "its time: a mission computer's compute delay, in which the solve runs in a process of its "
+                    "own while the loop goes on (controllers.nmpc_worker); 0: solve at its time, in place")
     reset_after_failures: int = Field(3, ge=1, le=1000,
                                       description="consecutive failed solves before the warm start is rebuilt")
     pitch_from: Literal["attitude", "flight_path"] = Field(

@@ -66,39 +66,82 @@ class NmpcLoiter:
     """Phase 2: the paper's NMPC with the CBF round the target estimate (``nmpc``).
 
     It solves every ``step_s`` (the first time at its first step) and holds the command between solves;
-    each solve goes to ``/fsw/nmpc`` and a fallback to the events.
+    each solve goes to ``/fsw/nmpc`` and a fallback to the events. With ``nmpc.solve_ahead_s`` every solve
+    after a loiter's first starts that long before its time (at the first tick within it), from the state
+    carried to that time by the model under the command held and the target carried by its estimated
+    velocity, and is applied at that time: a mission computer's compute delay, in which the solve can run
+    in a process of its own while the loop goes on (``controllers.nmpc_worker``; where it runs never
+    changes its numbers).
     """
 
     def __init__(self, nmpc_cfg, recorder):
-        from controllers.nmpc import Nmpc, NmpcStatus  # CasADi: loaded only when the NMPC flies
+        from controllers.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements  # CasADi: loaded
+        from controllers.nmpc_worker import make_solver  # only when the NMPC flies
 
         self._status = NmpcStatus.from_result
+        self._from_meas, self._predict = state_from_measurements, predict_state
+        self._command, self._command_input = Nmpc.command, Nmpc.command_input
         self.cfg = nmpc_cfg
-        self.nmpc = Nmpc(nmpc_cfg)
+        self.solver = make_solver(nmpc_cfg)
         self.radius_m, self.altitude_m = nmpc_cfg.radius_m, nmpc_cfg.altitude_m
         self._record = recorder
         self._cmd = None
         self._next_t = -math.inf
+        self._psi = None  # the last state's psi (its unwrapping)
+        self._ahead = float(nmpc_cfg.solve_ahead_s)
+        self._pending = None  # the time of a solve submitted ahead
 
     def step(self, nav: Measurements, target: TargetState) -> Guidance:
         t = nav.t_s
+        if self._pending is not None and t + 1e-9 >= self._pending:
+            res = self.solver.result()
+            if t - self._pending < self.cfg.step_s:  # else the loiter was left meanwhile: a stale plan
+                self._take(*res)
+            self._pending = None
         if t + 1e-9 >= self._next_t:
-            self._solve(nav, target)
+            if self._pending is not None:  # a solve ahead no longer wanted
+                self.solver.result()
+                self._pending = None
+            self._submit(t, self._state(nav), target.pos_enu_m, self._target_velocity(nav, target))
+            self._take(*self.solver.result())
+        elif self._pending is None and self._ahead > 0.0 and t + self._ahead + 1e-9 >= self._next_t:
+            self._solve_ahead(nav, target, self._next_t)
         c = self._cmd
         cmd = type(c)(t, c.airspeed_m_s, c.roll_rate_rad_s, c.pitch_rate_rad_s)
         return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m)
 
-    def _solve(self, nav: Measurements, target: TargetState) -> None:
-        t, nmpc = nav.t_s, self.nmpc
+    def close(self) -> None:
+        """Stop the solver's worker (if it has one)."""
+        self.solver.close()
+
+    def _state(self, nav: Measurements) -> np.ndarray:
+        x0 = self._from_meas(nav, self.cfg.pitch_from, self._psi)
+        self._psi = float(x0[5])
+        return x0
+
+    def _target_velocity(self, nav: Measurements, target: TargetState) -> np.ndarray:
         v_q = target.vel_enu_m_s
         if self.cfg.air_relative and np.isfinite(nav.wind_enu_m_s).all():
             v_q = v_q - nav.wind_enu_m_s  # the model flies in the air: the target drifts by minus the wind
-        res = nmpc.solve(t, nmpc.state_from_measurements(nav), target.pos_enu_m, v_q)
-        self._cmd = nmpc.command(res)
-        self._next_t = t + self.cfg.step_s
-        self._record.log(topics.FSW_NMPC, self._status(res, nmpc.fallback_count))
+        return v_q
+
+    def _submit(self, t_s: float, x0, q, v_q) -> None:
+        self.solver.submit(t_s, x0, q, v_q)
+
+    def _solve_ahead(self, nav: Measurements, target: TargetState, t_solve: float) -> None:
+        """Submit the solve for t_solve: the state carried there by the model under the command now held,
+        the target by its estimated velocity."""
+        dt = t_solve - nav.t_s
+        x0 = self._predict(self._state(nav), self._command_input(self._cmd), dt, self.cfg)
+        self._submit(t_solve, x0, target.pos_enu_m + dt * target.vel_enu_m_s, self._target_velocity(nav, target))
+        self._pending = t_solve
+
+    def _take(self, res, fallback_count: int) -> None:
+        self._cmd = self._command(res)
+        self._next_t = res.t_s + self.cfg.step_s
+        self._record.log(topics.FSW_NMPC, self._status(res, fallback_count))
         if res.fallback:
-            self._record.event(f"NMPC fallback at t = {t:.2f} s: {res.status}")
+            self._record.event(f"NMPC fallback at t = {res.t_s:.2f} s: {res.status}")
 
 
 class BpngTerminal:

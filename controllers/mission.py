@@ -93,6 +93,14 @@ class FlightSoftware:
         gimbal = self.pointing.step(nav, cam, est, fix)                   # search | track | reacquire
         return self._output(nav, est, fix, guide, gimbal)
 
+    def close(self) -> None:
+        """Release what the blocks hold beyond the flight (the NMPC's worker process): a block with a
+        ``close()`` has it called once, at the end of the run."""
+        for block in (*self.guidance.values(), self.estimation.filter, self.pointing.law):
+            close = getattr(block, "close", None)
+            if callable(close):
+                close()
+
     def _next_phase(self, nav: Measurements, est: TargetState, fix: DetectionFix) -> None:
         approach = window_bearing_deg(self.phase, self.cfg.switch, self.cfg.bpng, nav.wind_enu_m_s, est)
         self.phase, events = next_phase(self.phase, nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, nav.height_above_sea_m,
@@ -125,6 +133,9 @@ class ScriptedFlightSoftware:
     def step(self, meas: Measurements) -> FlightSoftwareOutput:
         cmd = self.script.step(meas)
         return FlightSoftwareOutput(cmd, self.script.gimbal(meas), self.script.status(meas, cmd))
+
+    def close(self) -> None:
+        pass
 
 
 def flight_software(cfg: Controllers, initial_cfg, camera_cfg):

@@ -348,6 +348,25 @@ def _np_step(x, u, dt, integrator):
     return _discrete_step(x, u, dt, integrator, _np_dyn)
 
 
+def state_from_measurements(meas: Measurements, pitch_from: str, psi_prev: float | None) -> np.ndarray:
+    """x0 = [pos_enu (3), phi, theta, psi_enu] with psi_enu = pi/2 - psi_ned, on the 2 pi branch nearest
+    ``psi_prev`` (the last call's psi; None: within [-pi, pi]); theta per ``NmpcConfig.pitch_from``."""
+    phi, theta, psi_ned = map(float, meas.euler_ned_rad)
+    if pitch_from == "flight_path":
+        v = meas.vel_enu_m_s
+        theta = math.atan2(float(v[2]), max(math.hypot(float(v[0]), float(v[1])), 1e-3))
+    psi = 0.5 * math.pi - psi_ned
+    psi = wrap_pi(psi) if psi_prev is None else psi_prev + wrap_pi(psi - psi_prev)
+    return np.array([*map(float, meas.pos_enu_m), phi, theta, psi])
+
+
+def predict_state(x0: np.ndarray, u: np.ndarray, dt: float, cfg: NmpcConfig) -> np.ndarray:
+    """x0 (NMPC convention) carried dt ahead by the model under the input u ([V_U, u_p, u_q]): one step of the
+    model's integrator (the solve-ahead's start, a fraction of ``step_s``)."""
+    return np.asarray(_np_step(np.asarray(x0, dtype=float), np.asarray(u, dtype=float), dt, cfg.integrator),
+                      dtype=float).reshape(NX)
+
+
 class Nmpc:
     """The Phase 2 NMPC: ``solve`` at 10 Hz, ``command`` to turn a result into a RateCommand."""
 
@@ -434,17 +453,14 @@ class Nmpc:
 
     def state_from_measurements(self, meas: Measurements) -> np.ndarray:
         """x0 = [pos_enu (3), phi, theta, psi_enu] with psi_enu = pi/2 - psi_ned, unwrapped across calls."""
-        phi, theta, psi_ned = map(float, meas.euler_ned_rad)
-        if self.cfg.pitch_from == "flight_path":
-            v = meas.vel_enu_m_s
-            theta = math.atan2(float(v[2]), max(math.hypot(float(v[0]), float(v[1])), 1e-3))
-        psi = 0.5 * math.pi - psi_ned
-        if self._psi_meas is not None:
-            psi = self._psi_meas + wrap_pi(psi - self._psi_meas)
-        else:
-            psi = wrap_pi(psi)
-        self._psi_meas = psi
-        return np.array([*map(float, meas.pos_enu_m), phi, theta, psi])
+        x0 = state_from_measurements(meas, self.cfg.pitch_from, self._psi_meas)
+        self._psi_meas = float(x0[5])
+        return x0
+
+    @staticmethod
+    def command_input(cmd: RateCommand) -> np.ndarray:
+        """[V_U, u_p, u_q] of a rate command (the inverse of :meth:`command`)."""
+        return np.array([cmd.airspeed_m_s, cmd.roll_rate_rad_s, cmd.pitch_rate_rad_s])
 
     @staticmethod
     def command(result: NmpcResult) -> RateCommand:

@@ -406,9 +406,17 @@ def run_one(job: RunJob) -> dict[str, Any]:
 _IN_POOL_WORKER = False
 
 
-def _pool_worker_init() -> None:
+def _pool_worker_init(nmpc_worker: str = "inline") -> None:
     global _IN_POOL_WORKER
     _IN_POOL_WORKER = True
+    from controllers.nmpc_worker import ENV
+    os.environ.setdefault(ENV, nmpc_worker)  # a user's FWSIM_NMPC_WORKER stands
+
+
+def _nmpc_worker_for(workers: int) -> str:
+    """Where a pool worker's NMPC solves (``controllers.nmpc_worker``): in a process of its own when the
+    machine has a spare core for each worker's, else on the worker's thread (the same numbers either way)."""
+    return "process" if (os.cpu_count() or 1) >= 2 * workers else "inline"
 
 
 def failed_row(job: RunJob, error: str) -> dict[str, Any]:
@@ -427,8 +435,9 @@ def _run_pool(jobs: list[RunJob], workers: int, on_row: RowCallback, run_fn: Cal
     and the one that dies again becomes a failed row."""
     ctx = multiprocessing.get_context("spawn")
     casualties: list[RunJob] = []
-    pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(jobs))), mp_context=ctx,
-                               initializer=_pool_worker_init)
+    n = max(1, min(workers, len(jobs)))
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_pool_worker_init,
+                               initargs=(_nmpc_worker_for(n),))
     try:
         futures = {pool.submit(run_fn, j): j for j in jobs}
         for fut in as_completed(futures):
@@ -445,7 +454,8 @@ def _run_pool(jobs: list[RunJob], workers: int, on_row: RowCallback, run_fn: Cal
     finally:  # on a stop: start nothing new (the runs in flight log 'interrupted')
         pool.shutdown(wait=True, cancel_futures=True)
     for job in casualties:  # one process per run: a crash takes down only itself
-        with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_pool_worker_init) as pool:
+        with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_pool_worker_init,
+                                 initargs=(_nmpc_worker_for(1),)) as pool:
             try:
                 on_row(pool.submit(run_fn, job).result())
             except BrokenProcessPool:
@@ -499,7 +509,11 @@ def _run_ray(jobs: list[RunJob], on_row: RowCallback, run_fn: Callable) -> None:
     system and fwsim installed on every node."""
     import ray
 
-    remote = ray.remote(num_cpus=1, max_retries=1)(run_fn)
+    from controllers.nmpc_worker import ENV
+
+    # one CPU a run: its NMPC solves on its own thread (controllers.nmpc_worker; the same numbers either way)
+    remote = ray.remote(num_cpus=1, max_retries=1,
+                        runtime_env={"env_vars": {ENV: os.environ.get(ENV, "inline")}})(run_fn)
     refs = {remote.remote(j): j for j in jobs}
     pending = list(refs)
     try:

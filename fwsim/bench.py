@@ -180,8 +180,11 @@ def run_bench(quick: bool = False) -> dict[str, float | str | dict]:
     profiled, blocks = block_breakdown(paper, paper_text)
     state_us, msg_us = log_writer_us()
     nmpc = nmpc_vs_ipopt(30.0 if quick else 60.0)
+    from controllers.nmpc_worker import solver_kind
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        # where the paper mission's NMPC solved (controllers.nmpc_worker; FWSIM_NMPC_WORKER)
+        "nmpc_worker": solver_kind(paper.controllers.nmpc),
         "jsbsim_raw_steps_per_s": raw,
         "jsbsim_raw_real_time_factor": raw / 120.0,
         "airframe_step_steps_per_s": wrap,

@@ -386,9 +386,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_environment() -> None:
+    """Environment variables fwsim reads, checked before anything flies (a bad one: exit code 2)."""
+    from controllers.nmpc_worker import ENV, worker_choice
+    try:
+        worker_choice()
+    except ValueError as exc:
+        raise ScenarioError(f"environment variable {ENV}: {exc}") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
+        _check_environment()
         return args.func(args)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)

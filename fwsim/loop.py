@@ -222,10 +222,14 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     epoch_ns = start_epoch_ns(scenario.start_time) if scenario.start_time else time.time_ns() // 1_000_000 * 1_000_000
     with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario), epoch_ns=epoch_ns,
                                               scenario_text=scenario_text, listeners=listeners) as log:
+        fsw = None
         log.add_attachment("scenario_effective.yaml",
                            yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),
                            "application/yaml")
         try:
+            # the flight software first: a block may start a worker process (the NMPC's) that gets ready
+            # while the harness is built
+            fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
             world = World(scenario)
             origin = world.airframe.origin
             truth = world.reset()
@@ -238,7 +242,6 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             sensors = Sensors(scenario.sensors, scenario.seed)
             cam = scenario.camera
             detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
-            fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
             if profile is not None:
                 time_harness(profile, sensors=sensors, detector=detector, autopilot=autopilot, world=world, log=log)
                 time_flight_software(profile, fsw)
@@ -324,6 +327,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
         except Exception as exc:  # any other error: the log says why, the caller sees it too
             log.close("failed", f"{type(exc).__name__}: {exc} (t = {sim_t:.2f} s)")
             raise
+        finally:
+            if fsw is not None:
+                fsw.close()  # e.g. the NMPC's worker process
         log.close(status, reason)
     if progress is not None:
         progress(sim_t, scenario.duration_s)

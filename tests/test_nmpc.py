@@ -233,11 +233,14 @@ def test_approach_term_is_nil_on_the_ring():
     assert on.plan_cost(x1, z, z, straight) > off.plan_cost(x1, z, z, straight) + 1.0
 
 
-def test_air_relative_loiter_predicts_the_target_in_the_air_mass():
+def test_air_relative_loiter_predicts_the_target_in_the_air_mass(monkeypatch):
     """With ``air_relative`` (default) the loiter hands the NMPC the target's velocity minus the navigation's
     wind estimate; without it, or with no estimate, the velocity over the ground."""
     from controllers.guidance import NmpcLoiter
     from controllers.messages import TargetState
+    from controllers.nmpc_worker import ENV
+
+    monkeypatch.setenv(ENV, "inline")  # the solve is wrapped in this process
 
     class _Recorder:
         def log(self, *args):
@@ -253,11 +256,11 @@ def test_air_relative_loiter_predicts_the_target_in_the_air_mass():
         loiter = NmpcLoiter(NmpcConfig.model_validate({"air_relative": air_relative}), _Recorder())
         seen = []
 
-        def solve(t, x0, q, v, _real=loiter.nmpc.solve, _seen=seen):  # the real solve, its target velocity kept
+        def solve(t, x0, q, v, _real=loiter.solver.nmpc.solve, _seen=seen):  # the real solve, its velocity kept
             _seen.append(np.array(v))
             return _real(t, x0, q, v)
 
-        loiter.nmpc.solve = solve
+        loiter.solver.nmpc.solve = solve
         m = meas(0.0, [-600.0, 0.0, 500.0], [0.0, 0.0, 0.5 * math.pi])
         loiter.step(dataclasses.replace(m, wind_enu_m_s=w), target)
         np.testing.assert_allclose(seen[0], want)
