@@ -8,13 +8,14 @@ order, so they give the same numbers, bit for bit: where a solve runs is a matte
 flight.
 
 * :class:`InlineSolver` solves at ``submit`` on the caller's thread.
-* :class:`ProcessSolver` solves in a process of its own (``multiprocessing``, spawned), one request at a
-  time over a pipe. The process ignores the terminal's and a scheduler's signals (the loop decides when
-  a run stops) and ends when the pipe closes, so it never outlives its flight software.
+* :class:`ProcessSolver` solves in a process of its own (a fresh interpreter, ``python -m
+  controllers.nmpc_worker``, on a socket pair), one request at a time. The process ignores the terminal's
+  and a scheduler's signals (the loop decides when a run stops) and ends when its socket closes, so it
+  never outlives its flight software.
 
-``FWSIM_NMPC_WORKER`` chooses: ``inline``, ``process``, or unset (``auto``: a process where the machine
-has a second core and this is not one of a batch's workers, which keep every core busy on their own;
-``fwsim.batch`` sets ``inline`` in them).
+``FWSIM_NMPC_WORKER`` chooses: ``inline``, ``process``, or unset (``auto``: a process when the loiter
+solves ahead and the machine has a second core). ``fwsim batch`` sets ``inline`` in its workers when they
+fill the machine, and in Ray tasks (one CPU each).
 """
 from __future__ import annotations
 
@@ -47,8 +48,15 @@ def solver_kind(cfg) -> str:
 
 
 def make_solver(cfg):
-    """The solver of :func:`solver_kind`."""
-    return ProcessSolver(cfg) if solver_kind(cfg) == "process" else InlineSolver(cfg)
+    """The solver of :func:`solver_kind` (inline when a worker process cannot be started: the same numbers)."""
+    if solver_kind(cfg) == "process":
+        try:
+            return ProcessSolver(cfg)
+        except OSError as exc:
+            import warnings
+            warnings.warn(f"the NMPC's worker process could not start ({exc}); solving on this thread",
+                          RuntimeWarning, stacklevel=2)
+    return InlineSolver(cfg)
 
 
 class InlineSolver:
