@@ -112,6 +112,9 @@ class DetectionFix:
     # (2 x 2, px^2) the spread of the shape correction over the ship's possible headings (zeros: one heading,
     # or no correction): how far (u_px, v_px) may be off while the heading is not known
     offset_spread_px2: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
+    # (px^2, u and v) variance added to the box centre's pixel noise where the estimator fuses it: a box whose
+    # size no heading explains, used with its doubt (detection_gate.size_mismatch_action: deweight)
+    centre_noise_px2: tuple = (0.0, 0.0)
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,7 +15,10 @@ Per tick (:meth:`Perception.step`):
    the estimated position and the plausible headings is removed, so that the
    fix is the image of the point the estimator tracks. A box whose width or
    height no plausible heading explains is skipped (``size_mismatch``: part of
-   the ship is hidden, or the box is wrong).
+   the ship is hidden, or the box is wrong), or with ``size_mismatch_action:
+   deweight`` used with its centre's doubt: the pixel variance of half the
+   size difference from the predicted box, where a box cut short on one side
+   puts its centre (the log says ``overridden: size_mismatch``).
 5. **Latency.** A detection arrives ``latency`` after its exposure; its box
    centre is brought to now (``propagate_feature``) before anything else, so
    that it goes with the camera pose of now.
@@ -59,6 +62,16 @@ _NAN4 = np.full(4, np.nan)
 _ZERO22 = np.zeros((2, 2))
 _ZERO22.setflags(write=False)
 _NAN4.setflags(write=False)
+_NO_NOISE = (0.0, 0.0)
+
+
+def _centre_doubt(det: np.ndarray, size: np.ndarray) -> tuple[float, float]:
+    """(px^2, u and v) the doubt of the centre of a box of size ``det`` (width, height) where ``size`` was
+    predicted: (half the difference)^2 in each, where a box cut short on one side puts its centre."""
+    dw, dh = 0.5 * (float(det[0]) - float(size[0])), 0.5 * (float(det[1]) - float(size[1]))
+    return dw * dw, dh * dh
+
+
 #: the flight software's tick is at most this long (the poses kept for late detections are matched to half of it)
 _POSE_MATCH_S = 1.0 / 20.0
 
@@ -117,21 +130,25 @@ class Perception:
             self.last_detection_t_s = nav.t_s
         u, v = nav.det_u_px, nav.det_v_px
         pred, use, reason, overridden = _NAN4, False, "", ""
-        spread = _ZERO22
+        spread, noise = _ZERO22, _NO_NOISE
         if new and not self.lock.locked:
             reason = FusionReason.ACQUIRING
         elif new and cam is None:
             reason = FusionReason.NO_CAMERA_POSE
         elif new and prior.from_estimator and not lock_now:
-            u, v, pred, reason, spread = self._judge(nav, cam, prior)
-            use, overridden = self._decide(reason)
-            reason = "" if use else reason
+            u, v, pred, reason, spread, doubt = self._judge(nav, cam, prior)
+            if reason == FusionReason.SIZE_MISMATCH and self.cfg.size_mismatch_action == "deweight":
+                use, overridden, reason, noise = True, reason, "", doubt
+                self.skipped_in_a_row = 0
+            else:
+                use, overridden = self._decide(reason)
+                reason = "" if use else reason
         elif new:
             use = True  # the estimator is down: this detection may (re)start it
             u, v = self._to_now(nav, cam, prior)
         return DetectionFix(nav.t_s, new, nav.det_exposure_t_s, nav.det_u_px, nav.det_v_px, nav.det_bbox_px,
                             u, v, pred, use, reason, overridden, self.lock.locked, lock_now, self.lock.lock_t_s,
-                            self.last_detection_t_s, spread)
+                            self.last_detection_t_s, spread, noise)
 
     # ------------------------------------------------------------------ the checks
     def _judge(self, nav: Measurements, cam: CameraMotion, prior: TargetState):
@@ -146,8 +163,8 @@ class Perception:
                                            prior.vel_std_m_s)
             if status is not None and self._record is not None:
                 self._record.log(topics.FSW_SHIP_HEADING, status)
-        u, v, pred, why, spread = self._corrected(nav, cam, prior, ref, fit_size=not gate)
-        return u, v, pred, gate or why, spread
+        u, v, pred, why, spread, doubt = self._corrected(nav, cam, prior, ref, fit_size=not gate)
+        return u, v, pred, gate or why, spread, doubt
 
     def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
         """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
@@ -167,15 +184,18 @@ class Perception:
                    fit_size: bool = False):
         """The box centre with the ship's box-centre offset removed (unchanged when the model is off or does
         not apply), the predicted box of the most likely heading, ``size_mismatch`` when no plausible
-        heading explains the box's size (else ""), and the offset's spread over the headings the ship may have
-        (2 x 2, px^2; zeros when there is one, or no correction). ``fit_size``: the box may teach the ship's
-        size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is sure); the correction
-        and the size gate use the fitted outline once it is in use."""
+        heading explains the box's size (else ""), the offset's spread over the headings the ship may have
+        (2 x 2, px^2; zeros when there is one, or no correction), and the centre's doubt ((u, v) px^2,
+        :func:`_centre_doubt`; with ``size_mismatch_action: deweight``, else zeros). ``fit_size``: the box
+        may teach the ship's size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is
+        sure); the correction and the size gate use the fitted outline once it is in use."""
         tm = self.ship.cfg
         u, v = self._to_now(nav, cam, prior)
         if not tm.enabled:
-            return u, v, _NAN4, "", _ZERO22
+            return u, v, _NAN4, "", _ZERO22, _NO_NOISE
         g = self.cfg
+        deweight = g.size_mismatch_action == "deweight"
+        why, doubt = "", _NO_NOISE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         single = len(courses) == 1
@@ -200,24 +220,28 @@ class Perception:
                     self._ratios.append(np.log(ratio))
                 if self._class_check(nav.t_s, mismatch):  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
-                        return u, v, pred, "", _ZERO22
+                        return u, v, pred, "", _ZERO22, _NO_NOISE
                     if g.class_mismatch_action == "rescale" and self._ratios:
                         # the size gate against the class scaled by the boxes' typical size ratio: a box cut
                         # short (occlusion) still stands out from the ship's usual boxes
                         scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
                         if self._no_heading_fits(det, scaled):
-                            return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22
+                            if not deweight:
+                                return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
+                            why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, scaled[best])
                 elif mismatch:
-                    return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22
+                    if not deweight:
+                        return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
+                    why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, sizes[best])
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
                                    courses_weights=None if single else (courses, weights), spread=True,
                                    scale=scale)
         if off is None:
-            return u, v, pred, "", _ZERO22
+            return u, v, pred, why, _ZERO22, doubt
         off, spread = off
-        return float(u) - float(off[0]), float(v) - float(off[1]), pred, "", spread
+        return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
 
     def _no_heading_fits(self, det: np.ndarray, sizes: np.ndarray) -> bool:
         """True when the box's (width, height) ``det`` differs from every heading's predicted ``sizes`` (n, 2)

@@ -736,6 +736,10 @@ class UkfTargetEstimator:
         h = max(motion.height_m - c.target_plane_height_m, 1.0)
         s2 = c.cam_pos_noise_m ** 2 + (c.attitude_noise_rad * rng) ** 2 + (c.height_noise_m * rng / h) ** 2
         r = [c.pixel_noise_px ** 2, c.pixel_noise_px ** 2, s2, s2, s2]  # (copied into the compiled update's input)
+        extra_u, extra_v = fix.centre_noise_px2
+        if extra_u or extra_v:  # a box used with its doubt (perception: size_mismatch_action deweight)
+            r[0] += extra_u
+            r[1] += extra_v
         z = [u, v, *motion.pos_enu_m]
         # the chi-square test on the pixel rows is always computed (for the log); it rejects only while
         # the gate is on and has not rejected innovation_gate_max_rejects detections in a row

@@ -699,3 +699,68 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.events), rec.events
     assert reasons[:n].count(FusionReason.SIZE_MISMATCH) > n // 2  # skipped for their size until then
     assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
+
+
+def test_a_box_no_heading_explains_is_deweighted_not_skipped_when_asked():
+    """size_mismatch_action: deweight: the box cut short is used, its corrected centre as a whole box's
+    would be corrected, with the doubt (half the size difference from the predicted box)^2 in each axis; the
+    log names the gate passed over. The default (skip) skips it."""
+    from controllers.ukf import CameraMotion
+    h = UkfConfig().target_plane_height_m
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
+    ship = _ship_with_shape(0.0, (30.0, 45.0, 60.0))
+    skip = _perception(ship)
+    weigh = Perception(DetectionGateConfig(size_mismatch_action="deweight"), AcquisitionConfig(lock_detections=1),
+                       ship, PinholeCamera.from_config(CAM_CFG))
+    weigh.lock.locked = True
+    for cp, Rc, box in ring_views(0.0, range(0, 360, 90), elevation_deg=30.0, rng_m=400.0):
+        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        cut = box.copy()
+        cut[2] = cut[0] + 0.5 * (box[2] - box[0])  # the right half hidden
+        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                            det_valid=True, det_u_px=float(0.5 * (cut[0] + cut[2])),
+                            det_v_px=float(0.5 * (cut[1] + cut[3])), det_bbox_px=cut)
+        skipped = skip.step(meas, motion, prior)
+        assert not skipped.use and skipped.reason == FusionReason.SIZE_MISMATCH
+        assert skipped.centre_noise_px2 == (0.0, 0.0)
+        fix = weigh.step(meas, motion, prior)
+        assert fix.use and fix.reason == "" and fix.overridden == FusionReason.SIZE_MISMATCH
+        pred = fix.predicted_box_px
+        dw = 0.5 * ((cut[2] - cut[0]) - (pred[2] - pred[0]))
+        dh = 0.5 * ((cut[3] - cut[1]) - (pred[3] - pred[1]))
+        assert fix.centre_noise_px2 == pytest.approx((dw * dw, dh * dh), rel=1e-12)
+        assert fix.centre_noise_px2[0] > 50.0  # half of a box of 100s of px: tens of px of doubt
+        # the centre corrected as for a whole box (the offset of the same view), not left raw
+        whole = weigh.step(dataclasses.replace(meas, det_bbox_px=box, det_u_px=float(0.5 * (box[0] + box[2])),
+                                               det_v_px=float(0.5 * (box[1] + box[3]))), motion, prior)
+        assert whole.use and whole.overridden == "" and whole.centre_noise_px2 == (0.0, 0.0)
+        off_cut = np.array([meas.det_u_px - fix.u_px, meas.det_v_px - fix.v_px])
+        off_whole = np.array([whole.raw_u_px - whole.u_px, whole.raw_v_px - whole.v_px])
+        np.testing.assert_allclose(off_cut, off_whole, atol=1e-9)
+
+
+def test_the_ukf_weighs_a_doubtful_box_less():
+    """A fix with centre_noise_px2 moves the estimate less than the same fix without it."""
+    from controllers.messages import DetectionFix
+    from controllers.ukf import CameraMotion, UkfTargetEstimator
+    cfg = UkfConfig()
+    cam = PinholeCamera.from_config(CAM_CFG)
+    cp = np.array([-400.0, 0.0, 300.0])
+    p = np.array([0.0, 0.0, cfg.target_plane_height_m]) - cp
+    d = p / np.linalg.norm(p)
+    z = np.array([0.0, 0.0, 1.0])
+    x = np.cross(z, d)
+    x = np.array([0.0, -1.0, 0.0]) if np.linalg.norm(x) < 1e-9 else x / np.linalg.norm(x)
+    Rc = np.column_stack([x, np.cross(d, x), d])  # optical axis on the point
+    motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+    moved = []
+    for noise in ((0.0, 0.0), (400.0, 400.0)):
+        f = UkfTargetEstimator(cam, cfg)
+        base = DetectionFix(0.0, True, 0.0, cam.cx, cam.cy, np.array([cam.cx - 50, cam.cy - 20, cam.cx + 50,
+                            cam.cy + 20]), cam.cx, cam.cy, np.full(4, np.nan), True, "", "", True, False, 0.0, 0.0)
+        f.initialise(base, motion)
+        before = f.estimate().pos_enu_m.copy()
+        shifted = dataclasses.replace(base, t_s=0.1, u_px=cam.cx + 4.0, centre_noise_px2=noise)
+        assert f.update(shifted, dataclasses.replace(motion, t_s=0.1)).used
+        moved.append(float(np.linalg.norm(f.estimate().pos_enu_m[:2] - before[:2])))
+    assert moved[1] < 0.5 * moved[0], moved
