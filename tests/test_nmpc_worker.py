@@ -163,3 +163,32 @@ def test_a_bad_worker_choice_is_one_line_and_exit_code_2(monkeypatch, capsys):
     assert main(["run", "scenarios/autopilot_checkout.yaml", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "error: environment variable FWSIM_NMPC_WORKER: must be auto, inline or process (got 'gpu')"
+
+
+def test_the_worker_ends_with_its_flight_software_even_when_that_is_killed():
+    """The worker process ends when its socket closes: here its parent dies without closing anything."""
+    import subprocess
+    import sys
+    import time
+
+    code = ("import os, sys\n"
+            "from controllers.config import NmpcConfig\n"
+            "from controllers.nmpc_worker import ProcessSolver\n"
+            "s = ProcessSolver(NmpcConfig.model_validate({}))\n"
+            "s._recv()\n"  # ready: the NMPC is built
+            "print(s._proc.pid, flush=True)\n"
+            "os._exit(0)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    pid = int(out.stdout.split()[0])
+    def ended() -> bool:
+        try:
+            with open(f"/proc/{pid}/stat") as f:  # a zombie (Z) has ended; whether init reaps it is not ours
+                return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+        except FileNotFoundError:
+            return True
+
+    for _ in range(100):
+        if ended():
+            return
+        time.sleep(0.05)
+    pytest.fail(f"the worker {pid} outlived its parent by 5 s")
