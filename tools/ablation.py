@@ -27,6 +27,8 @@ from fwsim.cases import SWEEP_SPEC, sweep_rows
 
 #: name -> (what it is, the overrides that switch it off)
 DEPARTURES: dict[str, tuple[str, dict]] = {
+    "nmpc_solve_ahead": ("the NMPC solved ahead (0.067 s), in a worker process",
+                         {"controllers.nmpc.solve_ahead_s": 0.0}),
     "box_centre_correction": ("box-centre correction for the ship's shape",
                               {"controllers.target_model.enabled": False}),
     "heading_from_shapes": ("a still ship's heading from its box shapes",
