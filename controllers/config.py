@@ -169,12 +169,6 @@ class ShapeHeadingConfig(StrictModel):
     min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
     min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
                                                             "times the largest are dropped")
-    mirrored_layout: bool = Field(
-        False, description="with a known course, when the shapes' posterior holds more than twice the weight "
-                           "within 30 deg of the course's reverse as within 30 deg of the course (the ship's "
-                           "superstructure at the other end of the class's), the correction, the box-size gate "
-                           "and the size fit use the class turned round (its heading = course + 180 deg) until "
-                           "the course side holds twice the reverse's; false: the class as configured")
     tell_bow_from_stern: bool = Field(
         True, description="trust the box shapes to tell the bow from the stern (the superstructure stands aft, "
                           "which shows in the box heights, most of all as the view steepens in the dive); "

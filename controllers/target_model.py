@@ -676,7 +676,6 @@ class ShipModel:
         self.shape = ShapeHeading(cfg.heading_from_shape, self.outline, camera, edge_px)
         self.size = ShipSize(cfg.size_fit, self.outline, camera, edge_px)
         self._course_known_since = math.nan  # since when the course has been known without a break
-        self.mirrored = False  # heading_from_shape.mirrored_layout: the class is used turned round
 
     def course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
         """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
@@ -709,10 +708,6 @@ class ShipModel:
         course = self.course(vel_enu, vel_std_m_s)
         sh = self.cfg.heading_from_shape
         if course is not None:
-            if sh.mirrored_layout and self.shape.ready:
-                self._check_mirrored(course)
-                if self.mirrored:  # the class turned round: its bow where the ship's stern is
-                    course = (course + 2.0 * math.pi) % (2.0 * math.pi) - math.pi
             if not (self.shape.ready and sh.fuse_with_course):
                 return np.array([course]), np.ones(1), course
             speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
@@ -729,18 +724,6 @@ class ShipModel:
             return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
-
-    def _check_mirrored(self, course: float) -> None:
-        """Update :attr:`mirrored` (``heading_from_shape.mirrored_layout``) from the shapes' posterior weight
-        within 30 deg of the course and of its reverse (a factor 2 either way, so it does not flicker)."""
-        w = self.shape.weights()
-        d = np.abs((self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi)
-        near = math.radians(30.0)
-        fwd, rev = float(w[d <= near].sum()), float(w[d >= math.pi - near].sum())
-        if not self.mirrored and rev > 2.0 * fwd:
-            self.mirrored = True
-        elif self.mirrored and fwd > 2.0 * rev:
-            self.mirrored = False
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
                    t_s: float | None = None) -> bool:

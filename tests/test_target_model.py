@@ -764,22 +764,3 @@ def test_the_ukf_weighs_a_doubtful_box_less():
         assert f.update(shifted, dataclasses.replace(motion, t_s=0.1)).used
         moved.append(float(np.linalg.norm(f.estimate().pos_enu_m[:2] - before[:2])))
     assert moved[1] < 0.5 * moved[0], moved
-
-
-def test_a_ship_whose_shapes_say_its_course_reversed_is_taken_as_the_class_turned_round_when_asked():
-    """heading_from_shape.mirrored_layout: the shapes learnt the class at 60 deg (ENU), the ship moves at
-    -120 deg (its superstructure at the other end): the correction's heading is the class turned round
-    (60 deg); and back to the course when the shapes agree with it. Off (the default): the course."""
-    cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(mirrored_layout=True))
-    astern = 3.0 * np.array([math.cos(math.radians(-120.0)), math.sin(math.radians(-120.0)), 0.0])
-    ship = _ship_with_shape(30.0, cfg=cfg)  # bow 30 deg clockwise from North = 60 deg ENU
-    courses, weights, course = ship.headings_and_course(astern, 0.1)
-    assert ship.mirrored
-    assert _deg_off(math.degrees(course), 60.0) <= 1e-9
-    assert _deg_off(math.degrees(float(courses[int(np.argmax(weights))])), 60.0) <= 5.0
-    ahead = -astern  # a ship moving the way its shapes point: not mirrored (and it clears the flag)
-    _, _, course = ship.headings_and_course(ahead, 0.1)
-    assert not ship.mirrored and _deg_off(math.degrees(course), 60.0) <= 1e-9
-    plain = _ship_with_shape(30.0)
-    _, _, course = plain.headings_and_course(astern, 0.1)
-    assert not plain.mirrored and _deg_off(math.degrees(course), -120.0) <= 1e-9
