@@ -102,7 +102,7 @@ class NmpcLoiter:
             if self._pending is not None:  # a solve ahead no longer wanted
                 self.solver.result()
                 self._pending = None
-            self._submit(t, self._state(nav), target.pos_enu_m, self._target_velocity(nav, target))
+            self.solver.submit(t, self._state(nav), target.pos_enu_m, self._target_velocity(nav, target))
             self._take(*self.solver.result())
         elif self._pending is None and self._ahead > 0.0 and t + self._ahead + 1e-9 >= self._next_t:
             self._solve_ahead(nav, target, self._next_t)
@@ -125,15 +125,13 @@ class NmpcLoiter:
             v_q = v_q - nav.wind_enu_m_s  # the model flies in the air: the target drifts by minus the wind
         return v_q
 
-    def _submit(self, t_s: float, x0, q, v_q) -> None:
-        self.solver.submit(t_s, x0, q, v_q)
-
     def _solve_ahead(self, nav: Measurements, target: TargetState, t_solve: float) -> None:
         """Submit the solve for t_solve: the state carried there by the model under the command now held,
         the target by its estimated velocity."""
         dt = t_solve - nav.t_s
         x0 = self._predict(self._state(nav), self._command_input(self._cmd), dt, self.cfg)
-        self._submit(t_solve, x0, target.pos_enu_m + dt * target.vel_enu_m_s, self._target_velocity(nav, target))
+        self.solver.submit(t_solve, x0, target.pos_enu_m + dt * target.vel_enu_m_s,
+                           self._target_velocity(nav, target))
         self._pending = t_solve
 
     def _take(self, res, fallback_count: int) -> None:

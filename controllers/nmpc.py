@@ -363,8 +363,7 @@ def state_from_measurements(meas: Measurements, pitch_from: str, psi_prev: float
 def predict_state(x0: np.ndarray, u: np.ndarray, dt: float, cfg: NmpcConfig) -> np.ndarray:
     """x0 (NMPC convention) carried dt ahead by the model under the input u ([V_U, u_p, u_q]): one step of the
     model's integrator (the solve-ahead's start, a fraction of ``step_s``)."""
-    return np.asarray(_np_step(np.asarray(x0, dtype=float), np.asarray(u, dtype=float), dt, cfg.integrator),
-                      dtype=float).reshape(NX)
+    return _np_step(np.asarray(x0, dtype=float), np.asarray(u, dtype=float), dt, cfg.integrator)
 
 
 class Nmpc:

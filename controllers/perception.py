@@ -194,7 +194,6 @@ class Perception:
         if not tm.enabled:
             return u, v, _NAN4, "", _ZERO22, _NO_NOISE
         g = self.cfg
-        deweight = g.size_mismatch_action == "deweight"
         why, doubt = "", _NO_NOISE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
@@ -218,6 +217,7 @@ class Perception:
                 ratio = det / np.maximum(sizes[best], 1.0)
                 if (ratio > 0.0).all():
                     self._ratios.append(np.log(ratio))
+                off_against = None  # the predicted sizes the box is off, when the size gate turns it away
                 if self._class_check(nav.t_s, mismatch):  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
                         return u, v, pred, "", _ZERO22, _NO_NOISE
@@ -226,13 +226,13 @@ class Perception:
                         # short (occlusion) still stands out from the ship's usual boxes
                         scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
                         if self._no_heading_fits(det, scaled):
-                            if not deweight:
-                                return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-                            why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, scaled[best])
+                            off_against = scaled
                 elif mismatch:
-                    if not deweight:
+                    off_against = sizes
+                if off_against is not None:
+                    if g.size_mismatch_action != "deweight":
                         return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-                    why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, sizes[best])
+                    why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
