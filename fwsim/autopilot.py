@@ -44,6 +44,7 @@ from fwsim import AIRCRAFT_DIR
 from fwsim.configbase import StrictModel
 from fwsim.frames import cross3, dcm_enu_from_frd, wrap_pi
 from fwsim.messages import AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand, AutopilotStatus, RateCommand
+from fwsim.yamlfile import FAST_SAFE_LOADER
 
 G_M_S2 = 9.80665
 _NAN3 = np.full(3, np.nan)
@@ -100,7 +101,7 @@ def load_autopilot_params(aircraft: str, aircraft_dir: Path = AIRCRAFT_DIR,
     path = Path(aircraft_dir) / aircraft / "autopilot.yaml"
     if not path.is_file():
         raise FileNotFoundError(f"{path}: the aircraft has no autopilot parameter file")
-    raw = yaml.safe_load(path.read_text())
+    raw = yaml.load(path.read_text(), Loader=FAST_SAFE_LOADER)  # noqa: S506 - a safe loader
     for name, value in (overrides or {}).items():
         if name not in raw:
             raise ValueError(f"{path.name}: unknown autopilot gain '{name}'")

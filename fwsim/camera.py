@@ -150,6 +150,12 @@ def _first_hit(scene, origins_local: np.ndarray, dirs_local: np.ndarray) -> np.n
     return d
 
 
+#: the ship's bounding box's 12 edges: pairs of RayCaster.ship_corners (index bits 4, 2, 1: x, y, z high)
+_BOX_EDGES = np.array([(i, i | bit) for bit in (4, 2, 1) for i in range(8) if not i & bit])
+#: corners closer than this in front of the camera plane count as behind it (their projection is meaningless)
+_NEAR_Z_M = 1e-3
+
+
 @dataclass
 class Pose:
     """A rigid pose: p_world = R @ p_local + t."""
@@ -262,21 +268,40 @@ class Camera:
 
     # ------------------------------------------------------------------ detection
     def roi(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose) -> tuple[int, int, int, int] | None:
-        """Pixel box (u0, v0, u1, v1 inclusive) where the ship can project, or None if it cannot."""
+        """Pixel box (u0, v0, u1, v1 inclusive) where the ship can project, or None if it cannot. When the ship's
+        bounding box straddles the camera plane this is the whole image (:meth:`rois` gives a tighter one)."""
+        return self.rois(cam_pos, R_enu_cam, ship)[0]
+
+    def rois(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose):
+        """(:meth:`roi`, the tight box): the same box, except when the ship's bounding box straddles the camera
+        plane: :meth:`roi` is then the whole image, the tight box that of the part of the bounding box in front
+        of the plane (its corners there, and where its edges cross it), or None when that part falls outside the
+        image. The ship's surface within a millimetre of the camera plane is all it leaves out."""
         corners_w = self.caster.ship_corners @ ship.R.T + ship.t
         p_cam = (corners_w - cam_pos) @ R_enu_cam
-        front = p_cam[:, 2] > 1e-3
+        front = p_cam[:, 2] > _NEAR_Z_M
         if not front.any():
-            return None
-        W, H, m = self.cfg.width_px, self.cfg.height_px, self.cfg.roi_margin_px
+            return None, None
         if front.all():
-            K = self.K
-            u = K.fx * p_cam[:, 0] / p_cam[:, 2] + K.cx  # K.project's pixels
-            v = K.fy * p_cam[:, 1] / p_cam[:, 2] + K.cy
-            u0, v0 = math.floor(u.min()) - m, math.floor(v.min()) - m
-            u1, v1 = math.ceil(u.max()) + m, math.ceil(v.max()) + m
-        else:  # the box straddles the camera plane: the whole image may show it
-            u0, v0, u1, v1 = 0, 0, W - 1, H - 1
+            box = self._pixel_box(p_cam)
+            return box, box
+        W, H = self.cfg.width_px, self.cfg.height_px
+        a, b = p_cam[_BOX_EDGES[:, 0]], p_cam[_BOX_EDGES[:, 1]]
+        crossing = front[_BOX_EDGES[:, 0]] != front[_BOX_EDGES[:, 1]]
+        a, b = a[crossing], b[crossing]
+        f = (_NEAR_Z_M - a[:, 2]) / (b[:, 2] - a[:, 2])
+        cut = a + f[:, None] * (b - a)
+        cut[:, 2] = _NEAR_Z_M
+        return (0, 0, W - 1, H - 1), self._pixel_box(np.vstack([p_cam[front], cut]))
+
+    def _pixel_box(self, p_cam: np.ndarray) -> tuple[int, int, int, int] | None:
+        """The margin-widened pixel box of camera-frame points in front of the camera, clipped to the image."""
+        W, H, m = self.cfg.width_px, self.cfg.height_px, self.cfg.roi_margin_px
+        K = self.K
+        u = K.fx * p_cam[:, 0] / p_cam[:, 2] + K.cx  # K.project's pixels
+        v = K.fy * p_cam[:, 1] / p_cam[:, 2] + K.cy
+        u0, v0 = math.floor(u.min()) - m, math.floor(v.min()) - m
+        u1, v1 = math.ceil(u.max()) + m, math.ceil(v.max()) + m
         u0, v0 = max(int(u0), 0), max(int(v0), 0)
         u1, v1 = min(int(u1), W - 1), min(int(v1), H - 1)
         if u0 > u1 or v0 > v1:
@@ -285,8 +310,8 @@ class Camera:
 
     def detect(self, t_s: float, cam_pos: np.ndarray, R_enu_cam: np.ndarray, uav: Pose, ship: Pose) -> FrameGeometry:
         """Visible ship pixels by ray casting over the region of interest."""
-        box = self.roi(cam_pos, R_enu_cam, ship)
-        if box is None:
+        box, tight = self.rois(cam_pos, R_enu_cam, ship)
+        if tight is None:  # (the rays of the box, not the tight one, are cast: the stride goes with the box)
             return _summarise(t_s, np.empty(0), np.empty(0), np.empty(0), np.empty(0), 1, 0)
         u0, v0, u1, v1 = box
         area = (u1 - u0 + 1) * (v1 - v0 + 1)
@@ -311,7 +336,7 @@ class Camera:
         """A shaded BGR image at the render resolution: sky, sea, ship, UAV parts in view."""
         rc = self.cfg.render
         dirs_w = self._render_rays @ R_enu_cam.T
-        box = self.roi(cam_pos, R_enu_cam, ship)  # full-resolution pixels where the ship can be
+        box = self.rois(cam_pos, R_enu_cam, ship)[1]  # full-resolution pixels where the ship can be
         ship_rays = np.empty(0, dtype=np.intp) if box is None else self._render_pixels_near(box)
         d_ship, d_uav = self.caster.cast(cam_pos, dirs_w, uav, ship, ship_rays=ship_rays, uav_only_where_ship=False)
         dz = dirs_w[:, 2].astype(np.float32)

@@ -46,6 +46,7 @@ from fwsim.profiling import BlockTimer, time_flight_software, time_harness
 from fwsim.scenario import Scenario, start_epoch_ns
 from fwsim.sensors import Sensors, rng_for
 from fwsim.world import World
+from fwsim.yamlfile import FAST_SAFE_DUMPER
 
 
 @dataclass(frozen=True)
@@ -223,9 +224,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario), epoch_ns=epoch_ns,
                                               scenario_text=scenario_text, listeners=listeners) as log:
         fsw = None
-        log.add_attachment("scenario_effective.yaml",
-                           yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False).encode(),
-                           "application/yaml")
+        effective = yaml.dump(scenario.model_dump(mode="json"), Dumper=FAST_SAFE_DUMPER, sort_keys=False)
+        log.add_attachment("scenario_effective.yaml", effective.encode(), "application/yaml")
         try:
             # the flight software first: a block may start a worker process (the NMPC's) that gets ready
             # while the harness is built

@@ -18,7 +18,13 @@ import yaml
 from yaml.constructor import ConstructorError
 from yaml.nodes import MappingNode, ScalarNode
 
-__all__ = ["load_yaml_text", "load_yaml_file", "read_text", "MAX_VALUES", "MAX_FILE_BYTES", "short"]
+__all__ = ["load_yaml_text", "load_yaml_file", "read_text", "MAX_VALUES", "MAX_FILE_BYTES", "short", "FAST_SAFE_LOADER",
+           "FAST_SAFE_DUMPER"]
+
+#: yaml.safe_load's and yaml.safe_dump's loader and dumper with libyaml's parser and emitter where PyYAML has them
+#: (the same values and text, a quarter of the time): for the project's own files, read or written per run
+FAST_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+FAST_SAFE_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 #: the most values (mappings, lists and scalars, aliases expanded) one file may hold
 MAX_VALUES = 200_000
