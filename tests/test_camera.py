@@ -187,3 +187,31 @@ def test_ray_table_is_the_rays_of_every_pixel():
     uu, vv = np.meshgrid(np.arange(K.width_px, dtype=float), np.arange(K.height_px, dtype=float))
     direct = K.rays(uu.ravel(), vv.ravel()).reshape(K.height_px, K.width_px, 3)
     assert np.array_equal(Camera._table(K), direct)
+
+
+def test_tight_roi_holds_every_ship_pixel_when_the_ship_straddles_the_camera_plane():
+    """Close to the ship, with its bounding box partly behind the camera, the tight box (the part in front,
+    clipped at the camera plane) holds every pixel the full frame sees the ship in, and is None only when
+    the full frame sees none: so rendering or detecting within it loses nothing."""
+    cam = Camera(CameraConfig(width_px=320, height_px=180), uav_mesh("fwuav"), SHIP.mesh)
+    rng = np.random.default_rng(3)
+    straddling = {"in view": 0, "out of view": 0}
+    for _ in range(200):
+        pos = rng.uniform([-40.0, -25.0, 2.0], [40.0, 25.0, 40.0])
+        euler = rng.uniform([-0.5, -0.8, -math.pi], [0.5, 0.8, math.pi])
+        R = dcm_enu_from_frd(euler)
+        cam_pos, R_cam = camera_pose_world(pos, euler, MOUNT, rng.uniform(-math.pi, math.pi), rng.uniform(-1.2, 0.2))
+        uav = Pose(R, pos)
+        box, tight = cam.rois(cam_pos, R_cam, SHIP_POSE)
+        if box is None or box == tight:
+            continue  # not straddling
+        assert box == (0, 0, 319, 179)
+        full = cam.detect_full_frame(0.0, cam_pos, R_cam, uav, SHIP_POSE)
+        if full.visible_px == 0:
+            straddling["out of view"] += tight is None
+            continue
+        straddling["in view"] += 1
+        assert tight is not None
+        u0, v0, u1, v1 = full.bbox_px
+        assert tight[0] <= u0 and tight[1] <= v0 and u1 <= tight[2] and v1 <= tight[3]
+    assert straddling["in view"] >= 5 and straddling["out of view"] >= 5, straddling
