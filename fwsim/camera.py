@@ -151,7 +151,7 @@ def _first_hit(scene, origins_local: np.ndarray, dirs_local: np.ndarray) -> np.n
 
 
 #: the ship's bounding box's 12 edges: pairs of RayCaster.ship_corners (index bits 4, 2, 1: x, y, z high)
-_BOX_EDGES = np.array([(i, i | bit) for bit in (4, 2, 1) for i in range(8) if not i & bit])
+_BOX_EDGES = tuple((i, i | bit) for bit in (4, 2, 1) for i in range(8) if not i & bit)
 #: corners closer than this in front of the camera plane count as behind it (their projection is meaningless)
 _NEAR_Z_M = 1e-3
 
@@ -278,30 +278,33 @@ class Camera:
         of the plane (its corners there, and where its edges cross it), or None when that part falls outside the
         image. The ship's surface within a millimetre of the camera plane is all it leaves out."""
         corners_w = self.caster.ship_corners @ ship.R.T + ship.t
-        p_cam = (corners_w - cam_pos) @ R_enu_cam
-        front = p_cam[:, 2] > _NEAR_Z_M
-        if not front.any():
+        # the corners in the camera frame as Python floats: the few scalar operations below cost less so than as
+        # numpy's (and give the same numbers: each is one IEEE operation either way)
+        pts = ((corners_w - cam_pos) @ R_enu_cam).tolist()
+        front = [p[2] > _NEAR_Z_M for p in pts]
+        if not any(front):
             return None, None
-        if front.all():
-            box = self._pixel_box(p_cam)
+        if all(front):
+            box = self._pixel_box(pts)
             return box, box
-        W, H = self.cfg.width_px, self.cfg.height_px
-        a, b = p_cam[_BOX_EDGES[:, 0]], p_cam[_BOX_EDGES[:, 1]]
-        crossing = front[_BOX_EDGES[:, 0]] != front[_BOX_EDGES[:, 1]]
-        a, b = a[crossing], b[crossing]
-        f = (_NEAR_Z_M - a[:, 2]) / (b[:, 2] - a[:, 2])
-        cut = a + f[:, None] * (b - a)
-        cut[:, 2] = _NEAR_Z_M
-        return (0, 0, W - 1, H - 1), self._pixel_box(np.vstack([p_cam[front], cut]))
+        inside = [p for p, f in zip(pts, front) if f]
+        for i, j in _BOX_EDGES:
+            if front[i] != front[j]:  # the edge crosses the plane z = _NEAR_Z_M: where
+                (xa, ya, za), (xb, yb, zb) = pts[i], pts[j]
+                f = (_NEAR_Z_M - za) / (zb - za)
+                inside.append((xa + f * (xb - xa), ya + f * (yb - ya), _NEAR_Z_M))
+        return (0, 0, self.cfg.width_px - 1, self.cfg.height_px - 1), self._pixel_box(inside)
 
-    def _pixel_box(self, p_cam: np.ndarray) -> tuple[int, int, int, int] | None:
-        """The margin-widened pixel box of camera-frame points in front of the camera, clipped to the image."""
+    def _pixel_box(self, pts) -> tuple[int, int, int, int] | None:
+        """The margin-widened pixel box of camera-frame points (x, y, z) in front of the camera, clipped to the
+        image."""
         W, H, m = self.cfg.width_px, self.cfg.height_px, self.cfg.roi_margin_px
         K = self.K
-        u = K.fx * p_cam[:, 0] / p_cam[:, 2] + K.cx  # K.project's pixels
-        v = K.fy * p_cam[:, 1] / p_cam[:, 2] + K.cy
-        u0, v0 = math.floor(u.min()) - m, math.floor(v.min()) - m
-        u1, v1 = math.ceil(u.max()) + m, math.ceil(v.max()) + m
+        fx, fy, cx, cy = K.fx, K.fy, K.cx, K.cy
+        us = [fx * x / z + cx for x, _, z in pts]  # K.project's pixels
+        vs = [fy * y / z + cy for _, y, z in pts]
+        u0, v0 = math.floor(min(us)) - m, math.floor(min(vs)) - m
+        u1, v1 = math.ceil(max(us)) + m, math.ceil(max(vs)) + m
         u0, v0 = max(int(u0), 0), max(int(v0), 0)
         u1, v1 = min(int(u1), W - 1), min(int(v1), H - 1)
         if u0 > u1 or v0 > v1:
