@@ -158,6 +158,13 @@ def bank_from_specific_force(fl: float, fr: float, bank: float, max_bank: float,
     return pull if abs(wrap_pi(pull - bank)) <= abs(wrap_pi(push - bank)) else push
 
 
+def _achieved_accel_perp(st: AirframeState, R: np.ndarray, vhat: np.ndarray) -> np.ndarray:
+    """The acceleration the airframe achieves perpendicular to its velocity (ENU, m/s^2): its specific force in
+    the world (``R``: ENU from body) plus gravity, less the part along the velocity's unit vector ``vhat``."""
+    acc = R @ st.specific_force_frd_m_s2 + _GRAVITY_ENU
+    return acc - (acc @ vhat) * vhat
+
+
 class Autopilot:
     """Airspeed, body-rate and acceleration loops of a small fixed wing."""
 
@@ -236,11 +243,9 @@ class Autopilot:
         self._normal_accel_integ = _clip(self._normal_accel_integ + pv("normal_accel_ki") * n_err * self.dt_s,
                                          -0.5, 0.5)
         q = q_ff + pv("normal_accel_kp") * n_err + self._normal_accel_integ
-        # achieved acceleration perpendicular to the velocity (for the log)
-        f_world = R @ st.specific_force_frd_m_s2
-        acc = f_world + g_vec
-        acc_perp = acc - (acc @ vhat) * vhat
-        return p, q, r_ff, bank_sp, a_perp, acc_perp
+        # the achieved acceleration perpendicular to the velocity is for the log: worked out when asked for
+        # (status(), _achieved_accel_perp)
+        return p, q, r_ff, bank_sp, a_perp, (R, vhat)
 
     # ------------------------------------------------------------------ step
     def step(self, cmd: AutopilotCommand, st: AirframeState) -> tuple[ActuatorCommand, AutopilotStatus]:
@@ -294,6 +299,8 @@ class Autopilot:
         if self._last is None:
             raise RuntimeError("Autopilot.status() asked before the first actuate()")
         cmd, st, p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._last
+        if a_ach is not None:
+            a_ach = _achieved_accel_perp(st, *a_ach)
         return AutopilotStatus(
             t_s=st.t_s, mode=cmd.mode, airspeed_sp_m_s=cmd.airspeed_m_s, airspeed_m_s=st.airspeed_m_s,
             body_rates_sp_frd_rad_s=np.array([p_sp, q_sp, r_sp]), body_rates_frd_rad_s=st.body_rates_frd_rad_s,
