@@ -278,8 +278,8 @@ class Camera:
         of the plane (its corners there, and where its edges cross it), or None when that part falls outside the
         image. The ship's surface within a millimetre of the camera plane is all it leaves out."""
         corners_w = self.caster.ship_corners @ ship.R.T + ship.t
-        # the corners in the camera frame as Python floats: the few scalar operations below cost less so than as
-        # numpy's (and give the same numbers: each is one IEEE operation either way)
+        # the corners in the camera frame as Python floats: the few scalar operations below cost less on them than
+        # as numpy calls, and give the same numbers (each is one IEEE operation either way)
         pts = ((corners_w - cam_pos) @ R_enu_cam).tolist()
         front = [p[2] > _NEAR_Z_M for p in pts]
         if not any(front):
