@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 from fwsim import SCENARIO_DIR
 from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
@@ -146,3 +147,17 @@ def test_the_readmes_scenario_example_is_a_valid_scenario():
     example = text.split("### Scenario files", 1)[1].split("```yaml", 1)[1].split("```", 1)[0]
     s = parse_scenario(example, "README.md")
     assert s.name == "my_case" and s.controllers.after_lock.use == "nmpc" and s.controllers.estimator.use == "ukf"
+
+
+@pytest.mark.parametrize("name", ["paper_mission", "autopilot_checkout", "camera_demo", "paper_as_printed"])
+def test_fast_yaml_loader_and_dumper_give_pyyamls_values_and_text(name):
+    """The per-run YAML goes through libyaml where PyYAML has it (fwsim.yamlfile.FAST_SAFE_LOADER / DUMPER):
+    the effective scenario it writes into every log is yaml.safe_dump's text, and the autopilot gains it reads
+    are yaml.safe_load's values."""
+    from fwsim import AIRCRAFT_DIR
+    from fwsim.yamlfile import FAST_SAFE_DUMPER, FAST_SAFE_LOADER
+    scenario, _ = load_scenario(SCENARIO_DIR / f"{name}.yaml")
+    data = scenario.model_dump(mode="json")
+    assert yaml.dump(data, Dumper=FAST_SAFE_DUMPER, sort_keys=False) == yaml.safe_dump(data, sort_keys=False)
+    text = (AIRCRAFT_DIR / scenario.aircraft.name / "autopilot.yaml").read_text()
+    assert yaml.load(text, Loader=FAST_SAFE_LOADER) == yaml.safe_load(text)  # noqa: S506 - a safe loader
