@@ -98,10 +98,7 @@ class NmpcLoiter:
             if t - self._pending < self.cfg.step_s:  # else the loiter was left meanwhile: a stale plan
                 self._take(*res)
             self._pending = None
-        if t + 1e-9 >= self._next_t:
-            if self._pending is not None:  # a solve ahead no longer wanted
-                self.solver.result()
-                self._pending = None
+        if t + 1e-9 >= self._next_t:  # (a solve ahead is for _next_t: it was taken or dropped above)
             self.solver.submit(t, self._state(nav), target.pos_enu_m, self._target_velocity(nav, target))
             self._take(*self.solver.result())
         elif self._pending is None and self._ahead > 0.0 and t + self._ahead + 1e-9 >= self._next_t:

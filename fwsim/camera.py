@@ -267,16 +267,13 @@ class Camera:
         return out
 
     # ------------------------------------------------------------------ detection
-    def roi(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose) -> tuple[int, int, int, int] | None:
-        """Pixel box (u0, v0, u1, v1 inclusive) where the ship can project, or None if it cannot. When the ship's
-        bounding box straddles the camera plane this is the whole image (:meth:`rois` gives a tighter one)."""
-        return self.rois(cam_pos, R_enu_cam, ship)[0]
-
     def rois(self, cam_pos: np.ndarray, R_enu_cam: np.ndarray, ship: Pose):
-        """(:meth:`roi`, the tight box): the same box, except when the ship's bounding box straddles the camera
-        plane: :meth:`roi` is then the whole image, the tight box that of the part of the bounding box in front
-        of the plane (its corners there, and where its edges cross it), or None when that part falls outside the
-        image. The ship's surface within a millimetre of the camera plane is all it leaves out."""
+        """(box, tight box): pixel boxes (u0, v0, u1, v1 inclusive) where the ship can project, or (None, None)
+        when it cannot. The two are the same unless the ship's bounding box straddles the camera plane: the box
+        is then the whole image (the region a detection frame casts over, its stride with it), the tight box
+        that of the part of the bounding box in front of the plane (its corners there, and where its edges
+        cross it), or None when that part falls outside the image. The ship's surface within a millimetre of
+        the camera plane is all the tight box leaves out."""
         corners_w = self.caster.ship_corners @ ship.R.T + ship.t
         # the corners in the camera frame as Python floats: the few scalar operations below cost less on them than
         # as numpy calls, and give the same numbers (each is one IEEE operation either way)
