@@ -167,6 +167,26 @@ class ShapeHeadingConfig(StrictModel):
         description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
                     "misfit repeats from frame to frame and must not make the heading look surer than it is")
     min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
+    centre_fit: bool = Field(
+        True,
+        description="while the course is unknown, weigh each heading also by how well its predicted boxes' "
+                    "centres follow the detected ones as the view changes (:class:`ShapeHeading`): seen from a "
+                    "closing or turning viewpoint, the box centre moves over the ship in a way the heading "
+                    "decides (a tall superstructure at one end pulls it that way more and more as the range "
+                    "closes), and the estimate's own error, a shift common to all headings, is fitted out. The "
+                    "box sizes barely tell a still ship's bow from its stern; this does. false: sizes only")
+    centre_fit_time_s: float = Field(
+        10.0, gt=0, le=600,
+        description="the centre fit forgets with this time constant, s (the estimate's error it fits out "
+                    "changes as the estimate converges)")
+    centre_fit_sigma_px: float = Field(
+        3.0, gt=0, le=100,
+        description="std. dev. of a detected box centre against a heading's predicted one, px, once the "
+                    "estimate's shift is fitted out (attitude noise, the outline's coarseness)")
+    centre_fit_max_effective: float = Field(
+        10.0, gt=0, le=10000,
+        description="the centre fit's evidence counts at most this many detections (its misfit repeats from "
+                    "frame to frame, like the sizes')")
     min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
                                                             "times the largest are dropped")
     tell_bow_from_stern: bool = Field(

@@ -279,6 +279,11 @@ def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_po
     return box
 
 
+_CENTRE_FIT_FOLLOW_VELOCITY = False
+_CENTRE_FIT_MAX_DRIFT_M = 25.0  # the centre fit starts again when its reference is this far from the estimate
+_CENTRE_FIT_SIZE_TOL, _CENTRE_FIT_SIZE_TOL_PX = 0.1, 6.0  # a box the centre fit takes: its size explained thus
+
+
 class ShapeHeading:
     """The ship's heading from the sizes of its detected boxes: a posterior over ``cfg.headings`` headings.
 
@@ -292,12 +297,31 @@ class ShapeHeading:
     ``max_effective_updates`` detections. A detection whose box touches the image border says nothing of the
     size and is not used; nor is one taken less than ``1 / rate_hz`` after the last used one.
 
+    The sizes barely tell a still ship's bow from its stern (a box is much the same either way round). Where
+    its centre falls does (``centre_fit``): each heading's predicted box centre, at the estimate, is off the
+    detected one by the estimate's error seen through this view (``J delta``, ``J`` the image Jacobian of a
+    horizontal shift of the ship, ``delta`` the error: common to all headings, slowly changing) plus that
+    heading's misfit. A least-squares fit of one ``delta`` per heading over the recent detections
+    (exponential forgetting, ``centre_fit_time_s``) leaves the misfit's sum of squares, ``SS_h``; as the view
+    closes or turns the right heading's centres follow the detected ones and the wrong ones' drift off (a
+    superstructure aft pulls the box centre aft more and more as the range closes: the reverse heading
+    predicts the pull the other way). While the course is unknown (:meth:`headings`) each heading's weight is
+    multiplied by ``exp(-k SS_h / (2 sigma^2))`` (``centre_fit_sigma_px``; ``k`` tempers the count to
+    ``centre_fit_max_effective`` detections).
+
     The box sizes come from the flight software's coarse outline (a priori knowledge of the ship class) and
     its own estimate of where the ship is: nothing here reads the simulated ship.
     """
 
     def __init__(self, cfg: ShapeHeadingConfig, outline: ShipOutline, camera: PinholeCamera, edge_px: float = 6.0):
         self.cfg = cfg
+        # the centre fit's normal equations (forgetting): sum J^T J (2 x 2, shared), per heading sum J^T y (n, 2)
+        # and sum |y|^2 (n), y = detected - predicted box centre; the count of detections in them
+        self._c_jj = np.zeros((2, 2))
+        self._c_jy = np.zeros((cfg.headings, 2))
+        self._c_yy = np.zeros(cfg.headings)
+        self._c_n = 0.0
+        self._c_ref = np.zeros(3)  # the reference the fitted shift is from: moves with the estimated velocity
         self.outline = outline
         self.camera = camera
         self.edge_px = float(edge_px)
@@ -315,7 +339,7 @@ class ShapeHeading:
         self._course = None  # the estimated course at the last used detection (None: not followed then)
 
     def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-               course_enu_rad: float | None = None) -> bool:
+               course_enu_rad: float | None = None, vel_enu_m_s=None) -> bool:
         """Use one detected box (u0, v0, u1, v1); True when it was used. ``course_enu_rad``: the ship's
         estimated course now when it is sure enough to follow (``follow_course``), else None: the posterior
         turns by the course's change since the last used detection before this box is added."""
@@ -339,6 +363,11 @@ class ShapeHeading:
         size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
         scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
+        if c.centre_fit and np.any(np.all(np.abs(size_det[None, None, :] - scaled)
+                                          <= _CENTRE_FIT_SIZE_TOL * scaled + _CENTRE_FIT_SIZE_TOL_PX, axis=2)):
+            # (a box no heading's size explains, at any of the size biases, is cut short or wrong: its centre
+            # would mislead the fit)
+            self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred, vel_enu_m_s)
         r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
         self._loglik_bias -= np.log1p(0.5 * r * r)
         self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
@@ -346,6 +375,58 @@ class ShapeHeading:
         self._weights = self._axis = None
         self._last_t = t_s
         return True
+
+    def _add_centres(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box: np.ndarray,
+                     pred: np.ndarray, vel_enu_m_s) -> None:
+        """Add one detection to the centre fit (forgetting what came before by its age).
+
+        The shift fitted is that of the ship from a reference that moves with the estimated velocity only
+        (``_c_ref``), not from the estimate itself: the estimate follows the corrected box centres, and so the
+        headings the correction weighs, which would make any heading's fit look good."""
+        ref = np.asarray(ref_enu_m, dtype=float)
+        R_ce = np.asarray(R_enu_from_cam, dtype=float).T
+        q = R_ce @ (ref - np.asarray(cam_pos_enu_m, dtype=float))
+        if not q[2] > 1.0:
+            return
+        if _CENTRE_FIT_FOLLOW_VELOCITY and self._c_n and vel_enu_m_s is not None:
+            v = np.asarray(vel_enu_m_s, dtype=float)
+            if np.all(np.isfinite(v)):
+                self._c_ref[:2] += v[:2] * max(t_s - self._last_t, 0.0)
+        if not self._c_n or float(np.hypot(*(self._c_ref[:2] - ref[:2]))) > _CENTRE_FIT_MAX_DRIFT_M:
+            self._c_jj[:] = 0.0  # (re)start from the estimate
+            self._c_jy[:] = 0.0
+            self._c_yy[:] = 0.0
+            self._c_n = 0.0
+            self._c_ref = ref.copy()
+        cam = self.camera
+        # d(u, v)/d(east, north) of the ship's image: the pinhole's Jacobian times R_ce's first two columns
+        jac = np.array([[cam.fx / q[2], 0.0, -cam.fx * q[0] / q[2] ** 2],
+                        [0.0, cam.fy / q[2], -cam.fy * q[1] / q[2] ** 2]]) @ R_ce[:, :2]
+        if self._c_n:
+            f = math.exp(-max(t_s - self._last_t, 0.0) / self.cfg.centre_fit_time_s)
+            self._c_jj *= f
+            self._c_jy *= f
+            self._c_yy *= f
+            self._c_n *= f
+        # the predicted boxes are at the estimate; moved to the reference to first order (J (ref - estimate))
+        y = (0.5 * np.array([box[0] + box[2], box[1] + box[3]]) - jac @ (self._c_ref[:2] - ref[:2]))[None, :] \
+            - 0.5 * (pred[:, 0:2] + pred[:, 2:4])
+        self._c_jj += jac.T @ jac
+        self._c_jy += y @ jac
+        self._c_yy += np.einsum("ij,ij->i", y, y)
+        self._c_n += 1.0
+
+    def centre_misfit_px2(self) -> np.ndarray | None:
+        """Each heading's centre-fit sum of squares ``SS_h`` (px^2) after its own best shift, or None before the
+        fit can tell (fewer than three detections in it, or no shift fitted)."""
+        if self._c_n < 3.0:
+            return None
+        try:
+            inv = np.linalg.inv(self._c_jj)
+        except np.linalg.LinAlgError:
+            return None
+        ss = self._c_yy - np.einsum("ij,jk,ik->i", self._c_jy, inv, self._c_jy)
+        return np.maximum(ss, 0.0) if np.all(np.isfinite(ss)) else None
 
     def turn(self, angle_rad: float) -> None:
         """The ship has turned by ``angle_rad`` (counter-clockwise): the evidence for each heading moves to the
@@ -397,7 +478,22 @@ class ShapeHeading:
         if not self.ready:
             return None
         w = self.weights()
-        keep = w >= self.cfg.min_weight * np.max(w)
+        c = self.cfg
+        ss = self.centre_misfit_px2() if c.centre_fit else None
+        n = len(w)
+        if ss is not None and n % 2 == 0:
+            # the centres only share each heading's and its opposite's weight between them (bow or stern);
+            # the axis stays the sizes'
+            k = min(1.0, c.centre_fit_max_effective / self._c_n)
+            # each heading's centre likelihood over its opposite's, exp(-k (SS_h - SS_opp) / (2 sigma^2)), times
+            # their size weights' ratio: this heading's share of the pair
+            d = 0.5 * k * (ss - np.roll(ss, n // 2)) / c.centre_fit_sigma_px ** 2
+            wo = np.roll(w, n // 2)
+            pair = w + wo
+            share = w / np.maximum(w + wo * np.exp(np.clip(d, -50.0, 50.0)), 1e-300)
+            w = pair * share
+            w = w / w.sum()
+        keep = w >= c.min_weight * np.max(w)
         return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
 
     def off_axis_rad(self, course_enu_rad: float) -> float:
@@ -747,7 +843,7 @@ class ShipModel:
         centre); its state for the log when it took the box, else None."""
         sh = self.shape
         if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-                         self._course_to_follow(t_s, vel_enu, vel_std_m_s)):
+                         self._course_to_follow(t_s, vel_enu, vel_std_m_s), vel_enu):
             return None
         w = sh.weights()
         k = int(np.argmax(w))

@@ -272,6 +272,54 @@ def test_bow_and_stern_count_alike_unless_told_apart():
     np.testing.assert_allclose(folded, 0.5 * (told + np.roll(told, half)), rtol=0, atol=1e-12)
 
 
+def _dive_shares(ship_heading_deg: float, az_deg: tuple[float, float], estimate_error, cfg: ShapeHeadingConfig,
+                 n: int = 60) -> tuple[float, float]:
+    """A dive on a still ship (range 700 -> 150 m, elevation 35 -> 60 deg, the bearing turning from az_deg[0] to
+    az_deg[1] relative to the bow, as BPNG swings onto its impact heading), ray-cast boxes at 3 Hz, the
+    estimate off by ``estimate_error(f)`` (ENU, m; f the dive's fraction): the headings' (true, reversed)
+    weights, each within 10 deg, while the course is unknown (ShapeHeading.headings)."""
+    ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pos, R = ship.pose(0.0)
+    sh = ShapeHeading(cfg, ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    for k in range(n):
+        f = k / (n - 1)
+        az = ship_heading_deg + az_deg[0] + (az_deg[1] - az_deg[0]) * f
+        cp, Rc, frame = _look_from(cam, Pose(R, pos), 700.0 - 550.0 * f, 35.0 + 25.0 * f, az)
+        assert sh.update(k / 3.0, cp, Rc, np.asarray(estimate_error(f), dtype=float), frame.bbox_px, None, np.zeros(3))
+    courses, w = sh.headings()
+    deg = (90.0 - np.degrees(courses)) % 360.0
+    return (float(sum(x for d, x in zip(deg, w) if _deg_off(d, ship_heading_deg) <= 10.0)),
+            float(sum(x for d, x in zip(deg, w) if _deg_off(d, ship_heading_deg + 180.0) <= 10.0)))
+
+
+@pytest.mark.parametrize("ship_heading_deg, az_deg", [(0.0, (50.0, 90.0)), (37.0, (-40.0, 0.0)),
+                                                       (90.0, (-40.0, 0.0))])
+def test_the_box_centres_tell_a_still_ships_bow_from_its_stern_in_a_dive(ship_heading_deg, az_deg):
+    """The sizes of a still ship's boxes barely tell its bow from its stern in a dive's short arc; where its box
+    centre falls as the view closes and turns does: the reverse heading puts the superstructure's pull on the
+    box centre the other way. The estimate's error (2 m here, or one that drifts 4 m along the ship during the
+    dive, as a correction split between bow and stern drives it) is fitted out."""
+    steady = lambda f: [2.0, -1.0, 0.0]  # noqa: E731
+    drifting = lambda f: [0.0, -4.0 * f, 0.0]  # noqa: E731
+    sizes_true, sizes_rev = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig(centre_fit=False))
+    assert sizes_true < 0.8 and sizes_rev > 0.2  # the sizes alone leave it open
+    for err in (steady, drifting):
+        true, rev = _dive_shares(ship_heading_deg, az_deg, err, ShapeHeadingConfig())
+        assert true > 0.95 and rev < 0.05
+        assert true + rev == pytest.approx(sizes_true + sizes_rev, abs=0.05)  # the axis is still the sizes'
+
+
+def test_the_centre_fit_leaves_a_sure_heading_and_the_known_course_alone():
+    """Seen from astern the sizes already tell the heading; the centre fit agrees. A known course is fused
+    with the sizes' weights (weights()), which the centre fit does not touch."""
+    true, rev = _dive_shares(0.0, (160.0, 200.0), lambda f: [1.0, 1.0, 0.0], ShapeHeadingConfig())
+    assert true > 0.95
+    sh = _shape_from(ring_views(130.0, range(0, 60, 5)))
+    sh_off = _shape_from(ring_views(130.0, range(0, 60, 5)), ShapeHeadingConfig(centre_fit=False))
+    np.testing.assert_array_equal(sh.weights(), sh_off.weights())
+
+
 def turning_ship_views(rate_deg_s: float, h0_deg: float = 20.0, lap_s: float = 60.0, hz: float = 3.0):
     """A lap of the loiter ring round a ship turning at ``rate_deg_s`` (clockwise seen from above: its heading
     grows): (t, cam_pos, R_enu_cam, box, the ship's course counter-clockwise from East, rad) at ``hz``."""
