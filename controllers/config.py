@@ -168,13 +168,15 @@ class ShapeHeadingConfig(StrictModel):
                     "misfit repeats from frame to frame and must not make the heading look surer than it is")
     min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
     centre_fit: bool = Field(
-        True,
+        False,
         description="while the course is unknown, weigh each heading also by how well its predicted boxes' "
                     "centres follow the detected ones as the view changes (:class:`ShapeHeading`): seen from a "
                     "closing or turning viewpoint, the box centre moves over the ship in a way the heading "
                     "decides (a tall superstructure at one end pulls it that way more and more as the range "
                     "closes), and the estimate's own error, a shift common to all headings, is fitted out. The "
-                    "box sizes barely tell a still ship's bow from its stern; this does. false: sizes only")
+                    "box sizes barely tell a still ship's bow from its stern; this does. Off by default: on the "
+                    "class's own ship it cuts a still ship's miss in a dive by about a third, on slow ships unlike "
+                    "the class it does a little harm (README, 'A still ship's heading from its box shapes')")
     centre_fit_time_s: float = Field(
         10.0, gt=0, le=600,
         description="the centre fit forgets with this time constant, s (the estimate's error it fits out "
@@ -184,7 +186,7 @@ class ShapeHeadingConfig(StrictModel):
         description="std. dev. of a detected box centre against a heading's predicted one, px, once the "
                     "estimate's shift is fitted out (attitude noise, the outline's coarseness)")
     centre_fit_max_effective: float = Field(
-        10.0, gt=0, le=10000,
+        5.0, gt=0, le=10000,
         description="the centre fit's evidence counts at most this many detections (its misfit repeats from "
                     "frame to frame, like the sizes')")
     min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "

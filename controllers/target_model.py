@@ -485,9 +485,12 @@ class ShapeHeading:
             # the centres only share each heading's and its opposite's weight between them (bow or stern);
             # the axis stays the sizes'
             k = min(1.0, c.centre_fit_max_effective / self._c_n)
-            # each heading's centre likelihood over its opposite's, exp(-k (SS_h - SS_opp) / (2 sigma^2)), times
-            # their size weights' ratio: this heading's share of the pair
-            d = 0.5 * k * (ss - np.roll(ss, n // 2)) / c.centre_fit_sigma_px ** 2
+            # the misfit's scale: the configured one, or the best heading's own per box side when larger (a ship
+            # unlike the class fits no heading well; its headings' misfits then differ by its unlike parts)
+            s2 = max(c.centre_fit_sigma_px ** 2, float(ss.min()) / max(2.0 * self._c_n - 2.0, 1.0))
+            # each heading's centre likelihood over its opposite's, exp(-k (SS_h - SS_opp) / (2 s2)), times their
+            # size weights' ratio: this heading's share of the pair
+            d = 0.5 * k * (ss - np.roll(ss, n // 2)) / s2
             wo = np.roll(w, n // 2)
             pair = w + wo
             share = w / np.maximum(w + wo * np.exp(np.clip(d, -50.0, 50.0)), 1e-300)

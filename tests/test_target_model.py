@@ -302,10 +302,10 @@ def test_the_box_centres_tell_a_still_ships_bow_from_its_stern_in_a_dive(ship_he
     dive, as a correction split between bow and stern drives it) is fitted out."""
     steady = lambda f: [2.0, -1.0, 0.0]  # noqa: E731
     drifting = lambda f: [0.0, -4.0 * f, 0.0]  # noqa: E731
-    sizes_true, sizes_rev = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig(centre_fit=False))
+    sizes_true, sizes_rev = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig())  # (off: default)
     assert sizes_true < 0.8 and sizes_rev > 0.2  # the sizes alone leave it open
     for err in (steady, drifting):
-        true, rev = _dive_shares(ship_heading_deg, az_deg, err, ShapeHeadingConfig())
+        true, rev = _dive_shares(ship_heading_deg, az_deg, err, ShapeHeadingConfig(centre_fit=True))
         assert true > 0.95 and rev < 0.05
         assert true + rev == pytest.approx(sizes_true + sizes_rev, abs=0.05)  # the axis is still the sizes'
 
@@ -313,10 +313,11 @@ def test_the_box_centres_tell_a_still_ships_bow_from_its_stern_in_a_dive(ship_he
 def test_the_centre_fit_leaves_a_sure_heading_and_the_known_course_alone():
     """Seen from astern the sizes already tell the heading; the centre fit agrees. A known course is fused
     with the sizes' weights (weights()), which the centre fit does not touch."""
-    true, rev = _dive_shares(0.0, (160.0, 200.0), lambda f: [1.0, 1.0, 0.0], ShapeHeadingConfig())
+    on = ShapeHeadingConfig(centre_fit=True)
+    true, rev = _dive_shares(0.0, (160.0, 200.0), lambda f: [1.0, 1.0, 0.0], on)
     assert true > 0.95
-    sh = _shape_from(ring_views(130.0, range(0, 60, 5)))
-    sh_off = _shape_from(ring_views(130.0, range(0, 60, 5)), ShapeHeadingConfig(centre_fit=False))
+    sh = _shape_from(ring_views(130.0, range(0, 60, 5)), on)
+    sh_off = _shape_from(ring_views(130.0, range(0, 60, 5)))
     np.testing.assert_array_equal(sh.weights(), sh_off.weights())
 
 
