@@ -279,7 +279,6 @@ def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_po
     return box
 
 
-_CENTRE_FIT_FOLLOW_VELOCITY = False
 _CENTRE_FIT_MAX_DRIFT_M = 25.0  # the centre fit starts again when its reference is this far from the estimate
 _CENTRE_FIT_SIZE_TOL, _CENTRE_FIT_SIZE_TOL_PX = 0.1, 6.0  # a box the centre fit takes: its size explained thus
 
@@ -298,16 +297,17 @@ class ShapeHeading:
     size and is not used; nor is one taken less than ``1 / rate_hz`` after the last used one.
 
     The sizes barely tell a still ship's bow from its stern (a box is much the same either way round). Where
-    its centre falls does (``centre_fit``): each heading's predicted box centre, at the estimate, is off the
-    detected one by the estimate's error seen through this view (``J delta``, ``J`` the image Jacobian of a
-    horizontal shift of the ship, ``delta`` the error: common to all headings, slowly changing) plus that
-    heading's misfit. A least-squares fit of one ``delta`` per heading over the recent detections
-    (exponential forgetting, ``centre_fit_time_s``) leaves the misfit's sum of squares, ``SS_h``; as the view
-    closes or turns the right heading's centres follow the detected ones and the wrong ones' drift off (a
-    superstructure aft pulls the box centre aft more and more as the range closes: the reverse heading
-    predicts the pull the other way). While the course is unknown (:meth:`headings`) each heading's weight is
-    multiplied by ``exp(-k SS_h / (2 sigma^2))`` (``centre_fit_sigma_px``; ``k`` tempers the count to
-    ``centre_fit_max_effective`` detections).
+    its centre falls does (``centre_fit``, off by default): each heading's predicted box centre, at the
+    estimate, is off the detected one by the ship's shift from a fixed reference seen through this view
+    (``J delta``, ``J`` the image Jacobian of a horizontal shift of the ship; ``delta`` common to all headings)
+    plus that heading's misfit. A least-squares fit of one ``delta`` per heading over the recent detections
+    (exponential forgetting, ``centre_fit_time_s``; only boxes whose size some heading explains) leaves the
+    misfit's sum of squares, ``SS_h``; as the view closes or turns the right heading's centres follow the
+    detected ones and the wrong ones' drift off (a superstructure aft pulls the box centre aft more and more
+    as the range closes: the reverse heading predicts the pull the other way). While the course is unknown
+    (:meth:`headings`) each heading and its opposite share their weight by their size weights times
+    ``exp(-k SS_h / (2 s^2))`` (``k`` tempers the count to ``centre_fit_max_effective`` detections; ``s`` is
+    ``centre_fit_sigma_px``, or the best heading's own misfit per box side when larger).
 
     The box sizes come from the flight software's coarse outline (a priori knowledge of the ship class) and
     its own estimate of where the ship is: nothing here reads the simulated ship.
@@ -321,7 +321,7 @@ class ShapeHeading:
         self._c_jy = np.zeros((cfg.headings, 2))
         self._c_yy = np.zeros(cfg.headings)
         self._c_n = 0.0
-        self._c_ref = np.zeros(3)  # the reference the fitted shift is from: moves with the estimated velocity
+        self._c_ref = np.zeros(3)  # the fixed reference the fitted shift is from
         self.outline = outline
         self.camera = camera
         self.edge_px = float(edge_px)
@@ -339,7 +339,7 @@ class ShapeHeading:
         self._course = None  # the estimated course at the last used detection (None: not followed then)
 
     def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-               course_enu_rad: float | None = None, vel_enu_m_s=None) -> bool:
+               course_enu_rad: float | None = None) -> bool:
         """Use one detected box (u0, v0, u1, v1); True when it was used. ``course_enu_rad``: the ship's
         estimated course now when it is sure enough to follow (``follow_course``), else None: the posterior
         turns by the course's change since the last used detection before this box is added."""
@@ -367,7 +367,7 @@ class ShapeHeading:
                                           <= _CENTRE_FIT_SIZE_TOL * scaled + _CENTRE_FIT_SIZE_TOL_PX, axis=2)):
             # (a box no heading's size explains, at any of the size biases, is cut short or wrong: its centre
             # would mislead the fit)
-            self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred, vel_enu_m_s)
+            self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred)
         r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
         self._loglik_bias -= np.log1p(0.5 * r * r)
         self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
@@ -377,21 +377,21 @@ class ShapeHeading:
         return True
 
     def _add_centres(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box: np.ndarray,
-                     pred: np.ndarray, vel_enu_m_s) -> None:
+                     pred: np.ndarray) -> None:
         """Add one detection to the centre fit (forgetting what came before by its age).
 
-        The shift fitted is that of the ship from a reference that moves with the estimated velocity only
-        (``_c_ref``), not from the estimate itself: the estimate follows the corrected box centres, and so the
-        headings the correction weighs, which would make any heading's fit look good."""
+        The shift fitted is the ship's from a fixed reference (``_c_ref``, the estimate when the fit started),
+        not from the estimate itself: the estimate follows the corrected box centres, and so the headings the
+        correction weighs, which made whichever end it leaned to fit well. Nor from a point moved with the
+        estimated velocity: a still ship's estimate drifts by up to 0.8 m/s in a dive, the same way. A ship
+        that moves while its course is unknown (under ``min_speed_for_course_m_s``) moves a few metres in the
+        forgetting time; the fit starts again when the reference is ``_CENTRE_FIT_MAX_DRIFT_M`` from the
+        estimate."""
         ref = np.asarray(ref_enu_m, dtype=float)
         R_ce = np.asarray(R_enu_from_cam, dtype=float).T
         q = R_ce @ (ref - np.asarray(cam_pos_enu_m, dtype=float))
         if not q[2] > 1.0:
             return
-        if _CENTRE_FIT_FOLLOW_VELOCITY and self._c_n and vel_enu_m_s is not None:
-            v = np.asarray(vel_enu_m_s, dtype=float)
-            if np.all(np.isfinite(v)):
-                self._c_ref[:2] += v[:2] * max(t_s - self._last_t, 0.0)
         if not self._c_n or float(np.hypot(*(self._c_ref[:2] - ref[:2]))) > _CENTRE_FIT_MAX_DRIFT_M:
             self._c_jj[:] = 0.0  # (re)start from the estimate
             self._c_jy[:] = 0.0
@@ -846,7 +846,7 @@ class ShipModel:
         centre); its state for the log when it took the box, else None."""
         sh = self.shape
         if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-                         self._course_to_follow(t_s, vel_enu, vel_std_m_s), vel_enu):
+                         self._course_to_follow(t_s, vel_enu, vel_std_m_s)):
             return None
         w = sh.weights()
         k = int(np.argmax(w))

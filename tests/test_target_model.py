@@ -286,7 +286,7 @@ def _dive_shares(ship_heading_deg: float, az_deg: tuple[float, float], estimate_
         f = k / (n - 1)
         az = ship_heading_deg + az_deg[0] + (az_deg[1] - az_deg[0]) * f
         cp, Rc, frame = _look_from(cam, Pose(R, pos), 700.0 - 550.0 * f, 35.0 + 25.0 * f, az)
-        assert sh.update(k / 3.0, cp, Rc, np.asarray(estimate_error(f), dtype=float), frame.bbox_px, None, np.zeros(3))
+        assert sh.update(k / 3.0, cp, Rc, np.asarray(estimate_error(f), dtype=float), frame.bbox_px)
     courses, w = sh.headings()
     deg = (90.0 - np.degrees(courses)) % 360.0
     return (float(sum(x for d, x in zip(deg, w) if _deg_off(d, ship_heading_deg) <= 10.0)),
