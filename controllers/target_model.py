@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from controllers.camera_model import PinholeCamera
+from controllers.camera_model import PinholeCamera, translation_rates
 from controllers.config import ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
@@ -399,9 +399,10 @@ class ShapeHeading:
             self._c_n = 0.0
             self._c_ref = ref.copy()
         cam = self.camera
-        # d(u, v)/d(east, north) of the ship's image: the pinhole's Jacobian times R_ce's first two columns
-        jac = np.array([[cam.fx / q[2], 0.0, -cam.fx * q[0] / q[2] ** 2],
-                        [0.0, cam.fy / q[2], -cam.fy * q[1] / q[2] ** 2]]) @ R_ce[:, :2]
+        # d(u, v)/d(east, north) of the ship's image: the feature rates of a unit east and north shift (the camera
+        # frame's columns of R_ce), in pixels
+        rates = translation_rates(q[0] / q[2], q[1] / q[2], q[2], R_ce[:, :2].T)  # (east, north) x (x1, x2)
+        jac = (rates * np.array([cam.fx, cam.fy])).T
         if self._c_n:
             f = math.exp(-max(t_s - self._last_t, 0.0) / self.cfg.centre_fit_time_s)
             self._c_jj *= f
