@@ -109,3 +109,59 @@ def test_estimator_consistency_share_against_a_known_gaussian():
     std[:10000] = np.nan  # samples without a std are left out
     assert share_within(err, std) == pytest.approx(1.0 - math.exp(-2.0), abs=0.015)
     assert math.isnan(share_within(err[:3], np.full(3, np.nan)))
+
+
+def _envelope_tool():
+    import importlib.util
+
+    from fwsim import PROJECT_ROOT
+    spec = importlib.util.spec_from_file_location("envelope_tool", PROJECT_ROOT / "tools" / "envelope.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool
+
+
+def test_the_envelope_why_gives_the_estimate_error_in_the_ships_frame():
+    """--why's (bow, port) error, by hand: a ship heading east has its bow east and port north; one heading
+    north, bow north and port west; the heading interpolated across north stays near north (not south,
+    as a plain interpolation of 350 and 10 deg would give); no estimate yet: NaN."""
+    import numpy as np
+    tool = _envelope_tool()
+    t, est = [1.0, 2.0, 3.0], np.array([[102.0, 51.0], [102.0, 51.0], [102.0, 51.0]])  # truth at (100, 50)
+    truth_t, truth_xy = [0.0, 4.0], np.array([[100.0, 50.0], [100.0, 50.0]])
+    east = tool.ship_frame_errors(t, est, truth_t, truth_xy, [math.pi / 2] * 2, [0.5, 2.5])
+    assert math.isnan(east[0][0]) and east[1] == pytest.approx((2.0, 1.0))
+    north = tool.ship_frame_errors(t, est, truth_t, truth_xy, [0.0, 0.0], [3.0])
+    assert north[0] == pytest.approx((1.0, -2.0))
+    across = tool.ship_frame_errors(t, est, truth_t, truth_xy, [math.radians(350.0), math.radians(370.0)], [2.0])
+    assert across[0] == pytest.approx((1.0, -2.0))  # 360 deg at t = 2: north
+    used, top = tool.last_detections([0.0, 6.0, 7.0, 8.0, 9.0, 10.0],
+                                     ["size_mismatch", "used", "size_mismatch", "size_mismatch", "used",
+                                      "too_close"], end_s=10.0)
+    assert used == pytest.approx(0.5) and top == "size_mismatch 2"  # the coast's and the earlier one left out
+
+
+def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
+    """--why on a real flight's log (the paper's terminal case, marked as a 4 m miss in its summary): its
+    row lists the failed bar, finite estimate errors and the share of detections fused."""
+    import yaml
+
+    from fwsim.cases import terminal_case
+    from fwsim.loop import run
+    from fwsim.scenario import parse_scenario
+    text = yaml.safe_dump(terminal_case(-30.0, 30.0, 0.0, 5.0), sort_keys=False)
+    (tmp_path / "logs").mkdir()
+    result = run(parse_scenario(text), text, tmp_path / "logs" / "t.mcap")
+    assert result.reason.startswith("hit the ship")
+    row = {"id": "t", "status": "completed", "hit": 1.0, "miss_distance_m": 4.0, "miss_bow_m": 4.0,
+           "miss_port_m": 0.0, "impact_fpa_error_deg": 0.5, "impact_heading_error_deg": -0.5,
+           "target_in_fov_fraction_after_lock": 1.0, "log": "logs/t.mcap", "set.target.speed_m_s": 5.0}
+    (tmp_path / "summary.json").write_text(json.dumps({"rows": [row]}))
+    assert _envelope_tool().main([str(tmp_path), "--why"]) == 1  # 0 of 1 within 3 m: a bar not met
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| t |")]
+    assert len(line) == 1, line
+    cells = [c.strip() for c in line[0].strip("|").split("|")]
+    assert cells[1] == "distance" and cells[2] == "4.00"
+    errs = [tuple(float(v) for v in c.split(",")) for c in cells[7:10]]
+    assert all(math.isfinite(b) and math.isfinite(p) and math.hypot(b, p) < 8.0 for b, p in errs), cells
+    assert cells[10].endswith("%") and 0.0 < float(cells[10].rstrip(" %")) <= 100.0, cells

@@ -4,6 +4,7 @@
     fwsim batch scenarios/batches/envelope_ct_ukf.yaml --workers 2 --out runs/envelope_ct_ukf  # same draws
     python tools/envelope.py runs/envelope runs/envelope_ct_ukf   # a Markdown table: each bar, each estimator
     python tools/envelope.py runs/envelope --by set.target.motion  # split another way
+    python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock; >= 90 %
@@ -12,6 +13,13 @@ whose estimate never converges counts against this bar). A last
 column says whether that std is honest: the median run's share of estimates whose error is within twice
 it (about 86 % or more for a consistent filter). The statistics are fwsim report's (fwsim.report.summarise).
 Exit code 0 when every group meets every bar.
+
+``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
+angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
+5 s and 2 s before the end and at the end (the dive steers on it: a miss the estimate shares is the
+perception's or the estimator's, one it does not is the guidance's), and what became of the detections of
+the last 5 s (the share fused and the commonest reason for the rest; those of the planned coast of the
+last ~120 m, ``too_close``, left out). The ship's motion, type and speed come from the summary's dispersed columns.
 """
 from __future__ import annotations
 
@@ -22,7 +30,13 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
+
 from fwsim.report import summarise
+
+#: seconds before the end of a run at which --why gives the estimate's error (the end itself too)
+WHY_TIMES_S = (5.0, 2.0)
+WHY_WINDOW_S = 5.0  # --why: the detections of the last this many seconds
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("in view >= 99 %", 0.95), ("estimate <= 8 m", 0.90))
 
@@ -48,16 +62,106 @@ def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], floa
     return out
 
 
+def ship_frame_errors(t_s, est_xy, truth_t_s, truth_xy, truth_heading_ned_rad, at_s) -> list[tuple[float, float]]:
+    """The estimate's horizontal error (estimate - truth) at each time of ``at_s``, in the ship's frame:
+    (towards the bow, to port), m. ``est_xy`` / ``truth_xy``: east, north; the ship's heading from north,
+    clockwise (its bow along (sin, cos) in east, north; port along (-cos, sin)). The latest estimate at or
+    before each time (NaN when there is none); the truth interpolated to that estimate's time."""
+    from fwsim.metrics import interp_at
+    t = np.asarray(t_s, dtype=float)
+    est = np.asarray(est_xy, dtype=float)
+    ok = np.isfinite(est).all(axis=1)
+    t, est = t[ok], est[ok]
+    tt = np.asarray(truth_t_s, dtype=float)
+    out = []
+    for a in at_s:
+        k = int(np.searchsorted(t, a, side="right")) - 1
+        if k < 0:
+            out.append((math.nan, math.nan))
+            continue
+        e = est[k] - interp_at(t[k:k + 1], tt, np.asarray(truth_xy, dtype=float))[0]
+        # the heading interpolated through its unwrapped angle (a ship turning through north)
+        yaw = float(np.interp(t[k], tt, np.unwrap(np.asarray(truth_heading_ned_rad, dtype=float))))
+        bow, port = (math.sin(yaw), math.cos(yaw)), (-math.cos(yaw), math.sin(yaw))
+        out.append((float(e[0] * bow[0] + e[1] * bow[1]), float(e[0] * port[0] + e[1] * port[1])))
+    return out
+
+
+def last_detections(t_s, reasons, end_s: float, window_s: float = WHY_WINDOW_S) -> tuple[float, str]:
+    """(share of the detections of the last ``window_s`` before ``end_s`` that were fused, the commonest
+    reason among the others with its count, e.g. "size_mismatch 40"; "" when none was left out). The
+    detections of the planned coast (``too_close``) are left out of both: they say where the coast began,
+    not how the estimate came to it. NaN when no other detection falls in the window."""
+    from collections import Counter
+
+    from controllers.messages import FUSED, FusionReason
+    t = np.asarray(t_s, dtype=float)
+    last = [str(r) for r, ti in zip(reasons, t.tolist())
+            if ti >= end_s - window_s and str(r) != FusionReason.TOO_CLOSE]
+    if not last:
+        return math.nan, ""
+    fused = {str(f) for f in FUSED}
+    used = sum(r in fused for r in last)
+    rest = Counter(r for r in last if r not in fused)
+    top = rest.most_common(1)
+    return used / len(last), (f"{top[0][0]} {top[0][1]}" if top else "")
+
+
+def _failed_bar(row: dict) -> str:
+    if not row.get("hit"):
+        return "no hit"
+    far = not row.get("miss_distance_m", math.inf) <= 3.0
+    off = not max(abs(row.get("impact_fpa_error_deg", math.inf)),
+                  abs(row.get("impact_heading_error_deg", math.inf))) <= 3.0
+    return "distance and angle" if far and off else "distance" if far else "angle" if off else ""
+
+
+def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
+    """--why's table rows (strings): each run outside 3 m / 3 deg, from its log."""
+    from fwsim import topics
+    from fwsim.log.reader import read_log
+    table = []
+    for r in sorted(rows, key=lambda r: -float(r.get("miss_distance_m") or 0.0)):
+        bar = _failed_bar(r)
+        if not bar or r.get("status") == "failed":
+            continue
+        motion = r.get("set.target.motion")
+        cells = [str(r.get("id", "?")), bar, f"{r.get('miss_distance_m', math.nan):.2f}",
+                 f"{r.get('miss_bow_m', math.nan):+.1f}, {r.get('miss_port_m', math.nan):+.1f}",
+                 str(r.get("set.target.type", "-")), _label(motion) if motion is not None else "-",
+                 f"{r['set.target.speed_m_s']:.1f}" if isinstance(r.get("set.target.speed_m_s"), (int, float))
+                 else "-"]
+        try:
+            log = read_log(out_dir / r["log"])
+            est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
+            end = float(log.table(topics.UAV_STATE)["t_s"][-1])
+            errs = ship_frame_errors(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"][:, :2],
+                                     tru["heading_ned_rad"], [end - dt for dt in WHY_TIMES_S] + [end])
+            cells += [f"{b:+.1f}, {p:+.1f}" if math.isfinite(b) else "-" for b, p in errs]
+            fu = log.table(topics.FSW_DETECTION_FUSION)
+            share, top = last_detections(fu["t_s"], fu["reason"], end)
+            cells += [f"{100 * share:.0f} %" if math.isfinite(share) else "-", top or "-"]
+        except (OSError, KeyError, ValueError, IndexError) as exc:
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 2)
+        table.append(cells)
+    return table
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out_dirs", type=Path, nargs="+", help="output folders of fwsim batch (with summary.json)")
     ap.add_argument("--by", default="set.controllers.estimator",
                     help="the summary column to group by (default: the estimator)")
+    ap.add_argument("--why", action="store_true",
+                    help="also list each run outside 3 m / 3 deg with its estimate's error and its last "
+                         "detections (reads the logs)")
     args = ap.parse_args(argv)
-    rows = []
+    rows, per_dir = [], []
     for out_dir in args.out_dirs:
         try:
-            rows += json.loads((out_dir / "summary.json").read_text())["rows"]
+            these = json.loads((out_dir / "summary.json").read_text())["rows"]
+            rows += these
+            per_dir.append((out_dir, these))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"error: {out_dir}/summary.json: {type(exc).__name__}: {exc}", file=sys.stderr)
             return 2
@@ -74,6 +178,17 @@ def main(argv=None) -> int:
             cells.append(f"{100 * share:.0f} %" + ("" if met else " (not met)"))
         cells.append(f"{100 * cover:.0f} %" if math.isfinite(cover) else "-")
         print(f"| {name} | {n} | " + " | ".join(cells) + " |")
+    if args.why:
+        head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s"] + [
+            f"estimate error (bow, port) {dt:g} s before the end, m" for dt in WHY_TIMES_S] + [
+            "estimate error (bow, port) at the end, m",
+            f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest"]
+        for out_dir, these in per_dir:
+            print(f"\nRuns outside 3 m / 3 deg in {out_dir} (worst first):\n")
+            print("| " + " | ".join(head) + " |")
+            print("|" + "---|" * len(head))
+            for cells in why(out_dir, these):
+                print("| " + " | ".join(cells) + " |")
     return 0 if ok else 1
 
 
