@@ -83,11 +83,14 @@ class DetectionGateConfig(StrictModel):
                     "box_size_tolerance_px: part of the ship is "
                     "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
     box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
-    size_mismatch_action: Literal["skip", "deweight"] = Field(
+    size_mismatch_action: Literal["skip", "deweight", "own_headings"] = Field(
         "skip", description="a box whose size no heading explains (box_size_tolerance): skip it (until "
                             "max_skipped_in_a_row), or deweight it: use it, its centre's pixel variance raised by "
                             "(half the width's difference)^2 and (half the height's)^2 from the predicted box "
-                            "(where a box cut short on one side puts its centre)")
+                            "(where a box cut short on one side puts its centre), or own_headings: correct it "
+                            "over the headings all round whose predicted size does explain it (the ship turned "
+                            "where the estimate did not follow), their offsets' spread added to its pixel "
+                            "variance; skipped when none does")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")

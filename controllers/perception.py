@@ -63,6 +63,7 @@ _ZERO22 = np.zeros((2, 2))
 _ZERO22.setflags(write=False)
 _NAN4.setflags(write=False)
 _NO_NOISE = (0.0, 0.0)
+_OWN_HEADINGS = 24  # size_mismatch_action own_headings: the headings all round a box is matched against
 
 
 def _centre_doubt(det: np.ndarray, size: np.ndarray) -> tuple[float, float]:
@@ -113,6 +114,7 @@ class Perception:
         self._size_off_count = 0  # how many of it are off
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
+        self._own_used = False  # this detection was corrected over its own headings (size_mismatch_action)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
         self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
 
@@ -136,8 +138,10 @@ class Perception:
         elif new and cam is None:
             reason = FusionReason.NO_CAMERA_POSE
         elif new and prior.from_estimator and not lock_now:
+            self._own_used = False
             u, v, pred, reason, spread, doubt = self._judge(nav, cam, prior)
-            if reason == FusionReason.SIZE_MISMATCH and self.cfg.size_mismatch_action == "deweight":
+            action = self.cfg.size_mismatch_action
+            if reason == FusionReason.SIZE_MISMATCH and (action == "deweight" or self._own_used):
                 use, overridden, reason, noise = True, reason, "", doubt
                 self.skipped_in_a_row = 0
             else:
@@ -230,9 +234,18 @@ class Perception:
                 elif mismatch:
                     off_against = sizes
                 if off_against is not None:
-                    if g.size_mismatch_action != "deweight":
+                    if g.size_mismatch_action == "own_headings":
+                        own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
+                        if own is None:
+                            return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
+                        courses, weights, boxes = own
+                        self._own_used = True
+                        single, pred = False, boxes[int(weights.argmax())].copy()
+                        why = FusionReason.SIZE_MISMATCH
+                    elif g.size_mismatch_action != "deweight":
                         return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-                    why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
+                    else:
+                        why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,
@@ -241,7 +254,30 @@ class Perception:
         if off is None:
             return u, v, pred, why, _ZERO22, doubt
         off, spread = off
+        if why and g.size_mismatch_action == "own_headings":  # the box's own headings: their spread is noise
+            doubt = (float(spread[0, 0]), float(spread[1, 1]))
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
+
+    def _own_headings(self, cam: CameraMotion, ref: np.ndarray, det: np.ndarray, scale, size_factor: np.ndarray):
+        """(courses, weights, predicted boxes) of the headings all round (every 360 / _OWN_HEADINGS deg) whose
+        predicted box size, times ``size_factor`` (the size gate's rescale, else ones), explains the box's
+        size ``det`` (width, height) within the size gate's tolerance, weighted by how well (a Gaussian of the
+        difference over the tolerance); None when none does."""
+        courses = 2.0 * math.pi * np.arange(_OWN_HEADINGS) / _OWN_HEADINGS
+        boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, courses,
+                                   scale)
+        ok = np.isfinite(boxes).all(axis=1)
+        if not ok.any():
+            return None
+        courses, boxes = courses[ok], boxes[ok]
+        sizes = (boxes[:, 2:4] - boxes[:, 0:2]) * np.asarray(size_factor, dtype=float)[None, :]
+        tol = self.cfg.box_size_tolerance * sizes + self.cfg.box_size_tolerance_px
+        z = (det[None, :] - sizes) / tol
+        fits = (np.abs(z) <= 1.0).all(axis=1)
+        if not fits.any():
+            return None
+        w = np.exp(-0.5 * (z[fits] ** 2).sum(axis=1))
+        return courses[fits], w / w.sum(), boxes[fits]
 
     def _no_heading_fits(self, det: np.ndarray, sizes: np.ndarray) -> bool:
         """True when the box's (width, height) ``det`` differs from every heading's predicted ``sizes`` (n, 2)
