@@ -87,10 +87,11 @@ class DetectionGateConfig(StrictModel):
         "skip", description="a box whose size no heading explains (box_size_tolerance): skip it (until "
                             "max_skipped_in_a_row), or deweight it: use it, its centre's pixel variance raised by "
                             "(half the width's difference)^2 and (half the height's)^2 from the predicted box "
-                            "(where a box cut short on one side puts its centre), or own_headings: correct it "
-                            "over the headings all round whose predicted size does explain it (the ship turned "
-                            "where the estimate did not follow), their offsets' spread added to its pixel "
-                            "variance; skipped when none does")
+                            "(where a box cut short on one side puts its centre), or own_headings: when it is "
+                            "larger than every estimated heading's box (more ship than they show: no occlusion "
+                            "does that, a turn the estimate has not followed does), correct it over the "
+                            "headings all round whose predicted size explains it, their offsets' spread added "
+                            "to its pixel variance; skipped otherwise")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")

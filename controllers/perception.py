@@ -18,7 +18,11 @@ Per tick (:meth:`Perception.step`):
    the ship is hidden, or the box is wrong), or with ``size_mismatch_action:
    deweight`` used with its centre's doubt: the pixel variance of half the
    size difference from the predicted box, where a box cut short on one side
-   puts its centre (the log says ``overridden: size_mismatch``).
+   puts its centre (the log says ``overridden: size_mismatch``); or with
+   ``own_headings``, when the box is larger than every estimated heading's
+   (no occlusion does that; a turn the estimate missed does), corrected
+   over the headings all round whose size explains it, their spread as its
+   pixel variance (also ``overridden: size_mismatch``).
 5. **Latency.** A detection arrives ``latency`` after its exposure; its box
    centre is brought to now (``propagate_feature``) before anything else, so
    that it goes with the camera pose of now.
@@ -234,8 +238,10 @@ class Perception:
                 elif mismatch:
                     off_against = sizes
                 if off_against is not None:
-                    if g.size_mismatch_action == "own_headings":
+                    own = None
+                    if g.size_mismatch_action == "own_headings" and self._larger_than_any(det, off_against):
                         own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
+                    if g.size_mismatch_action == "own_headings":
                         if own is None:
                             return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
                         courses, weights, boxes = own
@@ -257,6 +263,14 @@ class Perception:
         if why and g.size_mismatch_action == "own_headings":  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
+
+    def _larger_than_any(self, det: np.ndarray, sizes: np.ndarray) -> bool:
+        """The box (width, height) ``det`` is wider or taller than every one of the predicted ``sizes`` (n, 2)
+        by more than the size gate's tolerance: more ship than the estimated headings show, which no
+        occlusion makes (a hidden part only shrinks a box), but a turn the estimate has not followed does."""
+        tol, tol_px = self.cfg.box_size_tolerance, self.cfg.box_size_tolerance_px
+        big = np.asarray(sizes, dtype=float).max(axis=0)
+        return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
     def _own_headings(self, cam: CameraMotion, ref: np.ndarray, det: np.ndarray, scale, size_factor: np.ndarray):
         """(courses, weights, predicted boxes) of the headings all round (every 360 / _OWN_HEADINGS deg) whose
