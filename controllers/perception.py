@@ -241,17 +241,15 @@ class Perception:
                     own = None
                     if g.size_mismatch_action == "own_headings" and self._larger_than_any(det, off_against):
                         own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
-                    if g.size_mismatch_action == "own_headings":
-                        if own is None:
-                            return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
+                    if own is not None:
                         courses, weights, boxes = own
                         self._own_used = True
                         single, pred = False, boxes[int(weights.argmax())].copy()
                         why = FusionReason.SIZE_MISMATCH
-                    elif g.size_mismatch_action != "deweight":
-                        return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-                    else:
+                    elif g.size_mismatch_action == "deweight":
                         why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
+                    else:  # skip, or own_headings with no heading of its own
+                        return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
         off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                    float(courses[0]) if single else None, prior.tracked_height_m,
                                    tm.headings_when_unknown, boxes_px=boxes,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["wilson_interval", "Report", "summarise", "write_report", "ReportError"]
+__all__ = ["wilson_interval", "Report", "summarise", "within", "write_report", "ReportError"]
 
 Z95 = 1.959963984540054  # the standard normal's 97.5th percentile
 
@@ -149,10 +149,10 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                            "within_2std_median": _pct(cover, 50),
                            "within_2std_min": float(cover.min()) if cover.size else math.nan},
         outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []),
-        within_3m_3deg=sum(1 for r in rows if _within(r, 3.0, 3.0)) / n if n else math.nan)
+        within_3m_3deg=sum(1 for r in rows if within(r, 3.0, 3.0)) / n if n else math.nan)
 
 
-def _within(row: dict, miss_m: float, angle_deg: float) -> bool:
+def within(row: dict, miss_m: float, angle_deg: float) -> bool:
     """A hit within ``miss_m`` of the aim point and ``angle_deg`` of both commanded impact angles."""
     try:
         return (row.get("hit") == 1.0 and float(row["miss_distance_m"]) <= miss_m

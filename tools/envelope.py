@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fwsim.report import summarise
+from fwsim.report import summarise, within
 
 #: seconds before the end of a run at which --why gives the estimate's error (the end itself too)
 WHY_TIMES_S = (5.0, 2.0)
@@ -108,12 +108,13 @@ def last_detections(t_s, reasons, end_s: float, window_s: float = WHY_WINDOW_S) 
 
 
 def _failed_bar(row: dict) -> str:
-    if not row.get("hit"):
+    """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
+    if row.get("hit") != 1.0:
         return "no hit"
     far = not row.get("miss_distance_m", math.inf) <= 3.0
     off = not max(abs(row.get("impact_fpa_error_deg", math.inf)),
                   abs(row.get("impact_heading_error_deg", math.inf))) <= 3.0
-    return "distance and angle" if far and off else "distance" if far else "angle" if off else ""
+    return "distance and angle" if far and off else "distance" if far else "angle"
 
 
 def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
@@ -122,9 +123,9 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
     from fwsim.log.reader import read_log
     table = []
     for r in sorted(rows, key=lambda r: -float(r.get("miss_distance_m") or 0.0)):
-        bar = _failed_bar(r)
-        if not bar or r.get("status") == "failed":
+        if within(r, 3.0, 3.0) or r.get("status") == "failed":
             continue
+        bar = _failed_bar(r)
         motion = r.get("set.target.motion")
         cells = [str(r.get("id", "?")), bar, f"{r.get('miss_distance_m', math.nan):.2f}",
                  f"{r.get('miss_bow_m', math.nan):+.1f}, {r.get('miss_port_m', math.nan):+.1f}",
