@@ -349,6 +349,7 @@ class Perception:
         share = self._size_off_count / len(window)
         if not self.class_mismatch and share >= g.class_mismatch_enter:
             self.class_mismatch = True
+            self.ship.shape.doubt_class()
             self._event(f"perception: {100 * share:.0f} % of the last {len(window)} boxes are off the ship class's "
                         f"size: {g.class_mismatch_action.replace('_', ' ')} from now on")
         elif self.class_mismatch and share <= g.class_mismatch_exit:

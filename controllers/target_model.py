@@ -322,6 +322,9 @@ class ShapeHeading:
         self._c_yy = np.zeros(cfg.headings)
         self._c_n = 0.0
         self._c_ref = np.zeros(3)  # the fixed reference the fitted shift is from
+        # the boxes have disagreed with the ship class (the perception's class check): the centre fit, which
+        # reads the class's layout into where the box centres fall, is off from then on (doubt_class())
+        self.class_doubted = False
         self.outline = outline
         self.camera = camera
         self.edge_px = float(edge_px)
@@ -480,7 +483,7 @@ class ShapeHeading:
             return None
         w = self.weights()
         c = self.cfg
-        ss = self.centre_misfit_px2() if c.centre_fit else None
+        ss = self.centre_misfit_px2() if c.centre_fit and not self.class_doubted else None
         n = len(w)
         if ss is not None and n % 2 == 0:
             # the centres only share each heading's and its opposite's weight between them (bow or stern);
@@ -499,6 +502,12 @@ class ShapeHeading:
             w = w / w.sum()
         keep = w >= c.min_weight * np.max(w)
         return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+
+    def doubt_class(self) -> None:
+        """The boxes disagree with the ship class: its layout no longer tells the bow from the stern by where
+        the box centres fall (the centre fit is off for the rest of the flight; a ship of another layout, a
+        bridge forward, fits the class's reverse heading and would be turned end for end)."""
+        self.class_doubted = True
 
     def off_axis_rad(self, course_enu_rad: float) -> float:
         """How far (rad, 0..pi/2) a direction lies off the ship's axis."""

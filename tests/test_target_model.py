@@ -273,15 +273,18 @@ def test_bow_and_stern_count_alike_unless_told_apart():
 
 
 def _dive_shares(ship_heading_deg: float, az_deg: tuple[float, float], estimate_error, cfg: ShapeHeadingConfig,
-                 n: int = 60) -> tuple[float, float]:
+                 n: int = 60, class_doubted: bool = False) -> tuple[float, float]:
     """A dive on a still ship (range 700 -> 150 m, elevation 35 -> 60 deg, the bearing turning from az_deg[0] to
     az_deg[1] relative to the bow, as BPNG swings onto its impact heading), ray-cast boxes at 3 Hz, the
     estimate off by ``estimate_error(f)`` (ENU, m; f the dive's fraction): the headings' (true, reversed)
-    weights, each within 10 deg, while the course is unknown (ShapeHeading.headings)."""
+    weights, each within 10 deg, while the course is unknown (ShapeHeading.headings). ``class_doubted``: the
+    perception's class check has fired before the dive (ShapeHeading.doubt_class)."""
     ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pos, R = ship.pose(0.0)
     sh = ShapeHeading(cfg, ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    if class_doubted:
+        sh.doubt_class()
     for k in range(n):
         f = k / (n - 1)
         az = ship_heading_deg + az_deg[0] + (az_deg[1] - az_deg[0]) * f
@@ -308,6 +311,9 @@ def test_the_box_centres_tell_a_still_ships_bow_from_its_stern_in_a_dive(ship_he
         true, rev = _dive_shares(ship_heading_deg, az_deg, err, ShapeHeadingConfig(centre_fit=True))
         assert true > 0.95 and rev < 0.05
         assert true + rev == pytest.approx(sizes_true + sizes_rev, abs=0.05)  # the axis is still the sizes'
+    # once the boxes have disagreed with the class, its layout is not read into the centres: the sizes' shares
+    doubted = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig(centre_fit=True), class_doubted=True)
+    assert doubted == pytest.approx((sizes_true, sizes_rev), abs=1e-12)
 
 
 def test_the_centre_fit_leaves_a_sure_heading_and_the_known_course_alone():
@@ -746,6 +752,7 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
         reasons.append(fix.reason or fix.overridden)
     n = gate.class_check_window
     assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.events), rec.events
+    assert perc.ship.shape.class_doubted  # the centre fit is off from then on
     assert reasons[:n].count(FusionReason.SIZE_MISMATCH) > n // 2  # skipped for their size until then
     assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
 
