@@ -91,7 +91,15 @@ class DetectionGateConfig(StrictModel):
                             "larger than every estimated heading's box (more ship than they show: no occlusion "
                             "does that, a turn the estimate has not followed does), correct it over the "
                             "headings all round whose predicted size explains it, their offsets' spread added "
-                            "to its pixel variance; skipped otherwise")
+                            "to its pixel variance; skipped otherwise (a box cut short), unless the ship lies "
+                            "clear of the airframe (airframe_clearance_deg)")
+    airframe_clearance_deg: float = Field(
+        3.0, ge=0, le=90,
+        description="size_mismatch_action own_headings: a box smaller than the estimated headings' is also "
+                    "corrected over its own headings when the estimated ship lies at least this far below the "
+                    "wing plane (the self-occlusion model of the NMPC's barrier): no part of the airframe can "
+                    "hide it there, so the box is the ship's own size (a turn the estimate has not followed, a "
+                    "ship unlike the class), not a cut one; 90: never (smaller boxes are always skipped)")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")

@@ -58,6 +58,7 @@ from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModel
 from controllers.messages import DetectionFix, FusionReason, TargetState
 from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px
 from fwsim import topics
+from fwsim.frames import dcm_enu_from_frd
 from fwsim.messages import Measurements
 
 __all__ = ["Perception", "Lock"]
@@ -239,7 +240,8 @@ class Perception:
                     off_against = sizes
                 if off_against is not None:
                     own = None
-                    if g.size_mismatch_action == "own_headings" and self._larger_than_any(det, off_against):
+                    if g.size_mismatch_action == "own_headings" and (
+                            self._larger_than_any(det, off_against) or self._clear_of_airframe(nav, cam, prior)):
                         own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
                     if own is not None:
                         courses, weights, boxes = own
@@ -269,6 +271,17 @@ class Perception:
         tol, tol_px = self.cfg.box_size_tolerance, self.cfg.box_size_tolerance_px
         big = np.asarray(sizes, dtype=float).max(axis=0)
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
+
+    def _clear_of_airframe(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> bool:
+        """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
+        the self-occlusion model of :mod:`controllers.cbf`), seen from the camera: the airframe cannot hide any
+        of it, so a box smaller than predicted is not one cut short."""
+        clearance = self.cfg.airframe_clearance_deg
+        euler = np.asarray(nav.euler_ned_rad, dtype=float)
+        if clearance >= 90.0 or not np.isfinite(euler).all():
+            return False
+        r = dcm_enu_from_frd(euler).T @ (np.asarray(prior.pos_enu_m, dtype=float) - cam.pos_enu_m)  # body FRD
+        return bool(math.atan2(r[2], math.hypot(r[0], r[1])) >= math.radians(clearance))
 
     def _own_headings(self, cam: CameraMotion, ref: np.ndarray, det: np.ndarray, scale, size_factor: np.ndarray):
         """(courses, weights, predicted boxes) of the headings all round (every 360 / _OWN_HEADINGS deg) whose

@@ -828,7 +828,11 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     cannot explain are skipped (``skip``); with ``own_headings`` those larger than the course's box (no
     occlusion makes a box larger) are corrected over the headings all round whose predicted size does explain
     them: used, flagged, nearer the tracked point's image than the wrong course's correction, and within
-    twice the pixel std their headings' spread gives them; a box cut short is still skipped."""
+    twice the pixel std their headings' spread gives them; a box cut short is still skipped. Here the UAV's
+    nose is on the ship (it lies in the wing plane, where the airframe may hide part of it): a box smaller than
+    the course's might be cut short, and is skipped; flown level, the ship lies 40 deg below the wing plane
+    (airframe_clearance_deg), no part of it can be hidden, and those are corrected over their own headings
+    too."""
     from controllers.ukf import CameraMotion
     cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -837,22 +841,33 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     own = Perception(DetectionGateConfig(size_mismatch_action="own_headings"), AcquisitionConfig(lock_detections=1),
                      ShipModel(ShipModelConfig(), cam), cam)
     own.lock.locked = True
+    level = Perception(DetectionGateConfig(size_mismatch_action="own_headings"), AcquisitionConfig(lock_detections=1),
+                       ShipModel(ShipModelConfig(), cam), cam)
+    level.lock.locked = True
     outline = ShipOutline(ShipModelConfig())
     errs = []  # (own headings, the eastward course's correction), px
+    smaller = 0  # boxes smaller than the course's that some heading explains
     for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=40.0, rng_m=400.0):
         motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+        nose_on = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+        meas = Measurements(0.0, cp, np.zeros(3), nose_on, np.zeros(3), 22.0, float(cp[2]), det_new=True,
                             det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
                             det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
         skipped = skip.step(meas, motion, prior)
         fix = own.step(meas, motion, prior)
+        clear = level.step(dataclasses.replace(meas, euler_ned_rad=np.zeros(3)), motion, prior)
         if skipped.use:  # the eastward course explains this box: both correct it alike
             assert fix.use and fix.overridden == "" and fix.u_px == skipped.u_px and fix.v_px == skipped.v_px
+            assert (clear.u_px, clear.v_px) == (fix.u_px, fix.v_px)
             continue
         assert skipped.reason == FusionReason.SIZE_MISMATCH
         if not fix.use:  # a box no larger than the eastward course's: it might be cut short, and is skipped
             assert fix.reason == FusionReason.SIZE_MISMATCH
+            # clear of the airframe it is the ship's own size: corrected over the headings that explain it
+            assert clear.use and clear.overridden == FusionReason.SIZE_MISMATCH, clear
+            smaller += 1
             continue
+        assert (clear.u_px, clear.v_px) == (fix.u_px, fix.v_px)
         assert fix.overridden == FusionReason.SIZE_MISMATCH, fix
         # a box with more ship than the course shows, and a cut-short one (the right half hidden) never taken
         cut = box.copy()
@@ -867,5 +882,6 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
         # what is left is the bow / stern doubt (both explain the size), and the fix's variance says so
         assert errs[-1][0] <= 2.0 * math.sqrt(sum(fix.centre_noise_px2)), (errs[-1], fix.centre_noise_px2)
     assert len(errs) >= 3, errs  # views where the ship turned 90 deg shows more of itself
+    assert smaller >= 2, smaller  # and views where it shows less
     own_err, wrong_err = np.mean(np.array(errs), axis=0)
     assert own_err < 0.7 * wrong_err, errs  # 6.6 against 11.0 px
