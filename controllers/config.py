@@ -84,15 +84,16 @@ class DetectionGateConfig(StrictModel):
                     "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
     box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
     size_mismatch_action: Literal["skip", "deweight", "own_headings"] = Field(
-        "skip", description="a box whose size no heading explains (box_size_tolerance): skip it (until "
-                            "max_skipped_in_a_row), or deweight it: use it, its centre's pixel variance raised by "
-                            "(half the width's difference)^2 and (half the height's)^2 from the predicted box "
-                            "(where a box cut short on one side puts its centre), or own_headings: when it is "
-                            "larger than every estimated heading's box (more ship than they show: no occlusion "
-                            "does that, a turn the estimate has not followed does), correct it over the "
-                            "headings all round whose predicted size explains it, their offsets' spread added "
-                            "to its pixel variance; skipped otherwise (a box cut short), unless the ship lies "
-                            "clear of the airframe (airframe_clearance_deg)")
+        "own_headings", description="a box whose size no heading explains (box_size_tolerance): own_headings "
+                            "(the default): when it cannot be a box cut short, correct it over the headings all "
+                            "round whose predicted size explains it, their offsets' spread added to its pixel "
+                            "variance; it cannot when it is larger than every estimated heading's box (more ship "
+                            "than they show: no occlusion does that, a turn the estimate has not followed does) "
+                            "or when the ship lies clear of the airframe (airframe_clearance_deg); skipped "
+                            "otherwise (until max_skipped_in_a_row). skip: skip every such box. deweight: use "
+                            "it, its centre's pixel variance raised by (half the width's difference)^2 and (half "
+                            "the height's)^2 from the predicted box (where a box cut short on one side puts its "
+                            "centre)")
     airframe_clearance_deg: float = Field(
         3.0, ge=0, le=90,
         description="size_mismatch_action own_headings: a box smaller than the estimated headings' is also "

@@ -14,15 +14,18 @@ Per tick (:meth:`Perception.step`):
    moves over the ship with the view; the offset the ship model predicts for
    the estimated position and the plausible headings is removed, so that the
    fix is the image of the point the estimator tracks. A box whose width or
-   height no plausible heading explains is skipped (``size_mismatch``: part of
-   the ship is hidden, or the box is wrong), or with ``size_mismatch_action:
-   deweight`` used with its centre's doubt: the pixel variance of half the
-   size difference from the predicted box, where a box cut short on one side
-   puts its centre (the log says ``overridden: size_mismatch``); or with
-   ``own_headings``, when the box is larger than every estimated heading's
-   (no occlusion does that; a turn the estimate missed does), corrected
-   over the headings all round whose size explains it, their spread as its
-   pixel variance (also ``overridden: size_mismatch``).
+   height no plausible heading explains (``size_mismatch``) is, with
+   ``size_mismatch_action: own_headings`` (the default), corrected over the
+   headings all round whose size explains it, their spread as its pixel
+   variance (the log says ``overridden: size_mismatch``), when it cannot be
+   a box cut short: when it is larger than every estimated heading's (no
+   occlusion does that; a turn the estimate missed does), or when the
+   estimated ship lies ``airframe_clearance_deg`` below the wing plane (the
+   barrier's self-occlusion model: no part of the airframe can hide it).
+   Otherwise it is skipped (part of the ship may be hidden). With ``skip``
+   every such box is skipped; with ``deweight`` it is used with its centre's
+   doubt: the pixel variance of half the size difference from the predicted
+   box, where a box cut short on one side puts its centre.
 5. **Latency.** A detection arrives ``latency`` after its exposure; its box
    centre is brought to now (``propagate_feature``) before anything else, so
    that it goes with the camera pose of now.

@@ -413,10 +413,12 @@ def test_a_velocity_off_the_ship_axis_gives_no_course():
     assert len(fresh.headings(np.zeros(3))[0]) == fresh.cfg.headings_when_unknown
 
 
-def _perception(ship: ShipModel) -> Perception:
-    """The perception with that ship model, locked (its gates and correction at work)."""
-    p = Perception(DetectionGateConfig(), AcquisitionConfig(lock_detections=1), ship,
-                   PinholeCamera.from_config(CAM_CFG))
+def _perception(ship: ShipModel, size_mismatch_action: str = "skip") -> Perception:
+    """The perception with that ship model, locked (its gates and correction at work). The size gate skips a
+    box off in size however the ship lies (``skip``; the default, ``own_headings``, takes a smaller box too
+    when the ship lies clear below the wing plane, as it does in these level views)."""
+    p = Perception(DetectionGateConfig(size_mismatch_action=size_mismatch_action),
+                   AcquisitionConfig(lock_detections=1), ship, PinholeCamera.from_config(CAM_CFG))
     p.lock.locked = True
     return p
 
