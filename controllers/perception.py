@@ -277,8 +277,9 @@ class Perception:
 
     def _clear_of_airframe(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> bool:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
-        the self-occlusion model of :mod:`controllers.cbf`), seen from the camera: the airframe cannot hide any
-        of it, so a box smaller than predicted is not one cut short."""
+        the self-occlusion model of :mod:`controllers.cbf`), seen from the camera: the airframe is not in the
+        way, so a box smaller than predicted is not one cut short (in the envelope's dives no box the airframe
+        cut had its ship more than 1 deg below the plane; README, "A box corrected over its own headings")."""
         clearance = self.cfg.airframe_clearance_deg
         euler = np.asarray(nav.euler_ned_rad, dtype=float)
         if clearance >= 90.0 or not np.isfinite(euler).all():
