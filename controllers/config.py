@@ -98,9 +98,10 @@ class DetectionGateConfig(StrictModel):
         3.0, ge=0, le=90,
         description="size_mismatch_action own_headings: a box smaller than the estimated headings' is also "
                     "corrected over its own headings when the estimated ship lies at least this far below the "
-                    "wing plane (the self-occlusion model of the NMPC's barrier): no part of the airframe can "
-                    "hide it there, so the box is the ship's own size (a turn the estimate has not followed, a "
-                    "ship unlike the class), not a cut one; 90: never (smaller boxes are always skipped)")
+                    "wing plane (the self-occlusion model of the NMPC's barrier): the airframe is not in the way "
+                    "there (in the envelope's dives no box it cut had its ship more than 1 deg below the plane), "
+                    "so the box is the ship's own size (a turn the estimate has not followed, a ship unlike the "
+                    "class), not a cut one; 90: never (smaller boxes are always skipped)")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")

@@ -21,7 +21,7 @@ Per tick (:meth:`Perception.step`):
    a box cut short: when it is larger than every estimated heading's (no
    occlusion does that; a turn the estimate missed does), or when the
    estimated ship lies ``airframe_clearance_deg`` below the wing plane (the
-   barrier's self-occlusion model: no part of the airframe can hide it).
+   barrier's self-occlusion model: the airframe is not in the way there).
    Otherwise it is skipped (part of the ship may be hidden). With ``skip``
    every such box is skipped; with ``deweight`` it is used with its centre's
    doubt: the pixel variance of half the size difference from the predicted
@@ -279,7 +279,9 @@ class Perception:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
         the self-occlusion model of :mod:`controllers.cbf`), seen from the camera: the airframe is not in the
         way, so a box smaller than predicted is not one cut short (in the envelope's dives no box the airframe
-        cut had its ship more than 1 deg below the plane; README, "A box corrected over its own headings")."""
+        cut had its ship more than 1 deg below the plane; README, "A box corrected over its own headings").
+        With the full attitude, not :func:`controllers.cbf.h_value`, which neglects the pitch (the loiter's
+        assumption; in the dive the nose is 30-60 deg down)."""
         clearance = self.cfg.airframe_clearance_deg
         euler = np.asarray(nav.euler_ned_rad, dtype=float)
         if clearance >= 90.0 or not np.isfinite(euler).all():
