@@ -94,6 +94,13 @@ class DetectionGateConfig(StrictModel):
                             "it, its centre's pixel variance raised by (half the width's difference)^2 and (half "
                             "the height's)^2 from the predicted box (where a box cut short on one side puts its "
                             "centre)")
+    maybe_cut_action: Literal["skip", "deweight"] = Field(
+        "deweight", description="size_mismatch_action own_headings: what becomes of a box off in size that may be "
+                                "cut short (no larger than every estimated heading's box, the ship not clear of the "
+                                "airframe) or that no heading all round explains: deweight (the default): use it "
+                                "with its centre's doubt as size_mismatch_action deweight does, (half its size "
+                                "difference from the predicted box)^2 in each axis; skip: skip it (until "
+                                "max_skipped_in_a_row; the default before 2026-11-25)")
     airframe_clearance_deg: float = Field(
         3.0, ge=0, le=90,
         description="size_mismatch_action own_headings: a box smaller than the estimated headings' is also "
@@ -101,7 +108,8 @@ class DetectionGateConfig(StrictModel):
                     "wing plane (the self-occlusion model of the NMPC's barrier): the airframe is not in the way "
                     "there (in the envelope's dives no box it cut had its ship more than 1 deg below the plane), "
                     "so the box is the ship's own size (a turn the estimate has not followed, a ship unlike the "
-                    "class), not a cut one; 90: never (smaller boxes are always skipped)")
+                    "class), not a cut one; 90: never (smaller boxes are always skipped; with "
+                    "class_check_clear_only the class check then counts no box)")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")
@@ -138,6 +146,14 @@ class DetectionGateConfig(StrictModel):
     class_mismatch_exit: float = Field(
         0.2, ge=0, le=1,
         description="... and goes back to the class correction when the share falls to this or below")
+    class_check_clear_only: bool = Field(
+        True,
+        description="the class check (its window and the rescale's size ratios) counts only the boxes whose "
+                    "estimated ship lies airframe_clearance_deg or more below the wing plane: a box the airframe "
+                    "may have cut short says nothing of the ship's size (every loiter box counts; in the dive "
+                    "about half do). false: every size-checked box counts (before 2026-11-25: in a third of the "
+                    "envelope's dives the cut boxes of the last seconds made the check find another class and "
+                    "the rescaled gate then let cut boxes through)")
 
     @model_validator(mode="after")
     def _class_check_hysteresis(self):

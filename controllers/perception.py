@@ -22,10 +22,12 @@ Per tick (:meth:`Perception.step`):
    occlusion does that; a turn the estimate missed does), or when the
    estimated ship lies ``airframe_clearance_deg`` below the wing plane (the
    barrier's self-occlusion model: the airframe is not in the way there).
-   Otherwise it is skipped (part of the ship may be hidden). With ``skip``
-   every such box is skipped; with ``deweight`` it is used with its centre's
-   doubt: the pixel variance of half the size difference from the predicted
-   box, where a box cut short on one side puts its centre.
+   Otherwise (part of the ship may be hidden) it is used with its centre's
+   doubt (``maybe_cut_action: deweight``, the default: the pixel variance of
+   half the size difference from the predicted box, where a box cut short on
+   one side puts its centre) or skipped (``maybe_cut_action: skip``). With
+   ``size_mismatch_action: skip`` every such box is skipped; with
+   ``deweight`` every one is used with its centre's doubt.
 5. **Latency.** A detection arrives ``latency`` after its exposure; its box
    centre is brought to now (``propagate_feature``) before anything else, so
    that it goes with the camera pose of now.
@@ -34,7 +36,10 @@ Per tick (:meth:`Perception.step`):
    rely on may be what is wrong (``overridden`` names the gate passed over).
 7. **The class check.** The correction and the size gate trust the configured
    ship class. When ``class_mismatch_enter`` of the last
-   ``class_check_window`` size-checked boxes or more are off in size, the
+   ``class_check_window`` size-checked boxes (with ``class_check_clear_only``,
+   the default, only those whose ship lies ``airframe_clearance_deg`` below
+   the wing plane: a box the airframe may have cut says nothing of the
+   ship's size) or more are off in size, the
    boxes disagree with the class (a ship of another size or layout than
    configured, not a passing occlusion): from then on the size gate compares
    a box with the class's prediction scaled by the median size ratio of the
@@ -122,7 +127,7 @@ class Perception:
         self._size_off_count = 0  # how many of it are off
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
-        self._own_used = False  # this detection was corrected over its own headings (size_mismatch_action)
+        self._taken_off_size = False  # this box, off in size, is used all the same (own headings, or its doubt)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
         self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
 
@@ -146,10 +151,9 @@ class Perception:
         elif new and cam is None:
             reason = FusionReason.NO_CAMERA_POSE
         elif new and prior.from_estimator and not lock_now:
-            self._own_used = False
+            self._taken_off_size = False
             u, v, pred, reason, spread, doubt = self._judge(nav, cam, prior)
-            action = self.cfg.size_mismatch_action
-            if reason == FusionReason.SIZE_MISMATCH and (action == "deweight" or self._own_used):
+            if reason == FusionReason.SIZE_MISMATCH and self._taken_off_size:
                 use, overridden, reason, noise = True, reason, "", doubt
                 self.skipped_in_a_row = 0
             else:
@@ -210,7 +214,7 @@ class Perception:
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         single = len(courses) == 1
-        boxes, pred = None, _NAN4
+        boxes, pred, own_used = None, _NAN4, False
         known = course is not None or self.ship.shape.ready
         if fit_size:
             self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
@@ -226,11 +230,14 @@ class Perception:
                 sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 mismatch = self._no_heading_fits(det, sizes)
-                ratio = det / np.maximum(sizes[best], 1.0)
-                if (ratio > 0.0).all():
-                    self._ratios.append(np.log(ratio))
+                clear = self._clear_of_airframe(nav, cam, prior)
+                if clear or not g.class_check_clear_only:  # a box the airframe may have cut is no size evidence
+                    ratio = det / np.maximum(sizes[best], 1.0)
+                    if (ratio > 0.0).all():
+                        self._ratios.append(np.log(ratio))
+                    self._class_check(nav.t_s, mismatch)
                 off_against = None  # the predicted sizes the box is off, when the size gate turns it away
-                if self._class_check(nav.t_s, mismatch):  # the class does not fit
+                if self.class_mismatch:  # the class does not fit
                     if g.class_mismatch_action == "plain_centre":
                         return u, v, pred, "", _ZERO22, _NO_NOISE
                     if g.class_mismatch_action == "rescale" and self._ratios:
@@ -244,14 +251,16 @@ class Perception:
                 if off_against is not None:
                     own = None
                     if g.size_mismatch_action == "own_headings" and (
-                            self._larger_than_any(det, off_against) or self._clear_of_airframe(nav, cam, prior)):
+                            self._larger_than_any(det, off_against) or clear):
                         own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
                     if own is not None:
                         courses, weights, boxes = own
-                        self._own_used = True
+                        self._taken_off_size = own_used = True
                         single, pred = False, boxes[int(weights.argmax())].copy()
                         why = FusionReason.SIZE_MISMATCH
-                    elif g.size_mismatch_action == "deweight":
+                    elif g.size_mismatch_action == "deweight" or (
+                            g.size_mismatch_action == "own_headings" and g.maybe_cut_action == "deweight"):
+                        self._taken_off_size = True
                         why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
                     else:  # skip, or own_headings with no heading of its own
                         return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
@@ -263,7 +272,7 @@ class Perception:
         if off is None:
             return u, v, pred, why, _ZERO22, doubt
         off, spread = off
-        if why and g.size_mismatch_action == "own_headings":  # the box's own headings: their spread is noise
+        if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
 

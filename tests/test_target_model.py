@@ -759,6 +759,34 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
 
 
+def test_boxes_the_airframe_may_have_cut_do_not_turn_the_class_check_on():
+    """A ship of the class, its boxes cut short (the right half hidden), as the UAV's airframe cuts them in a
+    dive: with the ship in the wing plane (nose on) they are no evidence of another class and the class check
+    stays off (``class_check_clear_only``, the default), where counting them turns it on and lets the
+    rescaled size gate take cut boxes; with the ship clear below the wing plane (flown level) the same boxes
+    do count."""
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 25.0)
+
+    def fly(clear_only: bool, nose_on: bool) -> Perception:
+        perc = Perception(DetectionGateConfig(class_check_clear_only=clear_only),
+                          AcquisitionConfig(lock_detections=1),
+                          ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=False)), fsw_cam), fsw_cam)
+        perc.lock.locked = True
+        for k, az in enumerate(range(0, 360, 2)):
+            t = 0.5 * k
+            meas, motion, cp, _ = _ring_detection(cam, pose, t, az)
+            cut = np.asarray(meas.det_bbox_px, dtype=float).copy()
+            cut[2] = cut[0] + 0.5 * (cut[2] - cut[0])
+            euler = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+            meas = dataclasses.replace(meas, det_bbox_px=cut, euler_ned_rad=euler if nose_on else np.zeros(3))
+            perc.step(meas, motion, TargetState(t, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h))
+        return perc
+
+    assert not fly(True, nose_on=True).class_mismatch
+    assert fly(False, nose_on=True).class_mismatch
+    assert fly(True, nose_on=False).class_mismatch
+
+
 def test_a_box_no_heading_explains_is_deweighted_not_skipped_when_asked():
     """size_mismatch_action: deweight: the box cut short is used, its corrected centre as a whole box's
     would be corrected, with the doubt (half the size difference from the predicted box)^2 in each axis; the
@@ -795,6 +823,43 @@ def test_a_box_no_heading_explains_is_deweighted_not_skipped_when_asked():
         off_cut = np.array([meas.det_u_px - fix.u_px, meas.det_v_px - fix.v_px])
         off_whole = np.array([whole.raw_u_px - whole.u_px, whole.raw_v_px - whole.v_px])
         np.testing.assert_allclose(off_cut, off_whole, atol=1e-9)
+
+
+def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
+    """``own_headings`` with ``maybe_cut_action: deweight`` (the default): a box cut short (the right half
+    hidden) while the ship lies in the wing plane (nose on), which ``maybe_cut_action: skip`` skips, is used
+    with the doubt
+    ``deweight`` gives it, (half its size difference from the predicted box)^2; a whole box is corrected as
+    before."""
+    from controllers.ukf import CameraMotion
+    h = UkfConfig().target_plane_height_m
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
+    ship = _ship_with_shape(0.0, (30.0, 45.0, 60.0))
+    percs = {}
+    for action in ("skip", "deweight"):
+        percs[action] = Perception(DetectionGateConfig(maybe_cut_action=action), AcquisitionConfig(lock_detections=1),
+                                   ship, PinholeCamera.from_config(CAM_CFG))
+        percs[action].lock.locked = True
+    for cp, Rc, box in ring_views(0.0, range(0, 360, 90), elevation_deg=30.0, rng_m=400.0):
+        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        nose_on = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+        cut = box.copy()
+        cut[2] = cut[0] + 0.5 * (box[2] - box[0])
+        meas = Measurements(0.0, cp, np.zeros(3), nose_on, np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                            det_valid=True, det_u_px=float(0.5 * (cut[0] + cut[2])),
+                            det_v_px=float(0.5 * (cut[1] + cut[3])), det_bbox_px=cut)
+        skipped = percs["skip"].step(meas, motion, prior)
+        assert not skipped.use and skipped.reason == FusionReason.SIZE_MISMATCH
+        fix = percs["deweight"].step(meas, motion, prior)
+        assert fix.use and fix.overridden == FusionReason.SIZE_MISMATCH
+        pred = fix.predicted_box_px
+        dw = 0.5 * ((cut[2] - cut[0]) - (pred[2] - pred[0]))
+        dh = 0.5 * ((cut[3] - cut[1]) - (pred[3] - pred[1]))
+        assert fix.centre_noise_px2 == pytest.approx((dw * dw, dh * dh), rel=1e-12)
+        whole = dataclasses.replace(meas, det_bbox_px=box, det_u_px=float(0.5 * (box[0] + box[2])),
+                                    det_v_px=float(0.5 * (box[1] + box[3])))
+        a, b = percs["skip"].step(whole, motion, prior), percs["deweight"].step(whole, motion, prior)
+        assert a.use and b.use and (a.u_px, a.v_px, a.centre_noise_px2) == (b.u_px, b.v_px, b.centre_noise_px2)
 
 
 def test_the_ukf_weighs_a_doubtful_box_less():
@@ -840,11 +905,11 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
     skip = _perception(ShipModel(ShipModelConfig(), cam))
-    own = Perception(DetectionGateConfig(size_mismatch_action="own_headings"), AcquisitionConfig(lock_detections=1),
-                     ShipModel(ShipModelConfig(), cam), cam)
+    gate = DetectionGateConfig(size_mismatch_action="own_headings", maybe_cut_action="skip")  # (the default
+    # uses a box that may be cut with its doubt: test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked)
+    own = Perception(gate, AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), cam), cam)
     own.lock.locked = True
-    level = Perception(DetectionGateConfig(size_mismatch_action="own_headings"), AcquisitionConfig(lock_detections=1),
-                       ShipModel(ShipModelConfig(), cam), cam)
+    level = Perception(gate, AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), cam), cam)
     level.lock.locked = True
     outline = ShipOutline(ShipModelConfig())
     errs = []  # (own headings, the eastward course's correction), px

@@ -43,6 +43,8 @@ DEPARTURES: dict[str, tuple[str, dict]] = {
                          "controllers.detection_gate.min_range_m": 0.0}),
     "own_box_headings": ("a box off in size corrected over its own headings when the airframe cannot have cut it",
                          {"controllers.detection_gate.size_mismatch_action": "skip"}),
+    "class_check_clear_only": ("the class check counts only boxes the airframe cannot have cut",
+                               {"controllers.detection_gate.class_check_clear_only": False}),
     "innovation_gate": ("the UKF's chi-square innovation gate", {"controllers.ukf.innovation_gate": 0.0}),
     "plane_height": ("the UKF's plane at the box centre's height (3.75 m; paper: the sea)",
                      {"controllers.ukf.target_plane_height_m": 0.0}),
