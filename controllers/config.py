@@ -585,6 +585,15 @@ class SwitchConfig(StrictModel):
                     "target estimate has grown this much above its least since the switch: a dive that is not "
                     "closing (a steep dive after a fast ship into a headwind can hold its range, then lose it); "
                     "none: never")
+    go_around_stall_s: float | None = Field(
+        20.0, gt=0, le=3600,
+        description="... and once this long after the switch the range has not fallen go_around_stall_fraction "
+                    "below its value at the switch: a dive that holds its range (from a wide ring round a fast "
+                    "ship the law's bias can cancel its PN term while the idle dive steepens; in the envelope "
+                    "such a dive met the sea 400 m short); none: never. Every dive that closed in the envelope "
+                    "and the terminal sweep had closed 4 % or more of its range by 20 s")
+    go_around_stall_fraction: float = Field(
+        0.02, ge=0, lt=1, description="see go_around_stall_s")
     approach_lead_deg: float = Field(
         5.0, ge=-90, le=90,
         description="the window's centre lies this far past the approach bearing in the direction the UAV goes "

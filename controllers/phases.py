@@ -15,7 +15,9 @@
    direction, at the dive's airspeed in the estimated wind, less the target's
    estimated velocity), by default only after a go-around.
    A dive that does not close goes round: once the range to the target
-   estimate has grown ``go_around_m`` above its least since the switch, the
+   estimate has grown ``go_around_m`` above its least since the switch, or
+   ``go_around_stall_s`` after the switch it has not fallen
+   ``go_around_stall_fraction`` below its value at the switch, the
    mission returns to Phase 2 (the loiter takes the UAV back to its ring) and
    the switch is armed again, its dwell and minimum loiter counted afresh.
 
@@ -53,6 +55,8 @@ class PhaseState:
     phase2_t_s: float = math.nan  # when Phase 2 started
     in_tol_since_s: float = math.nan  # since when radius and altitude are within tolerance (NaN: not now)
     closest_m: float = math.nan  # in Phase 3: the least range to the target estimate since the switch
+    phase3_t_s: float = math.nan  # when Phase 3 started
+    switch_m: float = math.nan  # in Phase 3: the range to the target estimate at its first tick
     go_arounds: int = 0  # dives that did not close and went back to the loiter
 
 
@@ -125,16 +129,25 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
         state, why = switch_reason(state, t_s, pos_enu_m, vel_enu_m_s, height_m, target, ring, switch,
                                    approach_deg)
         if why:
-            state = replace(state, phase=3, closest_m=math.nan)
+            state = replace(state, phase=3, closest_m=math.nan, phase3_t_s=t_s, switch_m=math.nan)
             events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {why}")
-    elif state.phase == 3 and switch.go_around_m is not None and target.known:
+    elif state.phase == 3 and (switch.go_around_m is not None or switch.go_around_stall_s is not None) \
+            and target.known:
         d = np.asarray(target.pos_enu_m, float) - np.asarray(pos_enu_m, float)
         rng = math.sqrt(d.dot(d))  # np.linalg.norm's own sum for a vector
+        why = ""
+        if math.isnan(state.switch_m):
+            state = replace(state, switch_m=rng)
         if not rng >= state.closest_m:  # the first tick of Phase 3 (NaN), or closer than ever
             state = replace(state, closest_m=rng)
-        elif rng - state.closest_m > switch.go_around_m and ring is not None:
-            events.append(f"phase 3 -> 2 at t = {t_s:.2f} s: the dive is not closing (range {rng:.0f} m, "
-                          f"{rng - state.closest_m:.0f} m above its least since the switch): going round, "
+        elif switch.go_around_m is not None and rng - state.closest_m > switch.go_around_m:
+            why = f"range {rng:.0f} m, {rng - state.closest_m:.0f} m above its least since the switch"
+        if (not why and switch.go_around_stall_s is not None and t_s - state.phase3_t_s >= switch.go_around_stall_s
+                and state.closest_m > (1.0 - switch.go_around_stall_fraction) * state.switch_m):
+            why = (f"range {rng:.0f} m {t_s - state.phase3_t_s:.0f} s after the switch, its least "
+                   f"{state.closest_m:.0f} m against {state.switch_m:.0f} m at the switch")
+        if why and ring is not None:
+            events.append(f"phase 3 -> 2 at t = {t_s:.2f} s: the dive is not closing ({why}): going round, "
                           f"back to the loiter ({loiter_name}), the switch armed again")
             state = PhaseState(2, t_s, go_arounds=state.go_arounds + 1)
     return state, tuple(events)

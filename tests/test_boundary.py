@@ -214,6 +214,35 @@ def test_a_dive_that_does_not_close_goes_round_and_the_switch_is_armed_again():
     assert again.phase == 2 and again.go_arounds == 1
 
 
+def test_a_dive_that_holds_its_range_goes_round_after_the_stall_time():
+    """go_around_stall_s after the switch, a dive whose least range has not fallen go_around_stall_fraction below
+    its range at the switch goes round (the range need not grow); one that has closed that much by then stays
+    in Phase 3 however slowly it goes on; go_around_stall_s: none never goes round for it."""
+    ship = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
+    ring = Ring(500.0, 500.0)
+    sw = SwitchConfig(go_around_stall_s=20.0, go_around_stall_fraction=0.02)
+    vel = np.array([22.0, 0.0, 0.0])
+
+    def fly(ranges, sw=sw):
+        state, log = PhaseState(3, 0.0, phase3_t_s=100.0), []
+        for k, r in enumerate(ranges):
+            state, events = next_phase(state, 100.0 + k, np.array([0.0, -r, 0.0]), vel, 500.0, ship, True, ring,
+                                       sw, 30.0, "nmpc")
+            log += events
+            if events:
+                return state, log, 100.0 + k
+        return state, log, None
+
+    holding = [870.0 - 0.5 * k for k in range(30)]  # 15 m (1.7 %) closer after 30 s
+    state, log, t = fly(holding)
+    assert state == PhaseState(2, 120.0, go_arounds=1) and t == 120.0
+    assert log[0].startswith("phase 3 -> 2 at t = 120.00 s: the dive is not closing (range 860 m 20 s after the "
+                             "switch, its least 860 m against 870 m at the switch)"), log
+    closing = [870.0 - 0.5 * k for k in range(19)] + [850.0] * 20  # 2.3 % closer by 20 s, then holding
+    assert fly(closing)[0].phase == 3
+    assert fly(holding, sw=SwitchConfig(go_around_stall_s=None))[0].phase == 3
+
+
 def test_the_window_is_placed_by_the_closing_bearing_after_a_go_around():
     """approach_from: the impact heading always, the closing bearing always, or (the default) the impact heading
     until a dive has gone round and the closing bearing after it; the impact heading without an estimate."""
