@@ -151,8 +151,8 @@ class DetectionGateConfig(StrictModel):
         description="the class check (its window and the rescale's size ratios) counts only the boxes whose "
                     "estimated ship lies airframe_clearance_deg or more below the wing plane: a box the airframe "
                     "may have cut short says nothing of the ship's size (every loiter box counts; in the dive "
-                    "about half do). false: every size-checked box counts (before 2026-11-25: in a third of the "
-                    "envelope's dives the cut boxes of the last seconds made the check find another class and "
+                    "about half do). false: every size-checked box counts (before 2026-11-25: in 25 of 64 of the "
+                    "envelope's dives at one seed the cut boxes made the check find another class and "
                     "the rescaled gate then let cut boxes through)")
 
     @model_validator(mode="after")

@@ -28,7 +28,8 @@ port, up). The ship's aim point comes from the logged ship states
 (/target/state), so a ship moved by an event scores where it really was. ``hit`` is 1 when the run's last state is
 inside the hull or superstructure. ``switch_time_s`` is the start of the last
 Phase 3 (the dive that ended the run); ``go_arounds`` counts the dives before
-it that did not close and went back to the loiter (``switch.go_around_m``).
+it that did not close and went back to the loiter (``switch.go_around_m``,
+``switch.go_around_stall_s``).
 """
 from __future__ import annotations
 
