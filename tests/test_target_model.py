@@ -688,6 +688,13 @@ def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading
             UkfConfig().target_plane_height_m, 3.0 * np.array([math.cos(course), math.sin(course), 0.0]))
 
 
+def _nose_on(cam_pos_enu_m) -> np.ndarray:
+    """NED Euler angles (level wings) of a UAV at ``cam_pos_enu_m`` with its nose on the origin: the ship there
+    lies in the wing plane, where the airframe may hide part of it."""
+    e, n, u = (float(x) for x in cam_pos_enu_m[:3])
+    return np.array([0.0, math.atan2(-u, math.hypot(e, n)), math.atan2(-e, -n)])
+
+
 def _ring_detection(cam, pose, t_s: float, az_deg: float, rng_m: float = 600.0, elevation_deg: float = 35.0):
     """The ship's ray-cast box seen from the ring at ``t_s``: (Measurements, CameraMotion, cam_pos, R_enu_cam)."""
     from controllers.ukf import CameraMotion
@@ -777,7 +784,7 @@ def test_boxes_the_airframe_may_have_cut_do_not_turn_the_class_check_on():
             meas, motion, cp, _ = _ring_detection(cam, pose, t, az)
             cut = np.asarray(meas.det_bbox_px, dtype=float).copy()
             cut[2] = cut[0] + 0.5 * (cut[2] - cut[0])
-            euler = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+            euler = _nose_on(cp)
             meas = dataclasses.replace(meas, det_bbox_px=cut, euler_ned_rad=euler if nose_on else np.zeros(3))
             perc.step(meas, motion, TargetState(t, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h))
         return perc
@@ -828,9 +835,8 @@ def test_a_box_no_heading_explains_is_deweighted_not_skipped_when_asked():
 def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
     """``own_headings`` with ``maybe_cut_action: deweight`` (the default): a box cut short (the right half
     hidden) while the ship lies in the wing plane (nose on), which ``maybe_cut_action: skip`` skips, is used
-    with the doubt
-    ``deweight`` gives it, (half its size difference from the predicted box)^2; a whole box is corrected as
-    before."""
+    with the doubt ``deweight`` gives it, (half its size difference from the predicted box)^2; a whole box is
+    corrected as before."""
     from controllers.ukf import CameraMotion
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
@@ -842,7 +848,7 @@ def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
         percs[action].lock.locked = True
     for cp, Rc, box in ring_views(0.0, range(0, 360, 90), elevation_deg=30.0, rng_m=400.0):
         motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        nose_on = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+        nose_on = _nose_on(cp)
         cut = box.copy()
         cut[2] = cut[0] + 0.5 * (box[2] - box[0])
         meas = Measurements(0.0, cp, np.zeros(3), nose_on, np.zeros(3), 22.0, float(cp[2]), det_new=True,
@@ -916,7 +922,7 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     smaller = 0  # boxes smaller than the course's that some heading explains
     for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=40.0, rng_m=400.0):
         motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        nose_on = np.array([0.0, math.atan2(-cp[2], math.hypot(cp[0], cp[1])), math.atan2(-cp[0], -cp[1])])
+        nose_on = _nose_on(cp)
         meas = Measurements(0.0, cp, np.zeros(3), nose_on, np.zeros(3), 22.0, float(cp[2]), det_new=True,
                             det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
                             det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
