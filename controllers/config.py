@@ -119,6 +119,17 @@ class DetectionGateConfig(StrictModel):
         description="skip detections while the estimated range to the target is below this: close in the box "
                     "centre no longer follows the ship model (perspective, parts of the ship out of the image) "
                     "and the estimate coasts on its velocity; 0: never")
+    moving_min_range_m: float = Field(
+        80.0, ge=0, le=10000,
+        description="min_range_m for a ship estimated to move at moving_speed_m_s or more: the last seconds "
+                    "coast on the estimated velocity, whose error (a course a few degrees off, a turn or a speed "
+                    "change not yet followed) grows with the ship's speed, so a moving ship's boxes are taken "
+                    "closer in and the coast is shorter; a still or slow ship has little to drift on and keeps "
+                    "min_range_m (the close boxes' own errors, parts of the ship leaving the image, would only "
+                    "add). Equal to min_range_m: one range for every ship (the default before 2026-11-25); "
+                    "min_range_m 0 turns both off")
+    moving_speed_m_s: float = Field(
+        2.0, ge=0, le=50, description="see moving_min_range_m: the estimated horizontal speed, m/s")
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
@@ -296,6 +307,37 @@ class SizeFitConfig(StrictModel):
                            "within 3 m / 3 deg 29 -> 26, miss p90 7.5 -> 7.2 m)")
 
 
+class LayoutFitConfig(StrictModel):
+    """Which end of the ship its superstructure stands at, learnt from where its box centres fall
+    (``controllers.target_model.LayoutFit``): the class's layout, or the same superstructure at the other end
+    (a ship with its bridge forward where the class has it aft)."""
+
+    enabled: bool = Field(
+        True, description="weigh the class's layout against the superstructure at the other end while the ship's "
+                          "course is known, and correct with the one the box centres fit")
+    window_s: float = Field(
+        60.0, gt=5, le=600,
+        description="the fit's window, s: each layout's corrected box centres, met with the tracked point's plane, "
+                    "are fitted by one track (position, velocity and acceleration: a ship's manoeuvre over a "
+                    "minute) and weighed by what that track leaves")
+    rate_hz: float = Field(3.0, gt=0, le=30, description="boxes taken a second at most (nearby frames are alike)")
+    point_floor_m: float = Field(
+        1.0, gt=0, le=50,
+        description="1-sigma floor of a ground point's error beside the pixel noise's, m (the track's own misfit, "
+                    "the fitted size's error): no close view outweighs the rest")
+    max_effective: float = Field(
+        30.0, gt=0, le=10000,
+        description="the evidence is tempered to count at most this many boxes (consecutive boxes' errors are "
+                    "not independent)")
+    prior_other_end: float = Field(0.2, gt=0, lt=1, description="the other end's probability a priori")
+    switch_probability: float = Field(
+        0.9, gt=0.5, lt=1,
+        description="the correction takes the other layout once its probability reaches this, and goes back once "
+                    "the class's does")
+    min_boxes: int = Field(30, ge=3, le=100000, description="boxes in the window before the fit decides")
+    pixel_noise_px: float = Field(2.0, gt=0, le=100, description="a box centre's pixel noise, 1-sigma, px")
+
+
 class ShipModelConfig(StrictModel):
     """The flight software's outline of the ship class (ship frame: x bow, y port, z up, origin at the
     waterline centre)."""
@@ -316,6 +358,7 @@ class ShipModelConfig(StrictModel):
                                                                    "when the course is unknown")
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
     size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
+    layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig)
 
 
 class UkfConfig(StrictModel):

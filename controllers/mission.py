@@ -108,8 +108,10 @@ class FlightSoftware:
                                         self.cfg.after_lock.use)
         for e in events:
             self.recorder.event(e)
-        if events and self.phase.phase == 3 and self.cfg.target_model.size_fit.hold_in_terminal:
-            self.perception.ship.size.hold()
+        if events and self.phase.phase == 3:
+            if self.cfg.target_model.size_fit.hold_in_terminal:
+                self.perception.ship.size.hold()
+            self.perception.ship.layout.hold()  # (the airframe starts to cut the boxes)
 
     def _output(self, nav: Measurements, est: TargetState, fix: DetectionFix, guide: Guidance,
                 gimbal: GimbalCommand) -> FlightSoftwareOutput:

@@ -6,8 +6,10 @@ Per tick (:meth:`Perception.step`):
    with a box make it; every box before counts toward it (``acquiring``).
 2. **Gates** (:class:`~controllers.config.DetectionGateConfig`), once the
    estimator runs: a target closer than ``min_range_m`` (``too_close``: close
-   in, the box centre no longer follows the ship model) and a box that spans
-   the whole image (``overflowing_box``) are skipped.
+   in, the box centre no longer follows the ship model; ``moving_min_range_m``
+   for a ship estimated to move at ``moving_speed_m_s`` or more, whose
+   velocity the coast after the last box flies) and a box that spans the
+   whole image (``overflowing_box``) are skipped.
 3. **The ship's heading** (:class:`~controllers.target_model.ShipModel`): each
    box (unless too close) feeds the heading-from-shapes posterior.
 4. **Box-centre correction** (``controllers.target_model``): the box centre
@@ -175,10 +177,16 @@ class Perception:
         pos, vel = prior.pos_enu_m, prior.vel_enu_m_s
         ref = np.array([pos[0], pos[1], pos[2] - h])
         if gate != FusionReason.TOO_CLOSE:
+            layout = self.ship.layout
+            switches = layout.switches
             status = self.ship.observe_box(nav.t_s, cam.pos_enu_m, cam.R_enu_from_cam, ref, nav.det_bbox_px, vel,
-                                           prior.vel_std_m_s)
+                                           prior.vel_std_m_s, h)
             if status is not None and self._record is not None:
                 self._record.log(topics.FSW_SHIP_HEADING, status)
+            if layout.switches != switches:
+                where = "at the other end from the class's" if layout.other_end else "where the class has it"
+                self._event(f"perception: the box centres put the superstructure {where} "
+                            f"(probability of the other end {layout.p_other_end:.2f}): correcting with that layout")
         u, v, pred, why, spread, doubt = self._corrected(nav, cam, prior, ref, fit_size=not gate)
         return u, v, pred, gate or why, spread, doubt
 
@@ -187,7 +195,8 @@ class Perception:
         g = self.cfg
         if g.min_range_m > 0.0 and np.isfinite(nav.cam_pos_enu_m).all():
             d = np.asarray(prior.pos_enu_m, float) - nav.cam_pos_enu_m
-            if math.sqrt(d.dot(d)) < g.min_range_m:  # (np.linalg.norm's numbers, without its wrapper)
+            rng = math.sqrt(d.dot(d))  # (np.linalg.norm's numbers, without its wrapper)
+            if rng < (g.moving_min_range_m if self._moving(prior) else g.min_range_m):
                 return FusionReason.TOO_CLOSE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         c, e = self.camera, g.edge_px
@@ -195,6 +204,12 @@ class Perception:
                 (b[0] <= e and b[2] >= c.width_px - 1.0 - e) or (b[1] <= e and b[3] >= c.height_px - 1.0 - e)):
             return FusionReason.OVERFLOWING_BOX
         return ""
+
+    def _moving(self, prior: TargetState) -> bool:
+        """The estimated ship moves at ``moving_speed_m_s`` or more (its boxes are taken down to
+        ``moving_min_range_m``)."""
+        v = prior.vel_enu_m_s
+        return math.hypot(float(v[0]), float(v[1])) >= self.cfg.moving_speed_m_s
 
     def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray,
                    fit_size: bool = False):

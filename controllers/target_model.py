@@ -55,7 +55,7 @@ import numpy as np
 import scipy.special
 
 from controllers.camera_model import PinholeCamera, translation_rates
-from controllers.config import ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
+from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
@@ -88,11 +88,14 @@ class ShipOutline:
     tapering to a point over the front 20 % and a chamfered transom; a
     deckhouse (0.32 L .. 0.04 L aft of midships, to 0.5 H), a wheelhouse on it
     (to 0.65 H), a funnel (to 0.85 H) and a mast (to H). The box around a
-    silhouette is the box around these points' projections.
+    silhouette is the box around these points' projections. ``other_end``: the
+    superstructure (deckhouse, wheelhouse, funnel, mast) mirrored to the other
+    end, forward of midships, on the same hull (:class:`LayoutFit`).
     """
 
-    def __init__(self, cfg: ShipModelConfig):
+    def __init__(self, cfg: ShipModelConfig, other_end: bool = False):
         L, W, H = cfg.length_m, cfg.width_m, cfg.height_m
+        self.other_end = bool(other_end)
         hh = 0.3 * H
         pts = []
         hull_xy = [(-0.5 * L, -0.42 * W), (-0.46 * L, -0.5 * W), (0.3 * L, -0.5 * W), (0.5 * L, 0.0),
@@ -106,10 +109,14 @@ class ShipOutline:
         solids = [(-0.32 * L, -0.04 * L, -0.36 * W, 0.36 * W, hh, 0.5 * H),  # deckhouse
                   (-0.20 * L, -0.07 * L, -0.42 * W, 0.42 * W, 0.5 * H, 0.65 * H),  # wheelhouse
                   (-0.30 * L, -0.23 * L, -0.08 * W, 0.08 * W, 0.5 * H, 0.85 * H)]  # funnel
+        mast = (-0.145 * L, -0.125 * L, -0.015 * W, 0.015 * W, 0.65 * H, H)
+        if other_end:  # x -> -x: the superstructure forward of midships
+            solids = [(-b[1], -b[0], *b[2:]) for b in solids]
+            mast = (-mast[1], -mast[0], *mast[2:])
         for b in solids:
             pts += box(*b)
         n_body = len(pts)
-        pts += box(-0.145 * L, -0.125 * L, -0.015 * W, 0.015 * W, 0.65 * H, H)  # mast
+        pts += box(*mast)
         self.points_ship_m = np.array(pts, dtype=float)
         #: the outline without the mast (a detector's box often leaves a thin mast out: the size fit's boxes)
         self.body = _Points(self.points_ship_m[:n_body])
@@ -753,6 +760,156 @@ class ShipSize:
         return True
 
 
+class LayoutFit:
+    """Which end of the ship its superstructure stands at: the class's layout or the other end
+    (:class:`ShipOutline` ``other_end``), from where the box centres fall while the ship's course is known.
+
+    Each layout corrects a box centre differently (a superstructure aft pulls the box aft and up, more so
+    the more it is seen end on): the corrected centre's ray, met with the tracked point's plane, is where that
+    layout puts the ship. Over the last ``window_s`` the ground points of the right layout lie on one smooth
+    track; the wrong layout's wander off it as the view goes round the ship, by up to twice the box centre's
+    pull. Each layout's points are fitted by a track of constant acceleration (weighted least squares: each
+    point's error is the pixel noise seen through its view, with a floor, ``point_floor_m``); what the fit
+    leaves, tempered to ``max_effective`` boxes, weighs the two layouts against the prior
+    (``prior_other_end``). Once the other end's probability reaches ``switch_probability`` the correction
+    takes it (and back once the class's does). The course comes from the estimated velocity: a still ship's
+    two layouts are its two headings, which the box shapes weigh (:class:`ShapeHeading`); nothing is learnt
+    while the course is unknown, and the fit stops learning at the terminal switch (:meth:`hold`), where the
+    airframe starts to cut the boxes.
+
+    Nothing here reads the simulated ship: only the flight software's outline and its own estimate."""
+
+    def __init__(self, cfg: LayoutFitConfig, outlines: tuple[ShipOutline, ShipOutline], camera: PinholeCamera,
+                 pixel_noise_px: float = 2.0, edge_px: float = 6.0):
+        self.cfg = cfg
+        self.outlines = outlines  # (the class's, the other end)
+        self.camera = camera
+        self.pixel_noise_px = float(pixel_noise_px)
+        self.edge_px = float(edge_px)
+        self._pts: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []  # (t, g class, g other, W 2x2)
+        self._last_t = -math.inf
+        self._dr = np.zeros(2)  # the estimated velocity integrated (dead reckoning), m
+        self._dr_t, self._dr_v = math.nan, np.zeros(2)
+        self.other_end = False  # the correction uses the other end's layout
+        self.p_other_end = float(cfg.prior_other_end)
+        self.held = False
+        self.switches = 0
+        self.misfit_per_dof = math.nan  # the better layout's reduced chi-square about its track
+
+    def hold(self) -> None:
+        """Stop learning (the terminal switch): the layout stays as it is."""
+        self.held = True
+
+    def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, course_enu_rad: float | None,
+                tracked_height_m: float, scale=None, vel_enu=None) -> bool:
+        """Take one box (the ship's waterline centre estimated at ``ref_enu_m``, on ``course_enu_rad``; its
+        estimated velocity ``vel_enu``, which the ground points are taken relative to); True when the layout
+        in use changed."""
+        c = self.cfg
+        if vel_enu is not None and c.enabled and not self.held:
+            v = np.array([float(vel_enu[0]), float(vel_enu[1])])
+            if math.isfinite(self._dr_t) and t_s > self._dr_t and np.isfinite(v).all():
+                self._dr = self._dr + 0.5 * (self._dr_v + v) * (t_s - self._dr_t)
+            if np.isfinite(v).all():
+                self._dr_t, self._dr_v = float(t_s), v
+        if not c.enabled or self.held or course_enu_rad is None or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9:
+            return False
+        b = np.asarray(box_px, dtype=float)
+        cam, e = self.camera, self.edge_px
+        if b.shape != (4,) or not np.isfinite(b).all() or (cam.width_px > 0 and (
+                b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e or b[3] >= cam.height_px - 1.0 - e)):
+            return False
+        ref = np.asarray(ref_enu_m, dtype=float)
+        cam_pos = np.asarray(cam_pos_enu_m, dtype=float)
+        R = np.asarray(R_enu_from_cam, dtype=float)
+        uv = 0.5 * np.array([b[0] + b[2], b[1] + b[3]])
+        det = np.array([b[2] - b[0], b[3] - b[1]])
+        plane = float(ref[2]) + tracked_height_m
+        points = []
+        for outline in self.outlines:
+            box = predicted_boxes_px(outline, cam, cam_pos, R, ref, [course_enu_rad], scale)[0]
+            if not np.isfinite(box).all():
+                return False
+            size = box[2:4] - box[0:2]
+            if not ((det > 0.5 * size).all() and (det < 2.0 * size).all()):  # cut short, or not this ship
+                return False
+            off = box_centre_offset_px(outline, cam, cam_pos, R, ref, course_enu_rad, tracked_height_m,
+                                       boxes_px=box[None, :], scale=scale)
+            if off is None:
+                return False
+            g = self._ground(uv - off, cam_pos, R, plane)
+            if g is None:
+                return False
+            points.append(g)
+        g0, J = points[0][0], np.column_stack([points[0][1], points[0][2]])  # d(ground)/d(u, v), m per px
+        cov = (self.pixel_noise_px ** 2) * (J @ J.T) + (c.point_floor_m ** 2) * np.eye(2)
+        self._last_t = float(t_s)
+        self._pts.append((float(t_s), g0 - self._dr, points[1][0] - self._dr, np.linalg.inv(cov)))
+        while self._pts and self._pts[0][0] < t_s - c.window_s:
+            self._pts.pop(0)
+        return self._decide()
+
+    def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
+        """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v) or None."""
+        cam = self.camera
+        out = []
+        for du, dv in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)):
+            d = R @ np.array([(uv[0] + du - cam.cx) / cam.fx, (uv[1] + dv - cam.cy) / cam.fy, 1.0])
+            if not d[2] < -1e-6 or not cam_pos[2] > plane_z:
+                return None
+            out.append((cam_pos + ((plane_z - cam_pos[2]) / d[2]) * d)[:2])
+        return out[0], out[1] - out[0], out[2] - out[0]
+
+    def misfits(self) -> tuple[float, float, int] | None:
+        """(each layout's weighted sum of squares about its best track, the boxes in the window), or None."""
+        n = len(self._pts)
+        if n < max(self.cfg.min_boxes, 4):
+            return None
+        t = np.array([p[0] for p in self._pts])
+        tau = t - 0.5 * (t[0] + t[-1])
+        basis = np.stack([np.ones(n), tau, 0.5 * tau * tau], axis=1)  # (n, 3): position, velocity, acceleration
+        W = np.array([p[3] for p in self._pts])  # (n, 2, 2)
+        # the normal equations of g_i = theta^T basis_i (theta 3 x 2: [p; v; a] in east, north), each point
+        # weighted by W_i: sum (b b^T) (x) W  and  sum b (x) W g
+        A = np.einsum("ij,ik,iab->jakb", basis, basis, W).reshape(6, 6)
+        out = []
+        for k in (1, 2):
+            g = np.array([p[k] for p in self._pts])  # (n, 2)
+            Wg = np.einsum("iab,ib->ia", W, g)
+            y = np.einsum("ij,ia->ja", basis, Wg).reshape(6)
+            try:
+                theta = np.linalg.solve(A, y).reshape(3, 2)
+            except np.linalg.LinAlgError:
+                return None
+            r = g - basis @ theta
+            out.append(float(np.einsum("ia,iab,ib->", r, W, r)))
+        return out[0], out[1], n
+
+    def _decide(self) -> bool:
+        fit = self.misfits()
+        if fit is None:
+            return False
+        ss_class, ss_other, n = fit
+        c = self.cfg
+        k = min(1.0, c.max_effective / n)
+        # the points' errors scaled so that the better layout's track fits them as their noise says (its
+        # reduced chi-square, when above 1: a manoeuvre the track does not follow, a size the fit has not
+        # learnt): a misfit both layouts share is no evidence for either
+        self.misfit_per_dof = min(ss_class, ss_other) / max(2.0 * n - 6.0, 1.0)
+        k /= max(self.misfit_per_dof, 1.0)
+        logit = math.log(c.prior_other_end / (1.0 - c.prior_other_end)) + 0.5 * k * (ss_class - ss_other)
+        self.p_other_end = float(scipy.special.expit(logit))
+        was = self.other_end
+        if not was and self.p_other_end >= c.switch_probability:
+            self.other_end = True
+        elif was and self.p_other_end <= 1.0 - c.switch_probability:
+            self.other_end = False
+        if self.other_end != was:
+            self.switches += 1
+            return True
+        return False
+
+
 @dataclass(frozen=True, slots=True)
 class ShipHeadingStatus:
     """The ship's heading as the box shapes tell it (:class:`ShapeHeading`), for the log."""
@@ -767,6 +924,8 @@ class ShipHeadingStatus:
     size_scale: np.ndarray  # (3,) the ship's length, beam, height over the class's as fitted (ShipSize)
     size_updates: int  # boxes the size fit has taken
     size_in_use: bool  # the correction uses the fitted outline
+    layout_other_end: float  # the probability that the superstructure stands at the other end (LayoutFit)
+    layout_in_use: str  # the layout the correction uses: "class" or "other_end"
 
 
 class ShipModel:
@@ -781,10 +940,17 @@ class ShipModel:
 
     def __init__(self, cfg: ShipModelConfig, camera: PinholeCamera, edge_px: float = 6.0):
         self.cfg = cfg
-        self.outline = ShipOutline(cfg)
-        self.shape = ShapeHeading(cfg.heading_from_shape, self.outline, camera, edge_px)
-        self.size = ShipSize(cfg.size_fit, self.outline, camera, edge_px)
+        self.outlines = (ShipOutline(cfg), ShipOutline(cfg, other_end=True))  # the class's layout, the other end
+        self.shape = ShapeHeading(cfg.heading_from_shape, self.outlines[0], camera, edge_px)
+        self.size = ShipSize(cfg.size_fit, self.outlines[0], camera, edge_px)
+        self.layout = LayoutFit(cfg.layout_fit, self.outlines, camera, cfg.layout_fit.pixel_noise_px, edge_px)
         self._course_known_since = math.nan  # since when the course has been known without a break
+
+    @property
+    def outline(self) -> ShipOutline:
+        """The outline the correction, the size gate and the size fit use: the class's, or its superstructure at
+        the other end once the box centres say so (:class:`LayoutFit`)."""
+        return self.outlines[1] if self.layout.other_end else self.outlines[0]
 
     def course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
         """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
@@ -851,9 +1017,13 @@ class ShipModel:
                                 box_px, t_s)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
-                    vel_std_m_s: float) -> ShipHeadingStatus | None:
-        """Feed one detected box to the heading-from-shapes posterior (``ref_enu_m``: the estimated waterline
-        centre); its state for the log when it took the box, else None."""
+                    vel_std_m_s: float, tracked_height_m: float = 0.0) -> ShipHeadingStatus | None:
+        """Feed one detected box to the heading-from-shapes posterior and the layout fit (``ref_enu_m``: the
+        estimated waterline centre; ``tracked_height_m``: the estimator's tracked point above it); the state
+        for the log when the shapes took the box, else None."""
+        if self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
+                               self.course(vel_enu, vel_std_m_s), tracked_height_m, self.size.scale, vel_enu):
+            self.size.outline = self.outline  # the size fit goes on with the layout in use
         sh = self.shape
         if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
                          self._course_to_follow(t_s, vel_enu, vel_std_m_s)):
@@ -865,7 +1035,8 @@ class ShipModel:
         return ShipHeadingStatus(t_s, heading_deg_from_course_enu(float(sh.courses_enu_rad[k])), float(w[k]),
                                  float(w[(k + len(w) // 2) % len(w)]), sh.updates, bool(course is None and sh.ready),
                                  math.nan if course is None else heading_deg_from_course_enu(course),
-                                 np.exp(sz.theta), sz.updates, sz.scale is not None)
+                                 np.exp(sz.theta), sz.updates, sz.scale is not None, self.layout.p_other_end,
+                                 "other_end" if self.layout.other_end else "class")
 
     def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
         """The estimated velocity's course when the box shapes' posterior may follow it

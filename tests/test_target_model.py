@@ -958,3 +958,138 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     assert smaller >= 2, smaller  # and views where it shows less
     own_err, wrong_err = np.mean(np.array(errs), axis=0)
     assert own_err < 0.7 * wrong_err, errs  # 6.6 against 11.0 px
+
+
+def test_a_moving_ship_s_boxes_are_taken_closer_in():
+    """``detection_gate.moving_min_range_m``: a ship estimated to move at ``moving_speed_m_s`` or more has its
+    boxes taken down to that range (the coast after the last box flies its velocity); a still or slow one's
+    stop at ``min_range_m``; with the two ranges equal every ship's stop there, and min_range_m 0 gates
+    none."""
+    from types import SimpleNamespace
+    cam = PinholeCamera.from_config(CAM_CFG)
+
+    def gate_at(range_m: float, speed_m_s: float, **settings) -> str:
+        p = Perception(DetectionGateConfig(**settings), AcquisitionConfig(lock_detections=1),
+                       ShipModel(ShipModelConfig(), cam), cam)
+        d = range_m / math.sqrt(2.0)
+        nav = SimpleNamespace(cam_pos_enu_m=np.array([0.0, -d, d]), det_bbox_px=np.array([600.0, 300, 700, 400]))
+        prior = TargetState(0.0, "estimator", np.zeros(3), np.array([0.6, 0.8, 0.0]) * speed_m_s, 0.1, 0.0)
+        return p._gate(nav, None, prior)
+
+    g = DetectionGateConfig()
+    assert (g.min_range_m, g.moving_min_range_m, g.moving_speed_m_s) == (120.0, 80.0, 2.0)
+    close = FusionReason.TOO_CLOSE
+    assert gate_at(100.0, 5.0) == "" and gate_at(100.0, 2.0) == ""
+    assert gate_at(100.0, 1.9) == close and gate_at(100.0, 0.0) == close
+    assert gate_at(79.0, 5.0) == close and gate_at(121.0, 0.0) == ""
+    assert gate_at(100.0, 5.0, moving_min_range_m=120.0) == close
+    assert gate_at(10.0, 5.0, min_range_m=0.0) == "" and gate_at(10.0, 0.0, min_range_m=0.0) == ""
+
+
+def _layout_fit_round(ship_type: str, course_known: bool = True, elevation_deg: float = 40.0):
+    """A LayoutFit fed the ray-cast boxes of a still ship of ``ship_type`` seen from round a ring (700 m, a lap
+    in 4 min at 1.5 boxes a second), the estimate on the ship, its course given (or None): the fit."""
+    from controllers.config import LayoutFitConfig
+    from controllers.target_model import LayoutFit
+    heading = 40.0
+    ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    cfg = ShipModelConfig()
+    fit = LayoutFit(LayoutFitConfig(), (ShipOutline(cfg), ShipOutline(cfg, other_end=True)),
+                    PinholeCamera.from_config(CAM_CFG))
+    course = math.radians(90.0 - heading) if course_known else None
+    for k, az in enumerate(np.arange(0.0, 360.0, 2.0)):
+        cp, Rc, frame = _look_from(cam, pose, 700.0, elevation_deg, az)
+        fit.observe(k / 1.5, cp, Rc, np.zeros(3), frame.bbox_px, course, UkfConfig().target_plane_height_m,
+                    vel_enu=np.zeros(3))
+    return fit
+
+
+@pytest.mark.parametrize("elevation_deg", [25.0, 40.0, 50.0])
+def test_the_layout_fit_tells_which_end_the_superstructure_stands_at(elevation_deg):
+    """Round a ship whose superstructure stands forward (``bridge_forward``) the box centres corrected with the
+    class's layout (bridge aft) wander off one track as the view goes round, the other end's do not: the fit
+    takes the other end (probability >= 0.9; measured 0.985-1.0). Round the class's own layout it keeps the
+    class (<= 0.1; measured 0.000-0.034). Neither moves without a known course (a still ship's two layouts are
+    its two headings)."""
+    fwd = _layout_fit_round("bridge_forward", elevation_deg=elevation_deg)
+    assert fwd.other_end and fwd.p_other_end >= 0.9, fwd.p_other_end
+    aft = _layout_fit_round("bridge_aft", elevation_deg=elevation_deg)
+    assert not aft.other_end and aft.p_other_end <= 0.1, aft.p_other_end
+    blind = _layout_fit_round("bridge_forward", course_known=False, elevation_deg=elevation_deg)
+    assert not blind.other_end and blind.p_other_end == blind.cfg.prior_other_end and blind.misfits() is None
+
+
+def test_the_other_end_s_outline_mirrors_the_superstructure_on_the_same_hull():
+    """``ShipOutline(other_end=True)``: the hull's points as the class's, every superstructure point at minus its
+    distance along the ship (x), beam and height as they were."""
+    cfg = ShipModelConfig()
+    a, b = ShipOutline(cfg), ShipOutline(cfg, other_end=True)
+    n_hull = 14  # the hull's corners (7 at the waterline, 7 at the deck)
+    assert np.array_equal(a.points_ship_m[:n_hull], b.points_ship_m[:n_hull])
+    sa, sb = a.points_ship_m[n_hull:], b.points_ship_m[n_hull:]
+    assert sa[:, 0].max() < 0.0 < sb[:, 0].min()  # aft of midships, and forward
+    assert sorted(map(tuple, sb)) == sorted(map(tuple, sa * np.array([-1.0, 1.0, 1.0])))
+
+
+def test_a_held_layout_fit_learns_nothing_more():
+    """The terminal switch holds the fit (the airframe starts to cut the boxes): no box moves it after."""
+    fit = _layout_fit_round("bridge_aft")
+    p, n = fit.p_other_end, len(fit._pts)
+    fit.hold()
+    ship = Ship(TargetConfig(type="bridge_forward", heading_deg=40.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    for k, az in enumerate(range(0, 360, 10)):
+        cp, Rc, frame = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 700.0, 40.0, az)
+        assert not fit.observe(1e4 + k, cp, Rc, np.zeros(3), frame.bbox_px, math.radians(50.0), 3.75)
+    assert (fit.p_other_end, len(fit._pts), fit.other_end) == (p, n, False)
+
+
+def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
+    """Round a ship with its bridge forward on a known course, the perception's ship model takes the other
+    end's outline once the fit decides (an event says so), and its corrected box centres land nearer the
+    tracked point's image than with the layout fit off, which keeps the class's bridge aft."""
+    from controllers.config import LayoutFitConfig
+    heading = 40.0
+    ship = Ship(TargetConfig(type="bridge_forward", heading_deg=heading))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - heading)
+    vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)  # (the ship held still here)
+
+    class Events:
+        def __init__(self):
+            self.texts = []
+
+        def event(self, text):
+            self.texts.append(text)
+
+        def log(self, *_):
+            pass
+
+    percs = {}
+    for on in (False, True):
+        cfg = ShipModelConfig(layout_fit=LayoutFitConfig(enabled=on))
+        percs[on] = Perception(DetectionGateConfig(), AcquisitionConfig(lock_detections=1),
+                               ShipModel(cfg, fsw_cam), fsw_cam, Events())
+        percs[on].lock.locked = True
+    errs = {False: [], True: []}
+    for k, az in enumerate(list(range(0, 360, 2)) * 2):
+        t = k / 1.5
+        meas, motion, cp, Rc = _ring_detection(cam, pose, t, az, rng_m=700.0, elevation_deg=40.0)
+        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        for on, perc in percs.items():
+            fix = perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
+            errs[on].append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
+    on, off = percs[True], percs[False]
+    assert on.ship.layout.other_end and on.ship.outline is on.ship.outlines[1]
+    assert not off.ship.layout.other_end and off.ship.outline is off.ship.outlines[0]
+    assert any("other end" in e for e in on._record.texts), on._record.texts
+    n = len(errs[True]) // 2  # the second time round, the layout decided
+    fit_err, class_err = np.mean(errs[True][n:]), np.mean(errs[False][n:])
+    assert fit_err < 0.8 * class_err, (fit_err, class_err)
