@@ -10,8 +10,11 @@ Per tick (:meth:`Perception.step`):
    for a ship estimated to move at ``moving_speed_m_s`` or more, whose
    velocity the coast after the last box flies) and a box that spans the
    whole image (``overflowing_box``) are skipped.
-3. **The ship's heading** (:class:`~controllers.target_model.ShipModel`): each
-   box (unless too close) feeds the heading-from-shapes posterior.
+3. **The ship's heading and layout** (:class:`~controllers.target_model.ShipModel`):
+   each box (unless too close) feeds the heading-from-shapes posterior and,
+   while the course is known, the layout fit (``target_model.layout_fit``:
+   whether the superstructure stands at the other end from the class's; an
+   event says when the correction takes the other end, or goes back).
 4. **Box-centre correction** (``controllers.target_model``): the box centre
    moves over the ship with the view; the offset the ship model predicts for
    the estimated position and the plausible headings is removed, so that the

@@ -1021,8 +1021,9 @@ class ShipModel:
         """Feed one detected box to the heading-from-shapes posterior and the layout fit (``ref_enu_m``: the
         estimated waterline centre; ``tracked_height_m``: the estimator's tracked point above it); the state
         for the log when the shapes took the box, else None."""
-        if self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-                               self.course(vel_enu, vel_std_m_s), tracked_height_m, self.size.scale, vel_enu):
+        if self.cfg.enabled and self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
+                                                    self.course(vel_enu, vel_std_m_s), tracked_height_m,
+                                                    self.size.scale, vel_enu):
             self.size.outline = self.outline  # the size fit goes on with the layout in use
         sh = self.shape
         if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
