@@ -786,7 +786,11 @@ class LayoutFit:
         self.camera = camera
         self.pixel_noise_px = float(pixel_noise_px)
         self.edge_px = float(edge_px)
-        self._pts: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []  # (t, g class, g other, W 2x2)
+        # the window's points, oldest first, in rows [lo, hi) of arrays that are compacted when full: time, each
+        # layout's ground point (east, north; relative to the dead reckoning), its weight (2 x 2)
+        cap = int(math.ceil(cfg.window_s * cfg.rate_hz)) + 16
+        self._t, self._g, self._w = np.zeros(cap), np.zeros((2, cap, 2)), np.zeros((cap, 2, 2))
+        self._lo = self._hi = 0
         self._last_t = -math.inf
         self._dr = np.zeros(2)  # the estimated velocity integrated (dead reckoning), m
         self._dr_t, self._dr_v = math.nan, np.zeros(2)
@@ -800,11 +804,12 @@ class LayoutFit:
         """Stop learning (the terminal switch): the layout stays as it is."""
         self.held = True
 
-    def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, course_enu_rad: float | None,
+    def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, course_enu_rad,
                 tracked_height_m: float, scale=None, vel_enu=None) -> bool:
-        """Take one box (the ship's waterline centre estimated at ``ref_enu_m``, on ``course_enu_rad``; its
-        estimated velocity ``vel_enu``, which the ground points are taken relative to); True when the layout
-        in use changed."""
+        """Take one box (the ship's waterline centre estimated at ``ref_enu_m``, on ``course_enu_rad``: a float,
+        None when unknown, or a function that gives it, asked only when the box is taken; its estimated
+        velocity ``vel_enu``, which the ground points are taken relative to); True when the layout in use
+        changed."""
         c = self.cfg
         if vel_enu is not None and c.enabled and not self.held:
             v = np.array([float(vel_enu[0]), float(vel_enu[1])])
@@ -814,6 +819,10 @@ class LayoutFit:
                 self._dr_t, self._dr_v = float(t_s), v
         if not c.enabled or self.held or course_enu_rad is None or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9:
             return False
+        if callable(course_enu_rad):
+            course_enu_rad = course_enu_rad()
+            if course_enu_rad is None:
+                return False
         b = np.asarray(box_px, dtype=float)
         cam, e = self.camera, self.edge_px
         if b.shape != (4,) or not np.isfinite(b).all() or (cam.width_px > 0 and (
@@ -844,10 +853,28 @@ class LayoutFit:
         g0, J = points[0][0], np.column_stack([points[0][1], points[0][2]])  # d(ground)/d(u, v), m per px
         cov = (self.pixel_noise_px ** 2) * (J @ J.T) + (c.point_floor_m ** 2) * np.eye(2)
         self._last_t = float(t_s)
-        self._pts.append((float(t_s), g0 - self._dr, points[1][0] - self._dr, np.linalg.inv(cov)))
-        while self._pts and self._pts[0][0] < t_s - c.window_s:
-            self._pts.pop(0)
+        self._append(float(t_s), g0 - self._dr, points[1][0] - self._dr, np.linalg.inv(cov))
+        while self._lo < self._hi and self._t[self._lo] < t_s - c.window_s:
+            self._lo += 1
         return self._decide()
+
+    @property
+    def boxes(self) -> int:
+        """The boxes in the fit's window."""
+        return self._hi - self._lo
+
+    def _append(self, t_s: float, g_class: np.ndarray, g_other: np.ndarray, w: np.ndarray) -> None:
+        if self._hi == len(self._t):  # full: the window's rows to the front
+            n, lo = self._hi - self._lo, self._lo
+            self._t[:n], self._g[:, :n], self._w[:n] = self._t[lo:self._hi], self._g[:, lo:self._hi], self._w[lo:self._hi]
+            self._lo, self._hi = 0, n
+            if n == len(self._t):  # (a rate above rate_hz cannot happen; grow rather than lose a point)
+                self._t = np.concatenate([self._t, np.zeros(n)])
+                self._g = np.concatenate([self._g, np.zeros((2, n, 2))], axis=1)
+                self._w = np.concatenate([self._w, np.zeros((n, 2, 2))])
+        k = self._hi
+        self._t[k], self._g[0, k], self._g[1, k], self._w[k] = t_s, g_class, g_other, w
+        self._hi += 1
 
     def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
         """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v) or None."""
@@ -862,19 +889,20 @@ class LayoutFit:
 
     def misfits(self) -> tuple[float, float, int] | None:
         """(each layout's weighted sum of squares about its best track, the boxes in the window), or None."""
-        n = len(self._pts)
+        n = self._hi - self._lo
         if n < max(self.cfg.min_boxes, 4):
             return None
-        t = np.array([p[0] for p in self._pts])
+        lo, hi = self._lo, self._hi
+        t = self._t[lo:hi]
         tau = t - 0.5 * (t[0] + t[-1])
         basis = np.stack([np.ones(n), tau, 0.5 * tau * tau], axis=1)  # (n, 3): position, velocity, acceleration
-        W = np.array([p[3] for p in self._pts])  # (n, 2, 2)
+        W = self._w[lo:hi]  # (n, 2, 2)
         # the normal equations of g_i = theta^T basis_i (theta 3 x 2: [p; v; a] in east, north), each point
         # weighted by W_i: sum (b b^T) (x) W  and  sum b (x) W g
         A = np.einsum("ij,ik,iab->jakb", basis, basis, W).reshape(6, 6)
         out = []
-        for k in (1, 2):
-            g = np.array([p[k] for p in self._pts])  # (n, 2)
+        for k in (0, 1):
+            g = self._g[k, lo:hi]  # (n, 2)
             Wg = np.einsum("iab,ib->ia", W, g)
             y = np.einsum("ij,ia->ja", basis, Wg).reshape(6)
             try:
@@ -1022,7 +1050,7 @@ class ShipModel:
         estimated waterline centre; ``tracked_height_m``: the estimator's tracked point above it); the state
         for the log when the shapes took the box, else None."""
         if self.cfg.enabled and self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-                                                    self.course(vel_enu, vel_std_m_s), tracked_height_m,
+                                                    lambda: self.course(vel_enu, vel_std_m_s), tracked_height_m,
                                                     self.size.scale, vel_enu):
             self.size.outline = self.outline  # the size fit goes on with the layout in use
         sh = self.shape

@@ -1036,14 +1036,14 @@ def test_the_other_end_s_outline_mirrors_the_superstructure_on_the_same_hull():
 def test_a_held_layout_fit_learns_nothing_more():
     """The terminal switch holds the fit (the airframe starts to cut the boxes): no box moves it after."""
     fit = _layout_fit_round("bridge_aft")
-    p, n = fit.p_other_end, len(fit._pts)
+    p, n = fit.p_other_end, fit.boxes
     fit.hold()
     ship = Ship(TargetConfig(type="bridge_forward", heading_deg=40.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     for k, az in enumerate(range(0, 360, 10)):
         cp, Rc, frame = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 700.0, 40.0, az)
         assert not fit.observe(1e4 + k, cp, Rc, np.zeros(3), frame.bbox_px, math.radians(50.0), 3.75)
-    assert (fit.p_other_end, len(fit._pts), fit.other_end) == (p, n, False)
+    assert (fit.p_other_end, fit.boxes, fit.other_end) == (p, n, False)
 
 
 def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
