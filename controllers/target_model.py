@@ -768,11 +768,14 @@ class LayoutFit:
     the more it is seen end on): the corrected centre's ray, met with the tracked point's plane, is where that
     layout puts the ship. Over the last ``window_s`` the ground points of the right layout lie on one smooth
     track; the wrong layout's wander off it as the view goes round the ship, by up to twice the box centre's
-    pull. Each layout's points are fitted by a track of constant acceleration (weighted least squares: each
-    point's error is the pixel noise seen through its view, with a floor, ``point_floor_m``); what the fit
-    leaves, tempered to ``max_effective`` boxes, weighs the two layouts against the prior
-    (``prior_other_end``). Once the other end's probability reaches ``switch_probability`` the correction
-    takes it (and back once the class's does). The course comes from the estimated velocity: a still ship's
+    pull. The points are taken relative to the estimated velocity integrated over time (which follows a
+    manoeuvre), and each layout's are fitted by a track of constant acceleration (weighted least squares:
+    each point's error is the pixel noise seen through its view, with a floor, ``point_floor_m``); what the
+    fit leaves, divided by the better layout's reduced chi-square when that is above 1 (a misfit both
+    share, a manoeuvre the track does not follow or a size not yet learnt, is no evidence) and tempered to
+    ``max_effective`` boxes, weighs the two layouts against the prior (``prior_other_end``). Once the other
+    end's probability reaches ``switch_probability`` the correction takes it (and back once the class's
+    does). The course comes from the estimated velocity: a still ship's
     two layouts are its two headings, which the box shapes weigh (:class:`ShapeHeading`); nothing is learnt
     while the course is unknown, and the fit stops learning at the terminal switch (:meth:`hold`), where the
     airframe starts to cut the boxes.
@@ -866,7 +869,8 @@ class LayoutFit:
     def _append(self, t_s: float, g_class: np.ndarray, g_other: np.ndarray, w: np.ndarray) -> None:
         if self._hi == len(self._t):  # full: the window's rows to the front
             n, lo = self._hi - self._lo, self._lo
-            self._t[:n], self._g[:, :n], self._w[:n] = self._t[lo:self._hi], self._g[:, lo:self._hi], self._w[lo:self._hi]
+            hi = self._hi
+            self._t[:n], self._g[:, :n], self._w[:n] = self._t[lo:hi], self._g[:, lo:hi], self._w[lo:hi]
             self._lo, self._hi = 0, n
             if n == len(self._t):  # (a rate above rate_hz cannot happen; grow rather than lose a point)
                 self._t = np.concatenate([self._t, np.zeros(n)])
