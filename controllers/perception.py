@@ -198,8 +198,7 @@ class Perception:
         g = self.cfg
         if g.min_range_m > 0.0 and np.isfinite(nav.cam_pos_enu_m).all():
             d = np.asarray(prior.pos_enu_m, float) - nav.cam_pos_enu_m
-            rng = math.sqrt(d.dot(d))  # (np.linalg.norm's numbers, without its wrapper)
-            if rng < (g.moving_min_range_m if self._moving(prior) else g.min_range_m):
+            if math.sqrt(d.dot(d)) < (g.moving_min_range_m if self._moving(prior) else g.min_range_m):  # (norm)
                 return FusionReason.TOO_CLOSE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         c, e = self.camera, g.edge_px

@@ -95,7 +95,6 @@ class ShipOutline:
 
     def __init__(self, cfg: ShipModelConfig, other_end: bool = False):
         L, W, H = cfg.length_m, cfg.width_m, cfg.height_m
-        self.other_end = bool(other_end)
         hh = 0.3 * H
         pts = []
         hull_xy = [(-0.5 * L, -0.42 * W), (-0.46 * L, -0.5 * W), (0.3 * L, -0.5 * W), (0.5 * L, 0.0),
@@ -795,8 +794,8 @@ class LayoutFit:
         self._t, self._g, self._w = np.zeros(cap), np.zeros((2, cap, 2)), np.zeros((cap, 2, 2))
         self._lo = self._hi = 0
         self._last_t = -math.inf
-        self._dr = np.zeros(2)  # the estimated velocity integrated (dead reckoning), m
-        self._dr_t, self._dr_v = math.nan, np.zeros(2)
+        self._dr = (0.0, 0.0)  # the estimated velocity integrated (dead reckoning), east, north, m
+        self._dr_t, self._dr_v = math.nan, (0.0, 0.0)  # (on Python floats: this runs with every box)
         self.other_end = False  # the correction uses the other end's layout
         self.p_other_end = float(cfg.prior_other_end)
         self.held = False
@@ -815,11 +814,13 @@ class LayoutFit:
         changed."""
         c = self.cfg
         if vel_enu is not None and c.enabled and not self.held:
-            v = np.array([float(vel_enu[0]), float(vel_enu[1])])
-            if math.isfinite(self._dr_t) and t_s > self._dr_t and np.isfinite(v).all():
-                self._dr = self._dr + 0.5 * (self._dr_v + v) * (t_s - self._dr_t)
-            if np.isfinite(v).all():
-                self._dr_t, self._dr_v = float(t_s), v
+            ve, vn = float(vel_enu[0]), float(vel_enu[1])
+            if math.isfinite(ve) and math.isfinite(vn):
+                if math.isfinite(self._dr_t) and t_s > self._dr_t:  # the trapezoid since the last box
+                    dt = t_s - self._dr_t
+                    self._dr = (self._dr[0] + 0.5 * (self._dr_v[0] + ve) * dt,
+                                self._dr[1] + 0.5 * (self._dr_v[1] + vn) * dt)
+                self._dr_t, self._dr_v = float(t_s), (ve, vn)
         if not c.enabled or self.held or course_enu_rad is None or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9:
             return False
         if callable(course_enu_rad):
@@ -856,7 +857,8 @@ class LayoutFit:
         g0, J = points[0][0], np.column_stack([points[0][1], points[0][2]])  # d(ground)/d(u, v), m per px
         cov = (self.pixel_noise_px ** 2) * (J @ J.T) + (c.point_floor_m ** 2) * np.eye(2)
         self._last_t = float(t_s)
-        self._append(float(t_s), g0 - self._dr, points[1][0] - self._dr, np.linalg.inv(cov))
+        dr = np.array(self._dr)
+        self._append(float(t_s), g0 - dr, points[1][0] - dr, np.linalg.inv(cov))
         while self._lo < self._hi and self._t[self._lo] < t_s - c.window_s:
             self._lo += 1
         return self._decide()
