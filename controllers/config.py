@@ -356,6 +356,19 @@ class ShipModelConfig(StrictModel):
                                       "taken as unknown")
     headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
                                                                    "when the course is unknown")
+    anchor: Literal["box_centre", "hull_bottom", "hull_bottom_in_dive", "blend", "blend_in_dive"] = Field(
+        "box_centre",
+        description="what the correction takes the tracked point's image from: box_centre (the detected centre "
+                    "less the whole outline's predicted centre offset, the superstructure's layout and height "
+                    "in it: the default), hull_bottom (the detected centre's u less the hull's predicted centre "
+                    "offset; its v moved down by half the box's height to the box's lower edge, less the hull's "
+                    "predicted lower-edge offset: superstructure shows up and inward of the hull's near lower "
+                    "edge, so the edge takes none of the superstructure the class may have wrong, but all of "
+                    "the hull's size), blend (the mean of the two fixes; a box off in size, which may be cut at "
+                    "its lower edge, keeps box_centre's); *_in_dive: box_centre until the terminal switch (in "
+                    "the loiter a wrong superstructure's error averages out as the view goes round the ship, "
+                    "in the dive it does not). README, envelope section: blend_in_dive gained at its tuning "
+                    "seed, not at two fresh ones")
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
     size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
     layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig)

@@ -108,6 +108,7 @@ class FlightSoftware:
                                         self.cfg.after_lock.use)
         for e in events:
             self.recorder.event(e)
+        self.perception.in_dive = self.phase.phase == 3
         if events and self.phase.phase == 3:
             if self.cfg.target_model.size_fit.hold_in_terminal:
                 self.perception.ship.size.hold()

@@ -18,7 +18,15 @@ Per tick (:meth:`Perception.step`):
 4. **Box-centre correction** (``controllers.target_model``): the box centre
    moves over the ship with the view; the offset the ship model predicts for
    the estimated position and the plausible headings is removed, so that the
-   fix is the image of the point the estimator tracks. A box whose width or
+   fix is the image of the point the estimator tracks. ``target_model.anchor``
+   (``box_centre`` by default) can take the fix, or half of it, from the
+   hull's lower edge instead: the detected centre moved down half the box's
+   height, less the hull alone's predicted lower-edge offset (and its centre's
+   across), everywhere or only in the dive (:attr:`Perception.in_dive`, set by
+   the mission). The superstructure, the part of a ship the class is likeliest
+   to have wrong, shows up and inward of the hull's near lower edge, so that
+   fix does not see it; it leans on the hull's size (the size fit's) instead. A
+   box off in size (it may be cut at that edge) keeps the centre's fix. A box whose width or
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
@@ -132,6 +140,7 @@ class Perception:
         self._size_off_count = 0  # how many of it are off
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
+        self.in_dive = False  # the terminal phase (the mission says so): target_model.anchor hull_bottom_in_dive
         self._taken_off_size = False  # this box, off in size, is used all the same (own headings, or its doubt)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
         self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
@@ -291,7 +300,28 @@ class Perception:
         off, spread = off
         if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
-        return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
+        u_fix, v_fix = float(u) - float(off[0]), float(v) - float(off[1])
+        share = self._bottom_share()
+        if share > 0.0 and not why and np.isfinite(b).all():  # (a box off in size may be cut at its lower edge)
+            hb = predicted_boxes_px(self.ship.outline.hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+                                    courses, scale)
+            ob = None if not np.isfinite(hb).all() else box_centre_offset_px(
+                self.ship.outline.hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, None,
+                prior.tracked_height_m, boxes_px=hb, courses_weights=(courses, weights), scale=scale,
+                anchor="bottom")
+            if ob is not None:  # the hull's centre across, its lower edge down (ShipModelConfig.anchor)
+                u_b = float(u) - float(ob[0])
+                v_b = float(v) + 0.5 * (float(b[3]) - float(b[1])) - float(ob[1])
+                u_fix += share * (u_b - u_fix)
+                v_fix += share * (v_b - v_fix)
+        return u_fix, v_fix, pred, why, spread, doubt
+
+    def _bottom_share(self) -> float:
+        """The share of the hull's lower edge in the fix (``target_model.anchor``), the rest the box centre's."""
+        a = self.ship.cfg.anchor
+        if a == "box_centre" or (a.endswith("_in_dive") and not self.in_dive):
+            return 0.0
+        return 0.5 if a.startswith("blend") else 1.0
 
     def _larger_than_any(self, det: np.ndarray, sizes: np.ndarray) -> bool:
         """The box (width, height) ``det`` is wider or taller than every one of the predicted ``sizes`` (n, 2)

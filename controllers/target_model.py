@@ -42,6 +42,12 @@ clears), and a ship of another layout than the class's (the fit then finds
 the sizes that best explain the boxes with the class's layout).
 ``enabled: false`` turns it off (the paper's plain point model).
 
+``anchor`` other than ``box_centre`` (``controllers.perception``) takes the
+fix, or half of it, from a part that leaves the superstructure out: the hull
+alone (:attr:`ShipOutline.hull`) predicts the box's lower edge
+(``anchor="bottom"`` of :func:`box_centre_offset_px`), the hull's near
+waterline from any view from above, whatever stands on the deck.
+
 The outline is a priori knowledge of the target class (the paper's ship is a
 known 55 x 25 x 25 m vessel), configured with the flight software; nothing
 here reads the simulated ship (DESIGN.md section 1).
@@ -101,6 +107,7 @@ class ShipOutline:
                    (0.3 * L, 0.5 * W), (-0.46 * L, 0.5 * W), (-0.5 * L, 0.42 * W)]
         for z in (0.0, hh):
             pts += [(x, y, z) for x, y in hull_xy]
+        n_hull = len(pts)
 
         def box(x0, x1, y0, y1, z0, z1):
             return [(x, y, z) for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
@@ -119,6 +126,8 @@ class ShipOutline:
         self.points_ship_m = np.array(pts, dtype=float)
         #: the outline without the mast (a detector's box often leaves a thin mast out: the size fit's boxes)
         self.body = _Points(self.points_ship_m[:n_body])
+        #: the hull alone (the same for both layouts: the correction's ``hull_bottom`` anchor)
+        self.hull = _Points(self.points_ship_m[:n_hull])
         #: boxes (lo, hi) a dive can strike: the hull (its bow taper ignored) and the solid superstructure
         #: (the mast is too thin to count on)
         self.solid_boxes_ship_m = [(np.array([-0.5 * L, -0.5 * W, 0.0]), np.array([0.5 * L, 0.5 * W, hh]))] + [
@@ -572,7 +581,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
                          headings_when_unknown: int = 8, boxes_px: np.ndarray | None = None,
                          courses_weights: tuple[np.ndarray, np.ndarray] | None = None,
-                         spread: bool = False, scale=None):
+                         spread: bool = False, scale=None, anchor: str = "centre"):
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
     ``ref_enu_m``: the ship's waterline centre (estimated); the tracked point is
@@ -587,7 +596,8 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     instead of ``headings_when_unknown`` equal ones. ``spread``: return ``(offset, cov)`` instead, ``cov``
     (2 x 2, px^2) the weighted covariance of the offsets over those headings: how far the averaged offset can
     be from the one of the ship's real heading (zeros for one known course); ``None`` as above. ``scale``:
-    the outline's (:func:`predicted_box_px`; ``boxes_px`` must be of it too).
+    the outline's (:func:`predicted_box_px`; ``boxes_px`` must be of it too). ``anchor``: ``"centre"``, or
+    ``"bottom"``: the v offset is of the box's lower edge (``v_max``), the u offset still of its centre.
     """
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     ref = np.asarray(ref_enu_m, dtype=float)
@@ -604,6 +614,8 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if not np.isfinite(b).all():
             return None
         offsets = 0.5 * (b[:, 0:2] + b[:, 2:4]) - uv_tracked  # (n, 2): the box centres' (u, v) offsets
+        if anchor == "bottom":
+            offsets[:, 1] = b[:, 3] - uv_tracked[1]
         mean = _weighted_mean_rows(offsets, weights)
         return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean
     if course_enu_rad is not None:
@@ -618,7 +630,8 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
             predicted_box_px(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref, course, scale)
         if box is None or not np.all(np.isfinite(box)):
             return None
-        offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0], 0.5 * (box[1] + box[3]) - uv_tracked[1]))
+        offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0],
+                        (box[3] if anchor == "bottom" else 0.5 * (box[1] + box[3])) - uv_tracked[1]))
     offsets = np.array(offsets)
     mean = _weighted_mean_rows(offsets, weights)
     return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean

@@ -1093,3 +1093,103 @@ def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
     n = len(errs[True]) // 2  # the second time round, the layout decided
     fit_err, class_err = np.mean(errs[True][n:]), np.mean(errs[False][n:])
     assert fit_err < 0.8 * class_err, (fit_err, class_err)
+
+
+def test_the_hull_s_lower_edge_offset_is_the_hull_box_s_bottom():
+    """``anchor="bottom"``: the u offset is the box centre's, the v offset the box's lower edge's, both against
+    the tracked point's image; for one course and averaged over several."""
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    hull = ShipOutline(ShipModelConfig()).hull
+    ship = Ship(TargetConfig(heading_deg=40.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    cp, Rc, _ = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 400.0, 40.0, 70.0)
+    h = UkfConfig().target_plane_height_m
+    p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+    tracked = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+    courses = np.radians([10.0, 50.0, 200.0])
+    boxes = predicted_boxes_px(hull, fsw_cam, cp, Rc, np.zeros(3), courses)
+    for i, c in enumerate(courses):
+        off = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), float(c), h, anchor="bottom")
+        centre = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), float(c), h)
+        assert off[0] == pytest.approx(centre[0])
+        assert off[1] == pytest.approx(boxes[i, 3] - tracked[1])
+        assert off[1] > centre[1] + 5.0  # the lower edge lies below the centre
+    w = np.array([0.2, 0.5, 0.3])
+    mean = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), None, h, boxes_px=boxes,
+                                courses_weights=(courses, w), anchor="bottom")
+    assert mean[1] == pytest.approx(float(w @ (boxes[:, 3] - tracked[1])))
+
+
+@pytest.mark.parametrize("elevation_deg", [30.0, 50.0])
+def test_the_hull_s_lower_edge_does_not_see_the_superstructure(elevation_deg):
+    """Two ships of the class's hull and size, one with its superstructure aft (the class's layout), one with it
+    forward: from a dive's views all round, the box centres corrected with the class's whole outline differ
+    between them by several pixels on average (the superstructure's place moves the box centre), the fixes
+    from the hull's lower edge by about 2 px (the hulls' bows taper a little differently; the ray cast's
+    box edges are quantised to its stride), and the fixes from the hull's lower edge land within the stride
+    of the tracked point's image for both."""
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    h = UkfConfig().target_plane_height_m
+    heading = 40.0
+    course = math.radians(90.0 - heading)
+    scenes = []
+    for kind in ("bridge_aft", "bridge_forward"):
+        ship = Ship(TargetConfig(type=kind, heading_deg=heading))
+        scenes.append((Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh), Pose(*reversed(ship.pose(0.0)))))
+    diff_centre, diff_bottom, err_bottom = [], [], []
+    for az in range(0, 360, 20):
+        fixes = []
+        for cam, pose in scenes:
+            cp, Rc, frame = _look_from(cam, pose, 350.0, elevation_deg, az + 2.5)
+            b = frame.bbox_px
+            centre = np.array([0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])])
+            oc = box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), course, h)
+            ob = box_centre_offset_px(outline.hull, fsw_cam, cp, Rc, np.zeros(3), course, h, anchor="bottom")
+            bottom = np.array([centre[0], b[3]]) - ob
+            p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+            tracked = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+            err_bottom.append(float(np.hypot(*(bottom - tracked))) / frame.stride_px)
+            fixes.append((centre - oc, bottom))
+        diff_centre.append(float(np.hypot(*(fixes[0][0] - fixes[1][0]))))
+        diff_bottom.append(float(np.hypot(*(fixes[0][1] - fixes[1][1]))))
+    assert np.mean(diff_centre) > 3.0, diff_centre
+    assert np.mean(diff_bottom) < 2.5, diff_bottom  # 1.7 and 1.9 px (the centres: 9.2 and 4.6 px)
+    assert np.mean(diff_bottom) < 0.5 * np.mean(diff_centre)
+    assert np.max(err_bottom) < 1.5, err_bottom
+
+
+def test_the_dive_s_fix_blends_the_hull_s_lower_edge_in():
+    """``anchor: blend_in_dive``: the perception's fix is the box centre corrected with the whole outline until
+    the mission says the dive has begun (``in_dive``), then the mean of that and the fix from the hull's lower
+    edge; ``box_centre`` (the default) keeps the first in the dive, ``hull_bottom_in_dive`` takes the second."""
+    from controllers.ukf import CameraMotion
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 25.0)
+    course = math.atan2(vel[1], vel[0])
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
+    cp, Rc, frame = _look_from(cam, pose, 400.0, 40.0, 100.0)
+    b = frame.bbox_px
+    outline = ShipOutline(ShipModelConfig())
+    c = np.array([0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])])
+    by_centre = c - box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), course, h)
+    by_bottom = np.array([c[0], b[3]]) - box_centre_offset_px(outline.hull, fsw_cam, cp, Rc, np.zeros(3), course,
+                                                              h, anchor="bottom")
+    assert np.hypot(*(by_centre - by_bottom)) > 1.0  # (the two differ, so the test tells them apart)
+    motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+    meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
+                        det_valid=True, det_u_px=float(c[0]), det_v_px=float(c[1]), det_bbox_px=b)
+
+    def fix(anchor, in_dive):
+        cfg = ShipModelConfig(anchor=anchor, size_fit=SizeFitConfig(enabled=False))
+        perc = _perception(ShipModel(cfg, fsw_cam))
+        perc.in_dive = in_dive
+        f = perc.step(meas, motion, prior)
+        assert f.use and not f.reason
+        return np.array([f.u_px, f.v_px])
+
+    np.testing.assert_allclose(fix("blend_in_dive", False), by_centre, atol=1e-6)
+    np.testing.assert_allclose(fix("blend_in_dive", True), 0.5 * (by_centre + by_bottom), atol=1e-6)
+    np.testing.assert_allclose(fix("box_centre", True), by_centre, atol=1e-6)
+    assert ShipModelConfig().anchor == "box_centre"
+    np.testing.assert_allclose(fix("hull_bottom_in_dive", True), by_bottom, atol=1e-6)
+    np.testing.assert_allclose(fix("hull_bottom_in_dive", False), by_centre, atol=1e-6)
