@@ -232,7 +232,9 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     m["impact_time_s"] = float(st["t_s"][-1]) if ended else math.nan
     try:
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
-    except Exception:  # a log written by another version: no geometry to score against
+    except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({first[:160]})"
         return
     ship = _LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
     t = st["t_s"]

@@ -272,6 +272,22 @@ def test_flying_into_the_ship_ends_the_run_as_a_hit(tmp_path):
     assert m["impact_time_s"] == pytest.approx(result.sim_time_s, abs=1e-6)
 
 
+def test_impact_metrics_left_out_of_another_version_s_log_say_so(tmp_path):
+    """A log whose scenario this version cannot read (a key it does not know) still gets its other metrics;
+    the impact metrics (miss, hit, angles) are left out, and an ``impact_metrics`` entry says why."""
+    from fwsim.log.reader import read_log
+    over = {"initial.pos_enu_m": [-150.0, 0.0, 16.0], "initial.flight_path_deg": -4.0, "target.speed_m_s": 0.0,
+            "controllers.script": [{"t_s": 0, "rates": {"airspeed_m_s": 22}}]}
+    result = fly(CHECKOUT, tmp_path, duration_s=3, **over)
+    log = read_log(result.log_path)
+    assert "impact_metrics" not in compute_metrics(log) and "miss_distance_m" in compute_metrics(log)
+    log.effective_scenario_text = log.effective_scenario_text + "\nfrom_a_later_version: 1\n"
+    m = compute_metrics(log)
+    assert "miss_distance_m" not in m and "flight_time_s" in m
+    assert m["impact_metrics"].startswith("left out: the log's scenario does not read with this fwsim version")
+    assert "from_a_later_version" in m["impact_metrics"], m["impact_metrics"]
+
+
 def test_missing_the_ship_is_not_a_hit(tmp_path):
     over = {"initial.pos_enu_m": [-150.0, 80.0, 16.0], "initial.flight_path_deg": -4.0, "target.speed_m_s": 0.0,
             "controllers.script": [{"t_s": 0, "rates": {"airspeed_m_s": 22}}]}
