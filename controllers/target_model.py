@@ -60,8 +60,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from controllers.camera_model import PinholeCamera, translation_rates
+from controllers.camera_model import PinholeCamera, depth_on_plane, translation_rates
 from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
+from controllers.ukf import ground_from_pixel_jacobian
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
@@ -896,15 +897,16 @@ class LayoutFit:
         self._hi += 1
 
     def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
-        """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v) or None."""
+        """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v: m per px,
+        :func:`controllers.ukf.ground_from_pixel_jacobian`) or None where the ray does not come down to it
+        (:func:`~controllers.camera_model.depth_on_plane`)."""
         cam = self.camera
-        out = []
-        for du, dv in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)):
-            d = R @ np.array([(uv[0] + du - cam.cx) / cam.fx, (uv[1] + dv - cam.cy) / cam.fy, 1.0])
-            if not d[2] < -1e-6 or not cam_pos[2] > plane_z:
-                return None
-            out.append((cam_pos + ((plane_z - cam_pos[2]) / d[2]) * d)[:2])
-        return out[0], out[1] - out[0], out[2] - out[0]
+        x1, x2 = (float(uv[0]) - cam.cx) / cam.fx, (float(uv[1]) - cam.cy) / cam.fy
+        Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), plane_z)
+        if not math.isfinite(Z):
+            return None
+        J = ground_from_pixel_jacobian(x1, x2, R, float(cam_pos[2]), plane_z, cam.fx, cam.fy)
+        return (cam_pos + Z * (R @ np.array([x1, x2, 1.0])))[:2], J[:2, 0], J[:2, 1]
 
     def misfits(self) -> tuple[float, float, int] | None:
         """(each layout's weighted sum of squares about its best track, the boxes in the window), or None."""
