@@ -303,12 +303,11 @@ class Perception:
         u_fix, v_fix = float(u) - float(off[0]), float(v) - float(off[1])
         share = self._bottom_share()
         if share > 0.0 and not why and np.isfinite(b).all():  # (a box off in size may be cut at its lower edge)
-            hb = predicted_boxes_px(self.ship.outline.hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
-                                    courses, scale)
-            ob = None if not np.isfinite(hb).all() else box_centre_offset_px(
-                self.ship.outline.hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, None,
-                prior.tracked_height_m, boxes_px=hb, courses_weights=(courses, weights), scale=scale,
-                anchor="bottom")
+            hull = self.ship.outline.hull
+            hb = predicted_boxes_px(hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, scale)
+            ob = box_centre_offset_px(hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, None,
+                                      prior.tracked_height_m, boxes_px=hb, courses_weights=(courses, weights),
+                                      scale=scale, anchor="bottom")  # (None when a box is not finite)
             if ob is not None:  # the hull's centre across, its lower edge down (ShipModelConfig.anchor)
                 u_b = float(u) - float(ob[0])
                 v_b = float(v) + 0.5 * (float(b[3]) - float(b[1])) - float(ob[1])

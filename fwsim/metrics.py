@@ -41,6 +41,7 @@ import numpy as np
 from fwsim import topics
 from fwsim.log import RunLog, read_log
 from fwsim.log.truth import interp_at
+from fwsim.yamlfile import short
 
 CONVERGED_STD_M = 5.0
 MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
@@ -233,8 +234,8 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     try:
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
     except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({first[:160]})"
+        why = short(exc, 160) or type(exc).__name__
+        m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
         return
     ship = _LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
     t = st["t_s"]
