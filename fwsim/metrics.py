@@ -30,6 +30,14 @@ inside the hull or superstructure. ``switch_time_s`` is the start of the last
 Phase 3 (the dive that ended the run); ``go_arounds`` counts the dives before
 it that did not close and went back to the loiter (``switch.go_around_m``,
 ``switch.go_around_stall_s``).
+
+The ship after the lock (``/camera/frame``, the ray-cast truth of each
+frame): ``target_in_fov_fraction_after_lock`` is the share of frames with
+the ship in the field of view; ``target_visible_fraction_after_lock`` the
+share in which it was also seen, some of its pixels not hidden by the UAV's
+own airframe (a bank or a pull that lifts the wing over the line of sight
+hides a ship that is in the field of view); ``target_hidden_longest_s_after_lock``
+the longest stretch between frames that saw it.
 """
 from __future__ import annotations
 
@@ -46,6 +54,17 @@ from fwsim.yamlfile import short
 CONVERGED_STD_M = 5.0
 MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
 PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
+
+
+def longest_gap_s(t_s, seen) -> float:
+    """The longest stretch, s, over which ``seen`` is false: from the last frame that saw (or the first
+    frame) to the next frame that sees (or the last frame). 0 when every frame sees."""
+    t = np.asarray(t_s, dtype=float)
+    ok = np.asarray(seen, dtype=bool)
+    if t.size == 0 or ok.all():
+        return 0.0
+    marks = np.concatenate(([t[0]], t[ok], [t[-1]]))
+    return float(np.max(np.diff(marks)))
 
 
 def _rms(x: np.ndarray) -> float:
@@ -283,9 +302,12 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         fr = log.table(topics.CAMERA_FRAME)
         after = fr["t_s"] >= lock_t
         if after.any():
-            m["target_in_fov_fraction_after_lock"] = float(np.mean(fr["in_fov"][after].astype(bool)))
-            m["occluded_frames_after_lock"] = float(np.sum(fr["in_fov"][after].astype(bool)
-                                                           & (fr["visible_px"][after] <= 0)))
+            in_fov = fr["in_fov"][after].astype(bool)
+            seen = in_fov & (fr["visible_px"][after] > 0)
+            m["target_in_fov_fraction_after_lock"] = float(np.mean(in_fov))
+            m["occluded_frames_after_lock"] = float(np.sum(in_fov & ~seen))
+            m["target_visible_fraction_after_lock"] = float(np.mean(seen))
+            m["target_hidden_longest_s_after_lock"] = longest_gap_s(fr["t_s"][after], seen)
     if topics.CAMERA_DETECTION in log.topics and "camera_width_px" in meta:
         det = log.table(topics.CAMERA_DETECTION)
         cx, cy = float(meta["camera_width_px"]) / 2, float(meta["camera_height_px"]) / 2

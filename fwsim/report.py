@@ -11,8 +11,9 @@ view it). The headline, also printed:
   percentile radius, not a fitted distribution);
 * the impact flight-path and heading errors: mean, standard deviation and the
   95th percentile of their magnitude;
-* the time in view after the lock, and the estimator's worst error after
-  convergence;
+* the time in view after the lock (in the field of view) and the time the ship
+  was seen (in view and not hidden behind the UAV's own airframe), and the
+  estimator's worst error after convergence;
 * failures and non-hits by reason.
 
 Figures: the miss in the ship's frame, histograms, each metric against each
@@ -82,6 +83,9 @@ class Report:
     outcomes: dict[str, int]  # failures and non-hits by reason
     dispersed: list[str] = field(default_factory=list)
     within_3m_3deg: float = math.nan  # share of runs that hit within 3 m of the aim point and 3 deg of both angles
+    # in view and not behind the airframe: mean, min, share of runs >= 0.99, the longest stretch hidden (worst run,
+    # s); NaN where the rows predate target_visible_fraction_after_lock
+    visible_after_lock: dict[str, float] = field(default_factory=dict)
 
     def headline(self) -> list[tuple[str, str]]:
         """(name, value) rows of the headline table."""
@@ -99,6 +103,11 @@ class Report:
         v = self.in_view_after_lock
         rows.append(("ship in view after lock", f"mean {100 * v['mean']:.1f} %, worst {100 * v['min']:.1f} %, "
                                                 f"{100 * v['share_99']:.0f} % of runs >= 99 %"))
+        v = self.visible_after_lock
+        if math.isfinite(v.get("mean", math.nan)):
+            rows.append(("ship seen after lock (in view, not behind the airframe)",
+                         f"mean {100 * v['mean']:.1f} %, worst {100 * v['min']:.1f} %, "
+                         f"{100 * v['share_99']:.0f} % of runs >= 99 %; longest hidden {v['longest_hidden_s']:.1f} s"))
         e = self.estimator_error_m
         rows.append(("estimator error after convergence (worst per run)",
                      f"median {e['median']:.1f} m, p90 {e['p90']:.1f} m, {100 * e['share_8m']:.0f} % of runs <= 8 m"))
@@ -131,6 +140,8 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                          "std": float(x.std(ddof=1)) if x.size > 1 else math.nan,
                          "p95_abs": _pct(np.abs(x), 95)}
     view = _finite(rows, "target_in_fov_fraction_after_lock")
+    seen = _finite(rows, "target_visible_fraction_after_lock")
+    hidden = _finite(rows, "target_hidden_longest_s_after_lock")
     est = _finite(rows, "ukf_pos_err_max_after_convergence_m")
     cover = _finite(rows, "ukf_pos_err_within_2std_fraction")
     # the runs with an estimate: one whose estimate never converged (its own std never stayed under 5 m) has no
@@ -149,7 +160,11 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
                            "within_2std_median": _pct(cover, 50),
                            "within_2std_min": float(cover.min()) if cover.size else math.nan},
         outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []),
-        within_3m_3deg=sum(1 for r in rows if within(r, 3.0, 3.0)) / n if n else math.nan)
+        within_3m_3deg=sum(1 for r in rows if within(r, 3.0, 3.0)) / n if n else math.nan,
+        visible_after_lock={"mean": float(seen.mean()) if seen.size else math.nan,
+                            "min": float(seen.min()) if seen.size else math.nan,
+                            "share_99": float(np.mean(seen >= 0.99)) if seen.size else math.nan,
+                            "longest_hidden_s": float(hidden.max()) if hidden.size else math.nan})
 
 
 def within(row: dict, miss_m: float, angle_deg: float) -> bool:

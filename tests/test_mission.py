@@ -24,6 +24,10 @@ def test_cbf_ablation_wing_hides_the_ship_only_without_the_cbf(direction, tmp_pa
     assert off["occluded_frames_phase2"] > 0 and off["partly_occluded_frames"] > 0
     assert on["occluded_frames_phase2"] == 0 and on["partly_occluded_frames"] == 0
     assert on["tilt_positive_s"] < off["tilt_positive_s"]
+    # the ship behind the wing is in the field of view but not seen: the view bar's metric counts it
+    assert off["target_visible_fraction_after_lock"] < off["target_in_fov_fraction_after_lock"]
+    assert off["target_hidden_longest_s_after_lock"] > 0.1
+    assert on["target_visible_fraction_after_lock"] == on["target_in_fov_fraction_after_lock"]
     for m in (on, off):
         assert m["lock_time_s"] < 1.0 and m["nmpc_fallbacks"] == 0
 

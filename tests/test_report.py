@@ -27,11 +27,14 @@ def _rows():
                      "miss_distance_m": miss, "miss_bow_m": miss, "miss_port_m": 0.0,
                      "impact_fpa_error_deg": [-1.0, 1.0, -2.0, 2.0][i], "impact_heading_error_deg": 0.5,
                      "target_in_fov_fraction_after_lock": [1.0, 1.0, 0.98, 1.0][i],
+                     "target_visible_fraction_after_lock": [1.0, 0.97, 0.98, 1.0][i],
+                     "target_hidden_longest_s_after_lock": [0.0, 5.2, 3.0, 0.0][i],
                      "ukf_pos_err_max_after_convergence_m": [3.0, 5.0, 9.0, 7.0][i],
                      "ukf_pos_err_within_2std_fraction": [0.9, 0.5, 0.2, 0.7][i],
                      "set.target.speed_m_s": float(i), "log": f"/tmp/logs/r{i}.mcap"})
     rows.append({"id": "r4", "status": "completed", "reason": "duration reached", "hit": 0.0,
                  "miss_distance_m": 30.0, "target_in_fov_fraction_after_lock": 0.5,
+                 "target_visible_fraction_after_lock": 0.5, "target_hidden_longest_s_after_lock": 100.0,
                  "set.target.speed_m_s": 9.0, "log": "/tmp/logs/r4.mcap"})
     rows.append({"id": "r5", "status": "failed", "reason": "", "error": "AirframeError: trim failed",
                  "set.target.speed_m_s": 2.0})
@@ -51,6 +54,13 @@ def test_summary_statistics_by_hand():
     fpa = rep.angle_errors["flight-path"]
     assert fpa["mean"] == pytest.approx(0.0) and fpa["std"] == pytest.approx(math.sqrt(10 / 3))
     assert rep.in_view_after_lock["share_99"] == pytest.approx(3 / 5) and rep.in_view_after_lock["min"] == 0.5
+    # seen (in view and not behind the airframe): r1 was in view all along but hidden 3 % of the time
+    seen = rep.visible_after_lock
+    assert seen["share_99"] == pytest.approx(2 / 5) and seen["min"] == 0.5 and seen["longest_hidden_s"] == 100.0
+    assert dict(rep.headline())["ship seen after lock (in view, not behind the airframe)"].startswith("mean 89.0 %")
+    old_rows = [{k: v for k, v in r.items() if not k.startswith("target_visible") and not k.startswith("target_hidden")}
+                for r in _rows()]
+    assert math.isnan(summarise(old_rows).visible_after_lock["share_99"])  # rows scored before the metric
     assert rep.estimator_error_m["share_8m"] == pytest.approx(3 / 4)
     # a run whose estimate never converged counts against the share, it does not drop out of it
     never = dict(_rows()[0], id="r6", ukf_pos_rmse_m=12.0)
@@ -88,11 +98,16 @@ def test_the_envelope_verdict_splits_by_estimator():
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
     rows = [dict(r, **{"set.controllers.estimator": "ct_ukf"}) for r in _rows()] + _rows()[:4]
-    table = {name: (n, shares, cover) for name, n, shares, cover in tool.verdict(rows, "set.controllers.estimator")}
+    table = {name: (n, shares, cover, fov)
+             for name, n, shares, cover, fov in tool.verdict(rows, "set.controllers.estimator")}
     assert table["ct_ukf"][0] == 6 and table["(the scenario's)"][0] == 4
     assert table["(the scenario's)"][2] == pytest.approx(0.6)  # median of 0.9, 0.5, 0.2, 0.7
     assert table["ct_ukf"][1][0] == pytest.approx(4 / 6) and table["(the scenario's)"][1][0] == 1.0
     assert table["(the scenario's)"][1][1] == pytest.approx(3 / 4)  # r3 misses by 4 m
+    # the view bar counts the ship seen (r1 hidden behind the airframe 3 % of the time), the last column the
+    # field of view alone (r2 out of it 2 %)
+    own = table["(the scenario's)"]
+    assert own[1][2] == pytest.approx(2 / 4) and own[3] == pytest.approx(3 / 4)
 
 
 def test_estimator_consistency_share_against_a_known_gaussian():
@@ -165,3 +180,15 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     errs = [tuple(float(v) for v in c.split(",")) for c in cells[7:10]]
     assert all(math.isfinite(b) and math.isfinite(p) and math.hypot(b, p) < 8.0 for b, p in errs), cells
     assert cells[10].endswith("%") and 0.0 < float(cells[10].rstrip(" %")) <= 100.0, cells
+
+
+def test_longest_hidden_stretch_by_hand():
+    """The longest stretch without a frame that sees the ship: from the last frame that saw it (or the first
+    frame) to the next that sees it (or the last frame)."""
+    from fwsim.metrics import longest_gap_s
+    t = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert longest_gap_s(t, [True] * 7) == 0.0
+    assert longest_gap_s(t, [True, False, False, True, True, False, True]) == 3.0  # seen at 0, then at 3
+    assert longest_gap_s(t, [False, False, True, True, True, True, False]) == 2.0  # from the start to 2
+    assert longest_gap_s(t, [True, True, True, True, False, False, False]) == 3.0  # 3 to the end
+    assert longest_gap_s(t, [False] * 7) == 6.0 and longest_gap_s([], []) == 0.0

@@ -7,7 +7,11 @@
     python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
-and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock; >= 90 %
+and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock (seen:
+in the field of view and not hidden behind the UAV's own airframe, ``target_visible_fraction_after_lock``;
+a further column gives the field of view alone, the bar as this tool counted it before 2026-11-26; rows
+scored before then lack the first: ``fwsim batch SPEC --out DIR --resume`` scores a batch's logs again
+without flying them); >= 90 %
 keep the estimator's horizontal error within 8 m after it has converged (its own std under 5 m; a run
 whose estimate never converges counts against this bar). A last
 column says whether that std is honest: the median run's share of estimates whose error is within twice
@@ -38,7 +42,8 @@ from fwsim.report import summarise, within
 WHY_TIMES_S = (5.0, 2.0)
 WHY_WINDOW_S = 5.0  # --why: the detections of the last this many seconds
 
-BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("in view >= 99 %", 0.95), ("estimate <= 8 m", 0.90))
+BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
+        ("estimate <= 8 m", 0.90))
 
 
 def _label(value) -> str:
@@ -47,9 +52,10 @@ def _label(value) -> str:
     return "(the scenario's)" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
 
 
-def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], float]]:
-    """(group, runs, [share per bar], the median run's share of estimates within 2 std of their error) for
-    each value of the column ``by``."""
+def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], float, float]]:
+    """(group, runs, [share per bar], the median run's share of estimates within 2 std of their error, the
+    share in the field of view >= 99 % of the time, the airframe's shadow not counted) for each value of the
+    column ``by``."""
     groups: dict[str, list[dict]] = defaultdict(list)
     for r in rows:
         groups[_label(r.get(by))].append(r)
@@ -57,8 +63,8 @@ def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], floa
     for name, rs in sorted(groups.items()):
         rep = summarise(rs, name)
         out.append((name, rep.runs, [rep.hits / rep.runs if rep.runs else math.nan, rep.within_3m_3deg,
-                                     rep.in_view_after_lock["share_99"], rep.estimator_error_m["share_8m"]],
-                    rep.estimator_error_m["within_2std_median"]))
+                                     rep.visible_after_lock["share_99"], rep.estimator_error_m["share_8m"]],
+                    rep.estimator_error_m["within_2std_median"], rep.in_view_after_lock["share_99"]))
     return out
 
 
@@ -168,17 +174,27 @@ def main(argv=None) -> int:
             return 2
     table = verdict(rows, args.by)
     print(f"| {args.by} | runs | " + " | ".join(f"{name} (bar {100 * bar:.0f} %)" for name, bar in BARS)
+          + " | in the field of view >= 99 % (the airframe's shadow not counted)"
           + " | estimate within 2 std, median run (honest: 86 % for a round error, up to 95 % for a long thin one) |")
-    print("|---|---|" + "---|" * (len(BARS) + 1))
-    ok = True
-    for name, n, shares, cover in table:
+    print("|---|---|" + "---|" * (len(BARS) + 2))
+    ok, unscored = True, False
+    for name, n, shares, cover, in_fov in table:
         cells = []
         for share, (_, bar) in zip(shares, BARS):
+            if not math.isfinite(share):
+                ok, unscored = False, True
+                cells.append("- (not scored)")
+                continue
             met = share >= bar - 1e-12
             ok &= met
             cells.append(f"{100 * share:.0f} %" + ("" if met else " (not met)"))
+        cells.append(f"{100 * in_fov:.0f} %" if math.isfinite(in_fov) else "-")
         cells.append(f"{100 * cover:.0f} %" if math.isfinite(cover) else "-")
         print(f"| {name} | {n} | " + " | ".join(cells) + " |")
+    if unscored:
+        print("\nnote: a bar is not scored: its rows predate the metric it needs (the ship seen: "
+              "target_visible_fraction_after_lock); `fwsim batch SPEC --out DIR --resume` scores the logs again "
+              "without flying them", file=sys.stderr)
     if args.why:
         head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s"] + [
             f"estimate error (bow, port) {dt:g} s before the end, m" for dt in WHY_TIMES_S] + [
