@@ -23,7 +23,8 @@ angle, both; or no hit), the estimate's horizontal error in the ship's frame (to
 5 s and 2 s before the end and at the end (the dive steers on it: a miss the estimate shares is the
 perception's or the estimator's, one it does not is the guidance's), and what became of the detections of
 the last 5 s (the share fused and the commonest reason for the rest; those of the planned coast of the
-last ~120 m, ``too_close``, left out). The ship's motion, type and speed come from the summary's dispersed columns.
+last ~120 m, ``too_close``, left out). The ship's motion, type and speed come from the summary's dispersed columns,
+and so does the longest stretch without the ship seen after the lock (out of view or behind the airframe).
 """
 from __future__ import annotations
 
@@ -133,11 +134,13 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             continue
         bar = _failed_bar(r)
         motion = r.get("set.target.motion")
+        hidden = r.get("target_hidden_longest_s_after_lock")
         cells = [str(r.get("id", "?")), bar, f"{r.get('miss_distance_m', math.nan):.2f}",
                  f"{r.get('miss_bow_m', math.nan):+.1f}, {r.get('miss_port_m', math.nan):+.1f}",
                  str(r.get("set.target.type", "-")), _label(motion) if motion is not None else "-",
                  f"{r['set.target.speed_m_s']:.1f}" if isinstance(r.get("set.target.speed_m_s"), (int, float))
-                 else "-"]
+                 else "-",
+                 f"{hidden:.1f}" if isinstance(hidden, (int, float)) and math.isfinite(hidden) else "-"]
         try:
             log = read_log(out_dir / r["log"])
             est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
@@ -196,7 +199,8 @@ def main(argv=None) -> int:
               "target_visible_fraction_after_lock); `fwsim batch SPEC --out DIR --resume` scores the logs again "
               "without flying them", file=sys.stderr)
     if args.why:
-        head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s"] + [
+        head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s",
+                "longest hidden after lock, s"] + [
             f"estimate error (bow, port) {dt:g} s before the end, m" for dt in WHY_TIMES_S] + [
             "estimate error (bow, port) at the end, m",
             f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest"]
