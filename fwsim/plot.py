@@ -377,6 +377,74 @@ def _pixel_errors(log: RunLog) -> Figure:
     return fig
 
 
+@figure("ship_visibility", needs=(topics.CAMERA_FRAME, topics.UAV_STATE, topics.TARGET_STATE),
+        title="The ship in the camera: seen, hidden behind the airframe, out of view")
+def _ship_visibility(log: RunLog) -> Figure:
+    """Top: the share of the ship's pixels the camera saw in each frame (0 out of view), the stretches in view
+    but wholly hidden by the UAV's own airframe shaded red, out of view grey. Bottom: where the ship lay in the
+    UAV's body frame (truth): its angle below the wing plane (the body x-y plane; negative above it) and its
+    azimuth off the nose. The camera hangs under the fuselage: the wing hides a ship above the plane to the
+    side, the nose one above it ahead."""
+    from fwsim.frames import dcm_enu_from_frd
+    from fwsim.metrics import longest_gap_s
+    fr, st, tg = log.table(topics.CAMERA_FRAME), log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
+    t = fr["t_s"]
+    if t.size < 2:
+        raise SkipFigure("fewer than two camera frames")
+    in_fov = fr["in_fov"].astype(bool)
+    seen = in_fov & (fr["visible_px"] > 0)
+    ship_px = np.maximum(fr["ship_px"].astype(float), 1.0)
+    share = np.where(in_fov, fr["visible_px"] / ship_px, 0.0)
+    fig, (a1, a2) = _figure(2, height=2.6)
+    a1.plot(t, 100.0 * share, lw=0.8, color="tab:blue", label="ship's pixels seen")
+    for mask, colour, label in ((in_fov & ~seen, "tab:red", "in view, hidden by the airframe"),
+                                (~in_fov, "0.6", "out of view")):
+        if mask.any():
+            a1.fill_between(t, 0.0, 100.0, where=mask, color=colour, alpha=0.3, step="mid", lw=0, label=label)
+    a1.set_ylabel("seen [% of pixels]")
+    a1.set_ylim(-2.0, 102.0)
+    lock_t = None
+    if log.topics.get(topics.FSW_STATUS):
+        fsw = log.table(topics.FSW_STATUS)
+        if "locked" in fsw and fsw["locked"].astype(bool).any():
+            lock_t = float(fsw["t_s"][np.argmax(fsw["locked"].astype(bool))])
+        if "phase" in fsw:
+            ph = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
+            for k in np.flatnonzero(np.diff(ph)) + 1:
+                for ax in (a1, a2):
+                    ax.axvline(fsw["t_s"][k], color="k", lw=0.6, ls=":")
+                a1.text(fsw["t_s"][k], 101.0, f" phase {ph[k]}", fontsize=7, va="top")
+    after = t >= (t[0] if lock_t is None else lock_t)
+    if after.any():
+        a1.set_title(f"{'no lock: all frames' if lock_t is None else 'after the lock'}: seen in "
+                     f"{100 * np.mean(seen[after]):.1f} % of the frames, in view in "
+                     f"{100 * np.mean(in_fov[after]):.1f} %; longest stretch unseen "
+                     f"{longest_gap_s(t[after], seen[after]):.1f} s", fontsize=9)
+    a1.legend(fontsize=7, loc="lower left")
+    pos = interp_at(t, st["t_s"], st["pos_enu_m"])
+    euler = _at(st["t_s"], st["euler_ned_rad"], t)
+    ship = interp_at(t, tg["t_s"], tg["pos_enu_m"])
+    below, az = np.full(t.size, np.nan), np.full(t.size, np.nan)
+    for k in range(t.size):
+        r = dcm_enu_from_frd(euler[k]).T @ (ship[k] - pos[k])
+        n = float(np.linalg.norm(r))
+        if n > 0.0:
+            below[k] = np.degrees(np.arcsin(np.clip(r[2] / n, -1.0, 1.0)))
+            az[k] = np.degrees(np.arctan2(r[1], r[0]))
+    a2.plot(t, below, lw=0.9, color="tab:green", label="ship below the wing plane [deg]")
+    a2.axhline(0.0, color="k", lw=0.5)
+    a2.set_ylabel("below the wing plane [deg]")
+    a2b = a2.twinx()
+    a2b.plot(t, az, lw=0.7, color="tab:purple", alpha=0.7, label="azimuth off the nose [deg]")
+    a2b.set_ylabel("azimuth off the nose [deg]")
+    a2b.set_ylim(-180.0, 180.0)
+    a2.legend(fontsize=7, loc="lower left")
+    a2b.legend(fontsize=7, loc="lower right")
+    a2.set_xlabel("sim time [s]")
+    a2.set_xlim(t[0], t[-1])
+    return fig
+
+
 @figure("target_estimate", needs=(topics.FSW_ESTIMATE, topics.TARGET_STATE), title="Target estimate vs truth, ±2σ")
 def _target_estimate(log: RunLog) -> Figure:
     est, tg = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)

@@ -116,3 +116,20 @@ def test_estimate_axes_clip_the_lock_transient():
     ax2 = Figure().subplots()
     _clip_transient(ax2, np.linspace(-1.0, 1.0, 100))  # nothing to clip: the axis is left alone
     assert not ax2.texts
+
+
+def test_the_ship_visibility_figure_states_the_runs_seen_share(mission_log, tmp_path):
+    """ship_visibility's title gives the share of the frames after the lock that saw the ship, as the metric
+    target_visible_fraction_after_lock scores it, and its longest stretch unseen; before any lock, of all
+    frames, and says so."""
+    from fwsim.metrics import compute_metrics
+    assert FIGURES["ship_visibility"].draw(read_log(mission_log)).axes[0].get_title().startswith("no lock")
+    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"duration_s": 20})
+    locked = run(scenario, text, tmp_path / "locked.mcap").log_path  # the search locks at ~13 s
+    m = compute_metrics(locked)
+    fig = FIGURES["ship_visibility"].draw(read_log(locked))
+    title = fig.axes[0].get_title()
+    assert title.startswith("after the lock"), title
+    assert f"seen in {100 * m['target_visible_fraction_after_lock']:.1f} % of the frames" in title, title
+    assert f"longest stretch unseen {m['target_hidden_longest_s_after_lock']:.1f} s" in title, title
+    assert len(fig.axes) == 3  # the share seen; the angle below the wing plane and, twinned, the azimuth
