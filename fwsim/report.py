@@ -223,7 +223,8 @@ def _miss_scatter(rows: list[dict], rep: Report) -> str:
 
 _HISTOGRAMS = (("miss_distance_m", "miss distance (m)"), ("impact_fpa_error_deg", "impact flight-path error (deg)"),
                ("impact_heading_error_deg", "impact heading error (deg)"),
-               ("ukf_pos_err_max_after_convergence_m", "estimator error after convergence, worst (m)"))
+               ("ukf_pos_err_max_after_convergence_m", "estimator error after convergence, worst (m)"),
+               ("target_hidden_longest_s_after_lock", "longest stretch unseen after lock (s)"))
 
 
 def _histograms(rows: list[dict]) -> str:
