@@ -56,6 +56,24 @@ MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss d
 PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
 
 
+def lock_time_s(log: RunLog) -> float:
+    """The time of the first ``/fsw/status`` tick with the target locked; NaN if it never locked."""
+    if topics.FSW_STATUS in log.topics:
+        fs = log.table(topics.FSW_STATUS)
+        if "locked" in fs:
+            locked = fs["locked"].astype(bool)
+            if locked.any():
+                return float(fs["t_s"][np.argmax(locked)])
+    return math.nan
+
+
+def seen_frames(frames) -> tuple[np.ndarray, np.ndarray]:
+    """(in the field of view, seen: in it and some of the ship's pixels not hidden by the UAV) per frame of a
+    ``/camera/frame`` table."""
+    in_fov = frames["in_fov"].astype(bool)
+    return in_fov, in_fov & (frames["visible_px"] > 0)
+
+
 def longest_gap_s(t_s, seen) -> float:
     """The longest stretch, s, over which ``seen`` is false: from the last frame that saw (or the first
     frame) to the next frame that sees (or the last frame). 0 when every frame sees."""
@@ -287,13 +305,7 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
 
 
 def _acquisition_metrics(log: RunLog, m: dict) -> None:
-    lock_t = math.nan
-    if topics.FSW_STATUS in log.topics:
-        fs = log.table(topics.FSW_STATUS)
-        if "locked" in fs:
-            locked = fs["locked"].astype(bool)
-            if locked.any():
-                lock_t = float(fs["t_s"][np.argmax(locked)])
+    lock_t = lock_time_s(log)
     m["lock_time_s"] = lock_t
     if math.isnan(lock_t):
         return
@@ -302,8 +314,7 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         fr = log.table(topics.CAMERA_FRAME)
         after = fr["t_s"] >= lock_t
         if after.any():
-            in_fov = fr["in_fov"][after].astype(bool)
-            seen = in_fov & (fr["visible_px"][after] > 0)
+            in_fov, seen = (x[after] for x in seen_frames(fr))
             m["target_in_fov_fraction_after_lock"] = float(np.mean(in_fov))
             m["occluded_frames_after_lock"] = float(np.sum(in_fov & ~seen))
             m["target_visible_fraction_after_lock"] = float(np.mean(seen))

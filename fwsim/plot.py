@@ -17,6 +17,7 @@ global backend), so plotting works in any process and thread.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -386,13 +387,12 @@ def _ship_visibility(log: RunLog) -> Figure:
     azimuth off the nose. The camera hangs under the fuselage: the wing hides a ship above the plane to the
     side, the nose one above it ahead."""
     from fwsim.frames import dcm_enu_from_frd
-    from fwsim.metrics import longest_gap_s
+    from fwsim.metrics import lock_time_s, longest_gap_s, seen_frames
     fr, st, tg = log.table(topics.CAMERA_FRAME), log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
     t = fr["t_s"]
     if t.size < 2:
         raise SkipFigure("fewer than two camera frames")
-    in_fov = fr["in_fov"].astype(bool)
-    seen = in_fov & (fr["visible_px"] > 0)
+    in_fov, seen = seen_frames(fr)
     ship_px = np.maximum(fr["ship_px"].astype(float), 1.0)
     share = np.where(in_fov, fr["visible_px"] / ship_px, 0.0)
     fig, (a1, a2) = _figure(2, height=2.6)
@@ -403,20 +403,19 @@ def _ship_visibility(log: RunLog) -> Figure:
             a1.fill_between(t, 0.0, 100.0, where=mask, color=colour, alpha=0.3, step="mid", lw=0, label=label)
     a1.set_ylabel("seen [% of pixels]")
     a1.set_ylim(-2.0, 102.0)
-    lock_t = None
+    lock_t = lock_time_s(log)
     if log.topics.get(topics.FSW_STATUS):
         fsw = log.table(topics.FSW_STATUS)
-        if "locked" in fsw and fsw["locked"].astype(bool).any():
-            lock_t = float(fsw["t_s"][np.argmax(fsw["locked"].astype(bool))])
         if "phase" in fsw:
             ph = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
             for k in np.flatnonzero(np.diff(ph)) + 1:
                 for ax in (a1, a2):
                     ax.axvline(fsw["t_s"][k], color="k", lw=0.6, ls=":")
                 a1.text(fsw["t_s"][k], 101.0, f" phase {ph[k]}", fontsize=7, va="top")
-    after = t >= (t[0] if lock_t is None else lock_t)
+    locked = math.isfinite(lock_t)
+    after = t >= (lock_t if locked else t[0])
     if after.any():
-        a1.set_title(f"{'no lock: all frames' if lock_t is None else 'after the lock'}: seen in "
+        a1.set_title(f"{'after the lock' if locked else 'no lock: all frames'}: seen in "
                      f"{100 * np.mean(seen[after]):.1f} % of the frames, in view in "
                      f"{100 * np.mean(in_fov[after]):.1f} %; longest stretch unseen "
                      f"{longest_gap_s(t[after], seen[after]):.1f} s", fontsize=9)

@@ -152,19 +152,21 @@ def summarise(rows: list[dict], name: str = "", dispersed: list[str] | None = No
         name=name, runs=n, completed=sum(1 for r in rows if r.get("status") == "completed"), hits=hits,
         hit_probability=hits / n if n else math.nan, hit_interval_95=wilson_interval(hits, n),
         cep50_m=_pct(miss, 50), cep90_m=_pct(miss, 90), angle_errors=angles,
-        in_view_after_lock={"mean": float(view.mean()) if view.size else math.nan,
-                            "min": float(view.min()) if view.size else math.nan,
-                            "share_99": float(np.mean(view >= 0.99)) if view.size else math.nan},
+        in_view_after_lock=_view_shares(view),
         estimator_error_m={"median": _pct(est, 50), "p90": _pct(est, 90),
                            "share_8m": float(np.sum(est <= 8.0)) / estimated if estimated else math.nan,
                            "within_2std_median": _pct(cover, 50),
                            "within_2std_min": float(cover.min()) if cover.size else math.nan},
         outcomes=dict(Counter(_outcome(r) for r in rows).most_common()), dispersed=list(dispersed or []),
         within_3m_3deg=sum(1 for r in rows if within(r, 3.0, 3.0)) / n if n else math.nan,
-        visible_after_lock={"mean": float(seen.mean()) if seen.size else math.nan,
-                            "min": float(seen.min()) if seen.size else math.nan,
-                            "share_99": float(np.mean(seen >= 0.99)) if seen.size else math.nan,
-                            "longest_hidden_s": float(hidden.max()) if hidden.size else math.nan})
+        visible_after_lock=dict(_view_shares(seen),
+                                longest_hidden_s=float(hidden.max()) if hidden.size else math.nan))
+
+
+def _view_shares(x: np.ndarray) -> dict[str, float]:
+    """mean, min and the share of runs >= 0.99 of per-run fractions of the time (NaN without any)."""
+    return {"mean": float(x.mean()) if x.size else math.nan, "min": float(x.min()) if x.size else math.nan,
+            "share_99": float(np.mean(x >= 0.99)) if x.size else math.nan}
 
 
 def within(row: dict, miss_m: float, angle_deg: float) -> bool:
