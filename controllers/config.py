@@ -834,6 +834,51 @@ TerminalChoice = Annotated[BlockChoice, _checked("terminal", "bpng")]
 PointingChoice = Annotated[BlockChoice, _checked("pointing", "ibvs")]
 
 
+# --------------------------------------------------------------------------- the UAV's own airframe
+
+
+def _box_sides(box: list[float]) -> list[float]:
+    if not all(math.isfinite(x) for x in box):
+        raise ValueError("a box's sides must be finite")
+    if not (box[0] < box[1] and box[2] < box[3] and box[4] < box[5]):
+        raise ValueError("a box is [x0, x1, y0, y1, z0, z1] with x0 < x1, y0 < y1 and z0 < z1")
+    return box
+
+
+_Box6 = Annotated[list[float], Field(min_length=6, max_length=6), AfterValidator(_box_sides)]
+
+
+class AirframeConfig(StrictModel):
+    """The UAV's own shape as the flight software knows it (a priori, as it knows the ship class): the parts
+    that can stand between its camera and the ship (``controllers.airframe``). Body FRD, metres, origin at
+    the CG; the camera sits at the gimbal's mount offset. The defaults are the fwuav's (fuselage 1.0 m x
+    0.12 m, high wing of 2.4 m span and 0.146 m chord, tails 0.6 m aft)."""
+
+    enabled: bool = Field(
+        True, description="predict the ship's box with the part the airframe hides removed (the box-centre "
+                          "correction then subtracts the centre of the box a detector sees); false: the whole "
+                          "ship's box, as if the airframe were not there")
+    fuselage_x_m: list[float] = Field(
+        default_factory=lambda: [-0.65, 0.35], min_length=2, max_length=2,
+        description="the fuselage cylinder's tail and nose, body x (forward), m")
+    fuselage_radius_m: float = Field(0.06, ge=0, le=5, description="the fuselage cylinder's radius (0: none), m")
+    boxes_frd_m: list[_Box6] = Field(
+        default_factory=lambda: [[-0.0958, 0.05, -1.2, 1.2, -0.069, -0.051],  # wing
+                                 [-0.6783, -0.5558, -0.2449, 0.2449, -0.004, 0.004],  # horizontal tail
+                                 [-0.6925, -0.5511, -0.004, 0.004, -0.2721, -0.05]],  # vertical tail
+        max_length=32, description="the other parts as boxes [x0, x1, y0, y1, z0, z1], body FRD, m")
+    grid_cells: int = Field(
+        96, ge=8, le=1000, description="a box the airframe may cut is drawn on a grid of this many cells "
+                                       "across its longer side (the cut's resolution)")
+
+    @field_validator("fuselage_x_m")
+    @classmethod
+    def _fuselage(cls, v: list[float]) -> list[float]:
+        if not (all(math.isfinite(x) for x in v) and v[0] < v[1]):
+            raise ValueError("must be [tail, nose] with tail < nose")
+        return v
+
+
 # --------------------------------------------------------------------------- the whole flight software
 
 
@@ -868,6 +913,7 @@ class Controllers(StrictModel):
     target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
     detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
+    airframe: AirframeConfig = Field(default_factory=AirframeConfig)
 
     @model_validator(mode="after")
     def _script(self):

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers.airframe import AirframeShadow
 from controllers.blocks import NO_LOITER, BlockContext, Recorder, build_block
 from controllers.camera_model import PinholeCamera, camera_motion
 from controllers.config import Controllers
@@ -69,7 +70,8 @@ class FlightSoftware:
         ship = ShipModel(cfg.target_model, camera, cfg.detection_gate.edge_px)
         ctx = BlockContext(cfg, camera, self.mount, ship, self.recorder, initial_cfg)
         self.navigation = Navigation(cfg.navigation)
-        self.perception = Perception(cfg.detection_gate, cfg.acquisition, ship, camera, self.recorder)
+        airframe = AirframeShadow(cfg.airframe, camera, self.mount) if cfg.airframe.enabled else None
+        self.perception = Perception(cfg.detection_gate, cfg.acquisition, ship, camera, self.recorder, airframe)
         self.estimation = Estimation(build_block("estimator", cfg.estimator, ctx, search_dirs),
                                      cfg.detection_gate.min_range_m, cfg.acquisition.lock_detections, self.recorder)
         loiter = None if cfg.after_lock.use == NO_LOITER else \

@@ -26,7 +26,12 @@ Per tick (:meth:`Perception.step`):
    the mission). The superstructure, the part of a ship the class is likeliest
    to have wrong, shows up and inward of the hull's near lower edge, so that
    fix does not see it; it leans on the hull's size (the size fit's) instead. A
-   box off in size (it may be cut at that edge) keeps the centre's fix. A box whose width or
+   box off in size (it may be cut at that edge) keeps the centre's fix. The
+   predicted boxes are those a detector would see: clipped to the image, and
+   (``controllers.airframe``, ``airframe.enabled``, the default) less the part
+   of the ship the UAV's own airframe hides from the camera, so that a box the
+   fuselage or wing cuts is corrected by the centre of the cut box (and sized
+   against it), not of the whole ship. A box whose width or
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
@@ -77,9 +82,9 @@ import numpy as np
 from controllers.camera_model import CameraMotion, PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
 from controllers.messages import DetectionFix, FusionReason, TargetState
-from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px
+from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px, projected_points_px
 from fwsim import topics
-from fwsim.frames import dcm_enu_from_frd
+from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd
 from fwsim.messages import Measurements
 
 __all__ = ["Perception", "Lock"]
@@ -128,8 +133,9 @@ class Perception:
     """Detections -> :class:`DetectionFix` (corrected box centre + decision); see the module text."""
 
     def __init__(self, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship: ShipModel,
-                 camera: PinholeCamera, recorder=None):
+                 camera: PinholeCamera, recorder=None, airframe=None):
         self.cfg = gate
+        self.airframe = airframe  # controllers.airframe.AirframeShadow, or None: boxes not cut by the airframe
         self.lock = Lock(acquisition)
         self.ship = ship
         self.camera = camera
@@ -248,6 +254,8 @@ class Perception:
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
+            if np.isfinite(boxes).all() and self.airframe is not None:
+                boxes = self._cut_by_airframe(nav, cam, ref, courses, scale, boxes)
             if not np.isfinite(boxes).all():
                 boxes = None
             else:
@@ -329,6 +337,34 @@ class Perception:
         tol, tol_px = self.cfg.box_size_tolerance, self.cfg.box_size_tolerance_px
         big = np.asarray(sizes, dtype=float).max(axis=0)
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
+
+    def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, scale,
+                         boxes: np.ndarray) -> np.ndarray:
+        """The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
+        the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see. A course
+        whose whole ship the airframe would hide keeps its box (the detection says the ship is not where
+        that predicts)."""
+        pan, tilt = float(nav.pan_rad), float(nav.tilt_rad)
+        if not (math.isfinite(pan) and math.isfinite(tilt)):
+            return boxes
+        R = R_frd_from_cam(pan, tilt)
+        air = self.airframe
+        union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
+        if not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
+            return boxes
+        out = boxes.copy()
+        outline = self.ship.outline
+        several = len(boxes) > 1
+        for i, course in enumerate(np.asarray(courses, dtype=float).tolist()):
+            if several and not air.may_hide(R, boxes[i]):
+                continue
+            pts = projected_points_px(outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, course, scale)
+            if pts is None:
+                continue
+            cut = air.cut_box(R, boxes[i], [pts[s] for s in outline.parts], checked=True)
+            if np.isfinite(cut).all():
+                out[i] = cut
+        return out
 
     def _clear_of_airframe(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> bool:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;

@@ -36,10 +36,12 @@ across it (the UKF's error, not a course: ships move along their axis).
 A ship of the class's layout but another size is learnt from its boxes
 (:class:`ShipSize`, ``size_fit``): its length, beam and height scale the
 outline the correction projects once enough boxes have been seen at a known
-heading. What it does not model: the UAV's own wing hiding part of the ship
-(the box shrinks; the correction then over- or under-shoots until the wing
-clears), and a ship of another layout than the class's (the fit then finds
-the sizes that best explain the boxes with the class's layout).
+heading. The UAV's own airframe hiding part of the ship is modelled by the
+perception (``controllers.airframe``: the predicted boxes are cut as the
+detector's are, :func:`projected_points_px` and :attr:`ShipOutline.parts` give
+it the silhouette). What it does not model: a ship of another layout than the
+class's (the fit then finds the sizes that best explain the boxes with the
+class's layout).
 ``enabled: false`` turns it off (the paper's plain point model).
 
 ``anchor`` other than ``box_centre`` (``controllers.perception``) takes the
@@ -67,7 +69,7 @@ from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
            "ShipOutline", "box_centre_offset_px",
-           "predicted_box_px", "predicted_boxes_px"]
+           "predicted_box_px", "predicted_boxes_px", "projected_points_px"]
 
 #: points closer than this in front of the camera make the projection meaningless: no correction
 _MIN_DEPTH_M = 0.5
@@ -125,6 +127,9 @@ class ShipOutline:
         n_body = len(pts)
         pts += box(*mast)
         self.points_ship_m = np.array(pts, dtype=float)
+        #: the rows of each convex solid (hull, deckhouse, wheelhouse, funnel, mast): a silhouette is the union
+        #: of their projections' convex hulls (``controllers.airframe``)
+        self.parts = [slice(0, n_hull)] + [slice(k, k + 8) for k in range(n_hull, len(pts), 8)]
         #: the outline without the mast (a detector's box often leaves a thin mast out: the size fit's boxes)
         self.body = _Points(self.points_ship_m[:n_body])
         #: the hull alone (the same for both layouts: the correction's ``hull_bottom`` anchor)
@@ -182,6 +187,20 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
     if u0 > u1 or v0 > v1:
         return None
     return np.array([u0, v0, u1, v1])
+
+
+def projected_points_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,
+                        course_enu_rad: float, scale=None) -> np.ndarray | None:
+    """The outline's corner points in the image, (n, 2) pixels (not clipped), or None when one is not in front
+    of the camera (as :func:`predicted_box_px`)."""
+    R_ce = np.asarray(R_enu_from_cam, dtype=float).T
+    cs, sn = math.cos(course_enu_rad), math.sin(course_enu_rad)
+    R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])
+    pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
+    p = (pts @ R_es.T + (np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) @ R_ce.T
+    if (p[:, 2] < _MIN_DEPTH_M).any():
+        return None
+    return np.stack([camera.fx * p[:, 0] / p[:, 2] + camera.cx, camera.fy * p[:, 1] / p[:, 2] + camera.cy], axis=1)
 
 
 def predicted_boxes_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m,

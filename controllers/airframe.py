@@ -1,0 +1,210 @@
+"""The UAV's own airframe in its camera's image: which pixels it hides, and the boxes it cuts.
+
+A belly camera looking at a ship above its wing plane sees part of the ship
+through the fuselage, wing or tail: the detector's box is then the box of the
+ship's pixels the airframe leaves, not of the whole ship, and its centre moves
+off the ship's by up to half the part hidden. The dive is where this happens
+(BPNG turns the lift toward a ship abeam; README, "The ship seen, not only in
+the field of view"), at the ranges that decide the miss.
+
+:class:`AirframeShadow` predicts the same cut. It knows the airframe a priori,
+as the flight software knows the ship class (:class:`~controllers.config.AirframeConfig`:
+a fuselage cylinder along the body x axis and boxes for wing and tails, body
+FRD, origin at the CG), and the camera's place on it (the gimbal's mount
+offset and encoders). :meth:`AirframeShadow.cut_box` takes a predicted ship
+box and the ship's projected parts (convex solids), draws them on a grid over
+the box, removes the pixels whose rays through the camera meet the airframe,
+and returns the box of what is left: the box a detector would report had the
+ship been where the estimate puts it. The perception's box-centre correction
+then subtracts the centre of that box, as it already does for a box cut by the
+image border (:func:`controllers.target_model.predicted_box_px` clips to the
+image). A box no ray of which can meet the airframe is returned unchanged at
+the cost of a few dot products (:meth:`AirframeShadow.may_hide`): the airframe
+lies above the camera, so it hides only rays that climb in the body frame, and
+for the fwuav none that climbs less than 3.5 deg.
+
+Nothing here reads the simulated airframe (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.camera_model import PinholeCamera
+from controllers.config import AirframeConfig
+
+__all__ = ["AirframeShadow"]
+
+_SHIFT = 4  # cv2.fillConvexPoly's fractional bits: vertices placed to 1/16 of a grid cell
+_FAR = float(2**26)  # polygon coordinates (in 1/16 cells) clamped to this: int32 with room to spare
+_NEAR_M = 0.005  # a part reaching behind the camera is cut this far in front of it
+_FUSELAGE_SIDES = 24  # the fuselage cylinder as a prism of this many sides
+_CLIMB_MARGIN = 0.2  # may_hide's slack on the shallowest climb that meets the airframe
+_GRID5 = np.tile(np.linspace(0.0, 1.0, 5), 5)  # may_hide's 5 x 5 grid over a box: the columns' fractions
+_GRID5_ROWS = np.repeat(np.linspace(0.0, 1.0, 5), 5)  # and the rows'
+
+
+class AirframeShadow:
+    """The airframe's silhouette in the camera and the ship boxes it cuts (see the module text)."""
+
+    def __init__(self, cfg: AirframeConfig, camera: PinholeCamera, mount_offset_frd_m):
+        self.cfg = cfg
+        self.camera = camera
+        self.origin = np.asarray(mount_offset_frd_m, dtype=float).reshape(3)  # the camera, body FRD
+        boxes = np.asarray(cfg.boxes_frd_m, dtype=float).reshape(-1, 6)
+        # each part a convex solid given by its corners, body FRD: the boxes, and the fuselage as a prism of
+        # _FUSELAGE_SIDES sides round the cylinder (its faces' midpoints on the cylinder: the prism holds it)
+        self.parts: list[np.ndarray] = [np.array([(x, y, z) for x in b[0:2] for y in b[2:4] for z in b[4:6]])
+                                        for b in boxes]
+        x0, x1 = (float(x) for x in cfg.fuselage_x_m)
+        r = float(cfg.fuselage_radius_m)
+        if r > 0.0:
+            a = 2.0 * math.pi * (np.arange(_FUSELAGE_SIDES) + 0.5) / _FUSELAGE_SIDES
+            rc = r / math.cos(math.pi / _FUSELAGE_SIDES)  # the corners' radius
+            ring = np.stack([rc * np.cos(a), rc * np.sin(a)], axis=1)
+            self.parts.append(np.array([(x, y, z) for x in (x0, x1) for y, z in ring]))
+        # the shallowest climb (tan of the elevation over the body x-y plane) from the camera to a corner: a
+        # ray climbing less meets no part (each lies in the cone of its corners, and the rays climbing at
+        # least that much form a convex cone round the body's up axis); 0 when a part is not above the camera
+        climbs = [float(((self.origin[2] - p[:, 2]) / np.hypot(p[:, 0] - self.origin[0],
+                                                              p[:, 1] - self.origin[1])).min())
+                  for p in self.parts]
+        self._min_climb = max(0.0, min(climbs, default=math.inf))
+        self._last: tuple[bytes, list[np.ndarray]] = (b"", [])  # the last gimbal angles' silhouettes
+
+    # ------------------------------------------------------------------ the silhouette
+    def silhouettes(self, R_frd_from_cam: np.ndarray) -> list[np.ndarray]:
+        """Each part's silhouette in the image, a convex polygon (k, 2) in pixels (parts wholly behind the
+        camera left out). A convex solid's silhouette is the convex hull of its corners' projections; a part
+        reaching behind the camera is first cut at a plane ``_NEAR_M`` in front of it (its corners in front,
+        and where the segments between those and the ones behind cross the plane: the cut solid's corners
+        are among them)."""
+        R = np.asarray(R_frd_from_cam, dtype=float)
+        key = R.tobytes()
+        if key == self._last[0]:
+            return self._last[1]
+        c = self.camera
+        R_cf = R.T
+        out = []
+        for part in self.parts:
+            p = (part - self.origin) @ R_cf.T  # camera frame
+            front = p[:, 2] >= _NEAR_M
+            if not front.any():
+                continue
+            if not front.all():
+                a, b = p[front], p[~front]
+                t = (_NEAR_M - a[:, None, 2]) / (b[None, :, 2] - a[:, None, 2])  # (na, nb) along a -> b
+                cross = a[:, None, :] + t[..., None] * (b[None, :, :] - a[:, None, :])
+                p = np.vstack([a, cross.reshape(-1, 3)])
+            uv = np.stack([c.fx * p[:, 0] / p[:, 2] + c.cx, c.fy * p[:, 1] / p[:, 2] + c.cy], axis=1)
+            out.append(_hull(uv))
+        self._last = (key, out)
+        return out
+
+    def hidden(self, R_frd_from_cam: np.ndarray, u_px, v_px) -> np.ndarray:
+        """Whether the ray through each pixel (u_px, v_px: broadcast together) meets the airframe (bool, their
+        broadcast shape): inside a part's silhouette."""
+        u, v = np.broadcast_arrays(np.asarray(u_px, dtype=float), np.asarray(v_px, dtype=float))
+        hit = np.zeros(u.shape, dtype=bool)
+        for poly in self.silhouettes(R_frd_from_cam):
+            hit |= _inside(poly, u, v)
+        return hit
+
+    def may_hide(self, R_frd_from_cam: np.ndarray, box_px) -> bool:
+        """False when no ray through the box (u0, v0, u1, v1) climbs (over the body x-y plane) as steeply as
+        the shallowest ray that meets the airframe: the airframe is then not in the way. The box's rays are
+        sampled on a 5 x 5 grid and the climb allowed ``_CLIMB_MARGIN`` of slack for what falls between (a
+        ray's climb varies smoothly over a box no wider than the field of view)."""
+        if not self.cfg.enabled:
+            return False
+        if not self.parts:
+            return False
+        c = self.camera
+        u0, v0, u1, v1 = (float(x) for x in box_px)
+        x = ((u0 + (u1 - u0) * _GRID5) - c.cx) / c.fx  # (25,) the grid's normalised image coordinates
+        y = ((v0 + (v1 - v0) * _GRID5_ROWS) - c.cy) / c.fy
+        R = np.asarray(R_frd_from_cam, dtype=float)
+        dx = R[0, 0] * x + R[0, 1] * y + R[0, 2]  # body FRD
+        dy = R[1, 0] * x + R[1, 1] * y + R[1, 2]
+        dz = R[2, 0] * x + R[2, 1] * y + R[2, 2]
+        climb = -dz - self._min_climb * (1.0 - _CLIMB_MARGIN) * np.sqrt(dx * dx + dy * dy)
+        return bool(climb.max() >= 0.0)
+
+    # ------------------------------------------------------------------ boxes
+    def cut_box(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
+                ) -> np.ndarray:
+        """The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves.
+
+        ``parts_px``: the projected corner points (m, 2) of each convex solid of the ship; ``box_px`` their
+        box clipped to the image. Drawn on a grid of at most ``grid_cells`` cells across the box's longer
+        side. The box itself when the airframe cannot reach it or hides none of it; NaN (4,) when it hides
+        all of it."""
+        b = np.asarray(box_px, dtype=float)
+        if not np.isfinite(b).all() or not (checked or self.may_hide(R_frd_from_cam, b)):
+            return b
+        u0, v0, u1, v1 = b
+        polys = [q for q in self.silhouettes(R_frd_from_cam)
+                 if q[:, 0].max() >= u0 and q[:, 0].min() <= u1 and q[:, 1].max() >= v0 and q[:, 1].min() <= v1]
+        if not polys:
+            return b
+        import cv2  # OpenCV only where a box is cut
+
+        step = max(1.0, max(u1 - u0, v1 - v0) / float(self.cfg.grid_cells))
+        nu, nv = int(math.floor((u1 - u0) / step)) + 1, int(math.floor((v1 - v0) / step)) + 1
+        scale = float(1 << _SHIFT) / step
+
+        def draw(shapes) -> np.ndarray:
+            img = np.zeros((nv, nu), dtype=np.uint8)
+            for pts in shapes:
+                p = np.asarray(pts, dtype=float)
+                if len(p) < 3 or not np.isfinite(p).all():
+                    continue
+                # a silhouette far outside the grid, clamped (a convex polygon stays one, and covers the grid
+                # as it did)
+                q = np.clip((p - np.array([u0, v0])) * scale, -_FAR, _FAR)
+                cv2.fillConvexPoly(img, cv2.convexHull(np.round(q).astype(np.int32)), 1, lineType=cv2.LINE_8,
+                                   shift=_SHIFT)
+            return img > 0
+
+        drawn = draw(parts_px)
+        if not drawn.any():  # (a box too thin for the grid: nothing drawn) the box as it was
+            return b
+        air = draw(polys)
+        if not (drawn & air).any():  # the airframe hides none of the ship drawn
+            return b
+        seen = drawn & ~air
+        if not seen.any():
+            return np.full(4, np.nan)
+        # each side moved by as much as the grid's seen part stands in from the grid's whole ship: the
+        # grid's own rounding cancels
+        return b + step * (_grid_box(seen) - _grid_box(drawn))
+
+
+def _grid_box(mask: np.ndarray) -> np.ndarray:
+    """(first column, first row, last column, last row) of a mask's true cells."""
+    cols = np.flatnonzero(mask.any(axis=0))
+    rows = np.flatnonzero(mask.any(axis=1))
+    return np.array([cols[0], rows[0], cols[-1], rows[-1]], dtype=float)
+
+
+def _hull(uv: np.ndarray) -> np.ndarray:
+    """The convex hull of points (n, 2), as its corners (k, 2) in order round it."""
+    import cv2  # OpenCV only where the airframe may be in view
+
+    return cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2).astype(float)
+
+
+def _inside(poly: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Whether points (u, v) lie in a convex polygon (k, 2), its corners in order either way round (edges
+    included)."""
+    inside = np.ones(u.shape, dtype=bool)
+    k = len(poly)
+    if k < 3:
+        return np.zeros(u.shape, dtype=bool)
+    x, y = poly[:, 0], poly[:, 1]
+    turn = 1.0 if float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) >= 0.0 else -1.0
+    for i in range(k):
+        a, b = poly[i], poly[(i + 1) % k]
+        inside &= turn * ((b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0])) >= 0.0
+    return inside
