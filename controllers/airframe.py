@@ -131,6 +131,22 @@ class AirframeShadow:
         climb = -dz - self._min_climb * (1.0 - _CLIMB_MARGIN) * np.sqrt(dx * dx + dy * dy)
         return bool(climb.max() >= 0.0)
 
+    def touches(self, R_frd_from_cam: np.ndarray, box_px, margin_px: float = 0.0) -> bool:
+        """Whether the airframe's silhouette overlaps the box (u0, v0, u1, v1) grown by ``margin_px``: a
+        detected box it touches may be one the airframe cut (separating axes of each convex silhouette and
+        the box)."""
+        b = np.asarray(box_px, dtype=float)
+        if not np.isfinite(b).all():
+            return False
+        g = b + np.array([-margin_px, -margin_px, margin_px, margin_px])
+        if not self.may_hide(R_frd_from_cam, g):
+            return False
+        rect = np.array([[g[0], g[1]], [g[2], g[1]], [g[2], g[3]], [g[0], g[3]]])
+        for poly in self.silhouettes(R_frd_from_cam):
+            if len(poly) >= 3 and _overlap(poly, rect):
+                return True
+        return False
+
     # ------------------------------------------------------------------ boxes
     def cut_box(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
                 ) -> np.ndarray:
@@ -208,3 +224,15 @@ def _inside(poly: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         a, b = poly[i], poly[(i + 1) % k]
         inside &= turn * ((b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0])) >= 0.0
     return inside
+
+
+def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two convex polygons (k, 2) overlap (touching counts): no edge normal of either separates
+    them."""
+    for poly in (a, b):
+        edges = np.roll(poly, -1, axis=0) - poly
+        normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1)
+        pa, pb = a @ normals.T, b @ normals.T  # (ka, k), (kb, k): each polygon's extent along each normal
+        if ((pa.max(axis=0) < pb.min(axis=0)) | (pb.max(axis=0) < pa.min(axis=0))).any():
+            return False
+    return True

@@ -28,10 +28,12 @@ Per tick (:meth:`Perception.step`):
    fix does not see it; it leans on the hull's size (the size fit's) instead. A
    box off in size (it may be cut at that edge) keeps the centre's fix. The
    predicted boxes are those a detector would see: clipped to the image, and
-   (``controllers.airframe``, ``airframe.enabled``, the default) less the part
-   of the ship the UAV's own airframe hides from the camera, so that a box the
-   fuselage or wing cuts is corrected by the centre of the cut box (and sized
-   against it), not of the whole ship. A box whose width or
+   (``controllers.airframe``, ``airframe.enabled``, the default), when the
+   detected box touches the UAV's own airframe in the image, less the part of
+   the ship the airframe hides from the camera, so that a box the fuselage or
+   wing cuts is corrected by the centre of the cut box (and sized against it),
+   not of the whole ship. Such a box teaches the heading, layout and size fits
+   nothing (as one at the image border does not). A box whose width or
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
@@ -194,7 +196,10 @@ class Perception:
         h = prior.tracked_height_m
         pos, vel = prior.pos_enu_m, prior.vel_enu_m_s
         ref = np.array([pos[0], pos[1], pos[2] - h])
-        if gate != FusionReason.TOO_CLOSE:
+        # a box the UAV's airframe may have cut says nothing sure of the ship's shape or size: the heading,
+        # layout and size fits leave it out (as they leave out one at the image border)
+        cut = self._touches_airframe(nav)
+        if gate != FusionReason.TOO_CLOSE and not cut:
             layout = self.ship.layout
             switches = layout.switches
             status = self.ship.observe_box(nav.t_s, cam.pos_enu_m, cam.R_enu_from_cam, ref, nav.det_bbox_px, vel,
@@ -205,8 +210,17 @@ class Perception:
                 where = "at the other end from the class's" if layout.other_end else "where the class has it"
                 self._event(f"perception: the box centres put the superstructure {where} "
                             f"(probability of the other end {layout.p_other_end:.2f}): correcting with that layout")
-        u, v, pred, why, spread, doubt = self._corrected(nav, cam, prior, ref, fit_size=not gate)
+        u, v, pred, why, spread, doubt = self._corrected(nav, cam, prior, ref, fit_size=not gate and not cut,
+                                                         cut_by_airframe=cut)
         return u, v, pred, gate or why, spread, doubt
+
+    def _touches_airframe(self, nav: Measurements) -> bool:
+        """The detected box touches (within ``edge_px``) the UAV's airframe in the image
+        (:meth:`controllers.airframe.AirframeShadow.touches`)."""
+        pan, tilt = float(nav.pan_rad), float(nav.tilt_rad)
+        if self.airframe is None or not (math.isfinite(pan) and math.isfinite(tilt)):
+            return False
+        return self.airframe.touches(R_frd_from_cam(pan, tilt), nav.det_bbox_px, self.cfg.edge_px)
 
     def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
         """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
@@ -229,14 +243,17 @@ class Perception:
         return math.hypot(float(v[0]), float(v[1])) >= self.cfg.moving_speed_m_s
 
     def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray,
-                   fit_size: bool = False):
+                   fit_size: bool = False, cut_by_airframe: bool = False):
         """The box centre with the ship's box-centre offset removed (unchanged when the model is off or does
         not apply), the predicted box of the most likely heading, ``size_mismatch`` when no plausible
         heading explains the box's size (else ""), the offset's spread over the headings the ship may have
         (2 x 2, px^2; zeros when there is one, or no correction), and the centre's doubt ((u, v) px^2,
         :func:`_centre_doubt`; with ``size_mismatch_action: deweight``, else zeros). ``fit_size``: the box
         may teach the ship's size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is
-        sure); the correction and the size gate use the fitted outline once it is in use."""
+        sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
+        the detected box touches the UAV's airframe in the image; the predicted boxes are then cut as the
+        airframe would cut them (:meth:`_cut_by_airframe`; a box clear of it was not cut, whatever the
+        prediction says)."""
         tm = self.ship.cfg
         u, v = self._to_now(nav, cam, prior)
         if not tm.enabled:
@@ -254,7 +271,7 @@ class Perception:
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
-            if np.isfinite(boxes).all() and self.airframe is not None:
+            if cut_by_airframe and np.isfinite(boxes).all():
                 boxes = self._cut_by_airframe(nav, cam, ref, courses, scale, boxes)
             if not np.isfinite(boxes).all():
                 boxes = None

@@ -119,9 +119,79 @@ def test_a_box_the_airframe_cuts_is_predicted_cut():
     assert np.mean(cut_err < whole_err) >= 0.9
 
 
+def test_a_box_the_airframe_cut_touches_its_silhouette():
+    """Every ray-cast box the airframe cut touches the airframe's silhouette (the fits leave such boxes
+    out); most whole ones do not."""
+    shadow = _shadow()
+    cut = clear = whole = 0
+    for cp, Rc, R_fc, frame, course in _dive_views():
+        if not frame.visible_px:
+            continue
+        if frame.occluded_fraction >= 0.02:
+            assert shadow.touches(R_fc, frame.bbox_px, 6.0)
+            cut += 1
+        elif frame.occluded_fraction == 0.0:
+            whole += 1
+            clear += not shadow.touches(R_fc, frame.bbox_px, 6.0)
+    assert cut >= 15 and whole >= 20
+    assert clear >= 0.5 * whole
+
+
 def test_the_airframe_settings_are_checked():
     with pytest.raises(ValueError, match="x0 < x1"):
         AirframeConfig(boxes_frd_m=[[0.1, 0.0, -1, 1, -1, 1]])
     with pytest.raises(ValueError, match="tail < nose"):
         AirframeConfig(fuselage_x_m=[0.3, -0.6])
     assert Controllers.model_validate({"airframe": {"enabled": False}}).airframe.enabled is False
+
+
+def test_the_perception_corrects_a_cut_box_by_the_cut():
+    """A ship moving on a known course, seen out of a dive through the airframe's edge: the perception with
+    the airframe model puts the fix near the image of the tracked point; without it the fix is off by the
+    half of the ship the airframe hid. Whole boxes get the same fix either way."""
+    from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.messages import TargetState
+    from controllers.perception import Perception
+    from controllers.target_model import ShipModel
+    from controllers.ukf import CameraMotion, UkfConfig
+    from fwsim.messages import Measurements
+
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - 30.0)
+    vel = 6.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.05, h)
+
+    def perception(airframe):
+        p = Perception(DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0),
+                       AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam), fsw_cam,
+                       airframe=airframe)
+        p.lock.locked = True
+        return p
+
+    errs = {"cut": [], "whole": []}
+    for cp, Rc, R_fc, frame, _ in _dive_views():
+        if not frame.visible_px:
+            continue
+        kind = "cut" if 0.05 <= frame.occluded_fraction <= 0.9 else "whole" if frame.occluded_fraction == 0 else None
+        if kind is None:
+            continue
+        pan = math.atan2(R_fc[1, 2], R_fc[0, 2])  # the optical axis (camera z) in the body frame
+        tilt = math.atan2(-R_fc[2, 2], math.hypot(R_fc[0, 2], R_fc[1, 2]))
+        box = np.asarray(frame.bbox_px, dtype=float)
+        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), pan_rad=pan,
+                            tilt_rad=tilt, det_new=True, det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        row = []
+        for air in (_shadow(), None):
+            fix = perception(air).step(meas, motion, prior)
+            row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])) / (frame.stride_px + 1.0))
+        errs[kind].append(row)
+    cut, whole = np.array(errs["cut"]), np.array(errs["whole"])
+    assert len(cut) >= 15 and len(whole) >= 15
+    with_model, without = np.median(cut, axis=0)
+    assert with_model < 3.0 and without > 3.0 * with_model, (with_model, without)
+    assert np.allclose(whole[:, 0], whole[:, 1], atol=0.5)
