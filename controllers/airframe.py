@@ -11,17 +11,22 @@ the field of view"), at the ranges that decide the miss.
 as the flight software knows the ship class (:class:`~controllers.config.AirframeConfig`:
 a fuselage cylinder along the body x axis and boxes for wing and tails, body
 FRD, origin at the CG), and the camera's place on it (the gimbal's mount
-offset and encoders). :meth:`AirframeShadow.cut_box` takes a predicted ship
-box and the ship's projected parts (convex solids), draws them on a grid over
-the box, removes the pixels whose rays through the camera meet the airframe,
-and returns the box of what is left: the box a detector would report had the
-ship been where the estimate puts it. The perception's box-centre correction
-then subtracts the centre of that box, as it already does for a box cut by the
-image border (:func:`controllers.target_model.predicted_box_px` clips to the
-image). A box no ray of which can meet the airframe is returned unchanged at
-the cost of a few dot products (:meth:`AirframeShadow.may_hide`): the airframe
-lies above the camera, so it hides only rays that climb in the body frame, and
-for the fwuav none that climbs less than 3.5 deg.
+offset and encoders). Each part is a convex solid, so its silhouette is the
+convex hull of its corners' projections (:meth:`AirframeShadow.silhouettes`;
+a part reaching behind the camera is cut at a plane just in front of it
+first). :meth:`AirframeShadow.cut_box` takes a predicted ship box and the
+ship's projected parts (convex solids too), draws them and the airframe's
+silhouettes on a grid over the box, and returns the box of the ship's cells
+the airframe leaves: the box a detector would report had the ship been where
+the estimate puts it. The perception (``controllers.perception``) does this
+when the detected box touches the silhouette (:meth:`AirframeShadow.touches`),
+and its box-centre correction then subtracts the centre of the cut box, as it
+already does for a box cut by the image border
+(:func:`controllers.target_model.predicted_box_px` clips to the image). A box
+no ray of which can meet the airframe is returned unchanged at the cost of a
+few dot products (:meth:`AirframeShadow.may_hide`): the airframe lies above
+the camera, so it hides only rays that climb in the body frame, and for the
+fwuav none that climbs less than 3.5 deg.
 
 Nothing here reads the simulated airframe (DESIGN.md section 1).
 """
@@ -67,9 +72,11 @@ class AirframeShadow:
         # the shallowest climb (tan of the elevation over the body x-y plane) from the camera to a corner: a
         # ray climbing less meets no part (each lies in the cone of its corners, and the rays climbing at
         # least that much form a convex cone round the body's up axis); 0 when a part is not above the camera
-        climbs = [float(((self.origin[2] - p[:, 2]) / np.hypot(p[:, 0] - self.origin[0],
-                                                              p[:, 1] - self.origin[1])).min())
-                  for p in self.parts]
+        with np.errstate(divide="ignore", invalid="ignore"):  # (a corner straight above: +inf; at the camera: 0)
+            climbs = [float(np.nan_to_num((self.origin[2] - p[:, 2]) / np.hypot(p[:, 0] - self.origin[0],
+                                                                                p[:, 1] - self.origin[1]),
+                                          nan=0.0).min())
+                      for p in self.parts]
         self._min_climb = max(0.0, min(climbs, default=math.inf))
         self._last: tuple[bytes, list[np.ndarray]] = (b"", [])  # the last gimbal angles' silhouettes
 
