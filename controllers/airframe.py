@@ -45,9 +45,6 @@ _SHIFT = 4  # cv2.fillConvexPoly's fractional bits: vertices placed to 1/16 of a
 _FAR = float(2**26)  # polygon coordinates (in 1/16 cells) clamped to this: int32 with room to spare
 _NEAR_M = 0.005  # a part reaching behind the camera is cut this far in front of it
 _FUSELAGE_SIDES = 24  # the fuselage cylinder as a prism of this many sides
-_CLIMB_MARGIN = 0.2  # may_hide's slack on the shallowest climb that meets the airframe
-_GRID5 = np.tile(np.linspace(0.0, 1.0, 5), 5)  # may_hide's 5 x 5 grid over a box: the columns' fractions
-_GRID5_ROWS = np.repeat(np.linspace(0.0, 1.0, 5), 5)  # and the rows'
 
 
 class AirframeShadow:
@@ -77,7 +74,7 @@ class AirframeShadow:
                                                                                 p[:, 1] - self.origin[1]),
                                           nan=0.0).min())
                       for p in self.parts]
-        self._min_climb = max(0.0, min(climbs, default=math.inf))
+        self._min_elevation = math.atan(max(0.0, min(climbs, default=math.inf)))  # rad
         self._last: tuple[bytes, list[np.ndarray]] = (b"", [])  # the last gimbal angles' silhouettes
 
     # ------------------------------------------------------------------ the silhouette
@@ -120,23 +117,28 @@ class AirframeShadow:
 
     def may_hide(self, R_frd_from_cam: np.ndarray, box_px) -> bool:
         """False when no ray through the box (u0, v0, u1, v1) climbs (over the body x-y plane) as steeply as
-        the shallowest ray that meets the airframe: the airframe is then not in the way. The box's rays are
-        sampled on a 5 x 5 grid and the climb allowed ``_CLIMB_MARGIN`` of slack for what falls between (a
-        ray's climb varies smoothly over a box no wider than the field of view)."""
-        if not self.cfg.enabled:
-            return False
-        if not self.parts:
+        the shallowest ray that meets the airframe: the airframe is then not in the way. Exact and cheap: a
+        ray's elevation changes no faster than the angle it turns through, and every ray of the box lies
+        within the angle of its farthest corner from the centre ray (the rays within an angle under 90 deg
+        of one form a convex cone), so the centre's elevation plus that angle bounds the box's."""
+        if not self.cfg.enabled or not self.parts:
             return False
         c = self.camera
         u0, v0, u1, v1 = (float(x) for x in box_px)
-        x = ((u0 + (u1 - u0) * _GRID5) - c.cx) / c.fx  # (25,) the grid's normalised image coordinates
-        y = ((v0 + (v1 - v0) * _GRID5_ROWS) - c.cy) / c.fy
-        R = np.asarray(R_frd_from_cam, dtype=float)
-        dx = R[0, 0] * x + R[0, 1] * y + R[0, 2]  # body FRD
-        dy = R[1, 0] * x + R[1, 1] * y + R[1, 2]
-        dz = R[2, 0] * x + R[2, 1] * y + R[2, 2]
-        climb = -dz - self._min_climb * (1.0 - _CLIMB_MARGIN) * np.sqrt(dx * dx + dy * dy)
-        return bool(climb.max() >= 0.0)
+        R = np.asarray(R_frd_from_cam, dtype=float).tolist()
+
+        def ray(u: float, v: float) -> tuple[float, float, float]:  # the unit ray through (u, v), body FRD
+            x, y = (u - c.cx) / c.fx, (v - c.cy) / c.fy
+            d = [R[k][0] * x + R[k][1] * y + R[k][2] for k in range(3)]
+            n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            return d[0] / n, d[1] / n, d[2] / n
+
+        m = ray(0.5 * (u0 + u1), 0.5 * (v0 + v1))
+        cos_far = min(sum(a * b for a, b in zip(m, ray(u, v))) for u in (u0, u1) for v in (v0, v1))
+        if cos_far <= 0.0:  # (a box 90 deg or more across: no bound)
+            return True
+        spread = math.acos(min(1.0, cos_far))
+        return math.asin(max(-1.0, min(1.0, -m[2]))) + spread >= self._min_elevation
 
     def touches(self, R_frd_from_cam: np.ndarray, box_px, margin_px: float = 0.0) -> bool:
         """Whether the airframe's silhouette overlaps the box (u0, v0, u1, v1) grown by ``margin_px``: a

@@ -867,6 +867,10 @@ class AirframeConfig(StrictModel):
                                  [-0.6783, -0.5558, -0.2449, 0.2449, -0.004, 0.004],  # horizontal tail
                                  [-0.6925, -0.5511, -0.004, 0.004, -0.2721, -0.05]],  # vertical tail
         max_length=32, description="the other parts as boxes [x0, x1, y0, y1, z0, z1], body FRD, m")
+    cut_only_if_closer: bool = Field(
+        True, description="a heading's predicted box is cut only when the detected box's size is nearer the cut "
+                          "box's than the whole one's (a box next to the airframe's silhouette but whole keeps "
+                          "the whole prediction); false: cut whenever the detected box touches the silhouette")
     grid_cells: int = Field(
         96, ge=8, le=1000, description="a box the airframe may cut is drawn on a grid of this many cells "
                                        "across its longer side (the cut's resolution)")

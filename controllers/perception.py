@@ -366,6 +366,8 @@ class Perception:
             return boxes
         R = R_frd_from_cam(pan, tilt)
         air = self.airframe
+        b = np.asarray(nav.det_bbox_px, dtype=float)
+        det = b[2:4] - b[0:2]  # the detected box's width and height
         union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
         if not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
             return boxes
@@ -379,7 +381,7 @@ class Perception:
             if pts is None:
                 continue
             cut = air.cut_box(R, boxes[i], [pts[s] for s in outline.parts], checked=True)
-            if np.isfinite(cut).all():
+            if np.isfinite(cut).all() and (not air.cfg.cut_only_if_closer or _closer_in_size(det, cut, boxes[i])):
                 out[i] = cut
         return out
 
@@ -496,3 +498,12 @@ class Perception:
             return False, ""
         self.skipped_in_a_row = 0
         return True, reason
+
+
+def _closer_in_size(det: np.ndarray, cut: np.ndarray, whole: np.ndarray) -> bool:
+    """The detected box's (width, height) ``det`` is nearer (in log ratio, both sides) to the cut box's than
+    to the whole one's: the detection is the cut one (a box merely next to the airframe is whole)."""
+    def misfit(box):
+        size = np.maximum(box[2:4] - box[0:2], 1.0)
+        return float(np.sum(np.log(np.maximum(det, 1.0) / size) ** 2))
+    return misfit(cut) < misfit(whole)

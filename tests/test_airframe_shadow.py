@@ -195,3 +195,49 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
     with_model, without = np.median(cut, axis=0)
     assert with_model < 3.0 and without > 3.0 * with_model, (with_model, without)
     assert np.allclose(whole[:, 0], whole[:, 1], atol=0.5)
+
+
+def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
+    """``cut_only_if_closer``: a detected box that touches the airframe's silhouette but is the whole ship's
+    (as when the estimate puts the ship a little into the silhouette and the ship is not there) is corrected
+    with the whole ship's prediction; with the rule off it takes the cut one and the fix moves off."""
+    from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.messages import TargetState
+    from controllers.perception import Perception
+    from controllers.target_model import ShipModel
+    from controllers.ukf import CameraMotion, UkfConfig
+    from fwsim.messages import Measurements
+
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - 30.0)
+    vel = 6.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.05, h)
+    errs = []
+    for cp, Rc, R_fc, frame, _ in _dive_views():
+        if not (frame.visible_px and 0.1 <= frame.occluded_fraction <= 0.8):
+            continue
+        box = predicted_box_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)  # the whole ship's box
+        pan = math.atan2(R_fc[1, 2], R_fc[0, 2])
+        tilt = math.atan2(-R_fc[2, 2], math.hypot(R_fc[0, 2], R_fc[1, 2]))
+        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), pan_rad=pan,
+                            tilt_rad=tilt, det_new=True, det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        row = []
+        for rule in (True, False):
+            air = AirframeShadow(AirframeConfig(cut_only_if_closer=rule), fsw_cam, MOUNT)
+            gate = DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0, size_mismatch_action="deweight")
+            per = Perception(gate, AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam),
+                             fsw_cam, airframe=air)
+            per.lock.locked = True
+            fix = per.step(meas, motion, prior)
+            row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
+        errs.append(row)
+    errs = np.array(errs)
+    assert len(errs) >= 15
+    with_rule, without = np.median(errs, axis=0)
+    assert with_rule < 1.0 and without > 10.0 * with_rule, (with_rule, without)
