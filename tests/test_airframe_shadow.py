@@ -20,7 +20,7 @@ MOUNT = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
 
 
 def _shadow() -> AirframeShadow:
-    return AirframeShadow(AirframeConfig(), PinholeCamera.from_config(CAM_CFG), MOUNT)
+    return AirframeShadow(AirframeConfig(enabled=True), PinholeCamera.from_config(CAM_CFG), MOUNT)
 
 
 def test_the_hidden_pixels_are_the_ray_cast_airframes():
@@ -142,7 +142,8 @@ def test_the_airframe_settings_are_checked():
         AirframeConfig(boxes_frd_m=[[0.1, 0.0, -1, 1, -1, 1]])
     with pytest.raises(ValueError, match="tail < nose"):
         AirframeConfig(fuselage_x_m=[0.3, -0.6])
-    assert Controllers.model_validate({"airframe": {"enabled": False}}).airframe.enabled is False
+    assert Controllers().airframe.enabled is False  # an option (README, "The airframe's cut, predicted")
+    assert Controllers.model_validate({"airframe": {"enabled": True}}).airframe.enabled is True
 
 
 def test_the_perception_corrects_a_cut_box_by_the_cut():
@@ -229,7 +230,7 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
         truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
         row = []
         for rule in (True, False):
-            air = AirframeShadow(AirframeConfig(cut_only_if_closer=rule), fsw_cam, MOUNT)
+            air = AirframeShadow(AirframeConfig(enabled=True, cut_only_if_closer=rule), fsw_cam, MOUNT)
             gate = DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0, size_mismatch_action="deweight")
             per = Perception(gate, AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam),
                              fsw_cam, airframe=air)
