@@ -89,6 +89,24 @@ def _dive_views():
                     yield cp, Rc, R_frd_from_cam(pan, tilt), frame, course
 
 
+def _detection(cp, Rc, R_fc, box, h):
+    """A detection of ``box`` from that camera pose, as the flight software gets it (the gimbal's angles from
+    the camera's rotation in the body frame), the camera's motion, and the image of the tracked point ``h``
+    above the ship's waterline centre (the origin)."""
+    from controllers.ukf import CameraMotion
+    from fwsim.messages import Measurements
+
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    pan = math.atan2(R_fc[1, 2], R_fc[0, 2])  # the optical axis (camera z) in the body frame
+    tilt = math.atan2(-R_fc[2, 2], math.hypot(R_fc[0, 2], R_fc[1, 2]))
+    meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), pan_rad=pan,
+                        tilt_rad=tilt, det_new=True, det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
+                        det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
+    motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+    p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
+    return meas, motion, np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+
+
 def test_a_box_the_airframe_cuts_is_predicted_cut():
     """Where the airframe hides 5-90 % of the ship, the cut prediction is the ray-cast box to within a few
     of the ray cast's strides (the truth's mesh is the class's, the outline coarse); the whole ship's box
@@ -154,8 +172,7 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
     from controllers.messages import TargetState
     from controllers.perception import Perception
     from controllers.target_model import ShipModel
-    from controllers.ukf import CameraMotion, UkfConfig
-    from fwsim.messages import Measurements
+    from controllers.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -177,15 +194,7 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
         kind = "cut" if 0.05 <= frame.occluded_fraction <= 0.9 else "whole" if frame.occluded_fraction == 0 else None
         if kind is None:
             continue
-        pan = math.atan2(R_fc[1, 2], R_fc[0, 2])  # the optical axis (camera z) in the body frame
-        tilt = math.atan2(-R_fc[2, 2], math.hypot(R_fc[0, 2], R_fc[1, 2]))
-        box = np.asarray(frame.bbox_px, dtype=float)
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), pan_rad=pan,
-                            tilt_rad=tilt, det_new=True, det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
-        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
-        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        meas, motion, truth = _detection(cp, Rc, R_fc, np.asarray(frame.bbox_px, dtype=float), h)
         row = []
         for air in (_shadow(), None):
             fix = perception(air).step(meas, motion, prior)
@@ -206,8 +215,7 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
     from controllers.messages import TargetState
     from controllers.perception import Perception
     from controllers.target_model import ShipModel
-    from controllers.ukf import CameraMotion, UkfConfig
-    from fwsim.messages import Measurements
+    from controllers.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
@@ -220,14 +228,7 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
         if not (frame.visible_px and 0.1 <= frame.occluded_fraction <= 0.8):
             continue
         box = predicted_box_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)  # the whole ship's box
-        pan = math.atan2(R_fc[1, 2], R_fc[0, 2])
-        tilt = math.atan2(-R_fc[2, 2], math.hypot(R_fc[0, 2], R_fc[1, 2]))
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), pan_rad=pan,
-                            tilt_rad=tilt, det_new=True, det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
-        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
-        truth = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
+        meas, motion, truth = _detection(cp, Rc, R_fc, box, h)
         row = []
         for rule in (True, False):
             air = AirframeShadow(AirframeConfig(enabled=True, cut_only_if_closer=rule), fsw_cam, MOUNT)
