@@ -28,7 +28,7 @@ Per tick (:meth:`Perception.step`):
    fix does not see it; it leans on the hull's size (the size fit's) instead. A
    box off in size (it may be cut at that edge) keeps the centre's fix. The
    predicted boxes are those a detector would see: clipped to the image, and
-   (``controllers.airframe``, ``airframe.enabled``, the default), when the
+   (``controllers.airframe``, with ``airframe.enabled``, an option), when the
    detected box touches the UAV's own airframe in the image, less the part of
    the ship the airframe hides from the camera, so that a box the fuselage or
    wing cuts is corrected by the centre of the cut box (and sized against it),
