@@ -121,7 +121,7 @@ class AirframeShadow:
         ray's elevation changes no faster than the angle it turns through, and every ray of the box lies
         within the angle of its farthest corner from the centre ray (the rays within an angle under 90 deg
         of one form a convex cone), so the centre's elevation plus that angle bounds the box's."""
-        if not self.cfg.enabled or not self.parts:
+        if not self.parts:
             return False
         c = self.camera
         u0, v0, u1, v1 = (float(x) for x in box_px)
@@ -185,8 +185,7 @@ class AirframeShadow:
                 p = np.asarray(pts, dtype=float)
                 if len(p) < 3 or not np.isfinite(p).all():
                     continue
-                # a silhouette far outside the grid, clamped (a convex polygon stays one, and covers the grid
-                # as it did)
+                # (int32 room: a part cut _NEAR_M in front of the camera projects within about 3e5 px)
                 q = np.clip((p - np.array([u0, v0])) * scale, -_FAR, _FAR)
                 cv2.fillConvexPoly(img, cv2.convexHull(np.round(q).astype(np.int32)), 1, lineType=cv2.LINE_8,
                                    shift=_SHIFT)

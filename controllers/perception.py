@@ -198,7 +198,8 @@ class Perception:
         ref = np.array([pos[0], pos[1], pos[2] - h])
         # a box the UAV's airframe may have cut says nothing sure of the ship's shape or size: the heading,
         # layout and size fits leave it out (as they leave out one at the image border)
-        cut = self._touches_airframe(nav)
+        cut_R = self._touching_airframe(nav)  # the camera's rotation in the body frame, or None
+        cut = cut_R is not None
         if gate != FusionReason.TOO_CLOSE and not cut:
             layout = self.ship.layout
             switches = layout.switches
@@ -211,16 +212,18 @@ class Perception:
                 self._event(f"perception: the box centres put the superstructure {where} "
                             f"(probability of the other end {layout.p_other_end:.2f}): correcting with that layout")
         u, v, pred, why, spread, doubt = self._corrected(nav, cam, prior, ref, fit_size=not gate and not cut,
-                                                         cut_by_airframe=cut)
+                                                         cut_by_airframe=cut_R)
         return u, v, pred, gate or why, spread, doubt
 
-    def _touches_airframe(self, nav: Measurements) -> bool:
-        """The detected box touches (within ``edge_px``) the UAV's airframe in the image
-        (:meth:`controllers.airframe.AirframeShadow.touches`)."""
+    def _touching_airframe(self, nav: Measurements) -> np.ndarray | None:
+        """The camera's rotation in the body frame (``R_frd_from_cam``) when the detected box touches (within
+        ``edge_px``) the UAV's airframe in the image (:meth:`controllers.airframe.AirframeShadow.touches`),
+        else None (no airframe model, no gimbal angles, or clear of it)."""
         pan, tilt = float(nav.pan_rad), float(nav.tilt_rad)
         if self.airframe is None or not (math.isfinite(pan) and math.isfinite(tilt)):
-            return False
-        return self.airframe.touches(R_frd_from_cam(pan, tilt), nav.det_bbox_px, self.cfg.edge_px)
+            return None
+        R = R_frd_from_cam(pan, tilt)
+        return R if self.airframe.touches(R, nav.det_bbox_px, self.cfg.edge_px) else None
 
     def _gate(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> str:
         """``too_close``, ``overflowing_box`` or "" (see :class:`DetectionGateConfig`)."""
@@ -243,7 +246,7 @@ class Perception:
         return math.hypot(float(v[0]), float(v[1])) >= self.cfg.moving_speed_m_s
 
     def _corrected(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray,
-                   fit_size: bool = False, cut_by_airframe: bool = False):
+                   fit_size: bool = False, cut_by_airframe: np.ndarray | None = None):
         """The box centre with the ship's box-centre offset removed (unchanged when the model is off or does
         not apply), the predicted box of the most likely heading, ``size_mismatch`` when no plausible
         heading explains the box's size (else ""), the offset's spread over the headings the ship may have
@@ -251,7 +254,8 @@ class Perception:
         :func:`_centre_doubt`; with ``size_mismatch_action: deweight``, else zeros). ``fit_size``: the box
         may teach the ship's size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is
         sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
-        the detected box touches the UAV's airframe in the image; the predicted boxes are then cut as the
+        the camera's rotation in the body frame when the detected box touches the UAV's airframe in the image
+        (else None); the predicted boxes are then cut as the
         airframe would cut them (:meth:`_cut_by_airframe`; a box clear of it was not cut, whatever the
         prediction says)."""
         tm = self.ship.cfg
@@ -271,8 +275,8 @@ class Perception:
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
-            if cut_by_airframe and np.isfinite(boxes).all():
-                boxes = self._cut_by_airframe(nav, cam, ref, courses, scale, boxes)
+            if cut_by_airframe is not None and np.isfinite(boxes).all():
+                boxes = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes)
             if not np.isfinite(boxes).all():
                 boxes = None
             else:
@@ -355,16 +359,12 @@ class Perception:
         big = np.asarray(sizes, dtype=float).max(axis=0)
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
-    def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, scale,
-                         boxes: np.ndarray) -> np.ndarray:
+    def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
+                         scale, boxes: np.ndarray) -> np.ndarray:
         """The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
         the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see. A course
         whose whole ship the airframe would hide keeps its box (the detection says the ship is not where
-        that predicts)."""
-        pan, tilt = float(nav.pan_rad), float(nav.tilt_rad)
-        if not (math.isfinite(pan) and math.isfinite(tilt)):
-            return boxes
-        R = R_frd_from_cam(pan, tilt)
+        that predicts). ``R``: the camera's rotation in the body frame."""
         air = self.airframe
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height

@@ -171,15 +171,10 @@ def predicted_box_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu_m,
     the camera or the box misses the image. ``scale``: the outline's length, beam
     and height multiplied by these (3,) (None: the class's).
     """
-    R_ce = np.asarray(R_enu_from_cam, dtype=float).T
-    cs, sn = math.cos(course_enu_rad), math.sin(course_enu_rad)
-    R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ship x (bow) along the course
-    pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
-    p = (pts @ R_es.T + (np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) @ R_ce.T
-    if (p[:, 2] < _MIN_DEPTH_M).any():
+    uv = projected_points_px(outline, camera, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad, scale)
+    if uv is None:
         return None
-    u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
-    v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
+    u, v = uv[:, 0], uv[:, 1]
     W = camera.width_px if camera.width_px > 0 else math.inf
     H = camera.height_px if camera.height_px > 0 else math.inf
     u0, u1 = max(float(u.min()), 0.0), min(float(u.max()), W - 1.0)
@@ -195,7 +190,7 @@ def projected_points_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_enu
     of the camera (as :func:`predicted_box_px`)."""
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     cs, sn = math.cos(course_enu_rad), math.sin(course_enu_rad)
-    R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])
+    R_es = np.array([[cs, -sn, 0.0], [sn, cs, 0.0], [0.0, 0.0, 1.0]])  # ship x (bow) along the course
     pts = outline.points_ship_m if scale is None else outline.points_ship_m * np.asarray(scale, dtype=float)
     p = (pts @ R_es.T + (np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float))) @ R_ce.T
     if (p[:, 2] < _MIN_DEPTH_M).any():
