@@ -159,20 +159,27 @@ class AirframeShadow:
     # ------------------------------------------------------------------ boxes
     def cut_box(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
                 ) -> np.ndarray:
-        """The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves.
+        """The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves (see
+        :meth:`cut`, which also gives the share of the ship hidden)."""
+        return self.cut(R_frd_from_cam, box_px, parts_px, checked)[0]
+
+    def cut(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
+            ) -> tuple[np.ndarray, float]:
+        """(The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves, the share of
+        the ship's pixels it hides).
 
         ``parts_px``: the projected corner points (m, 2) of each convex solid of the ship; ``box_px`` their
         box clipped to the image. Drawn on a grid of at most ``grid_cells`` cells across the box's longer
-        side. The box itself when the airframe cannot reach it or hides none of it; NaN (4,) when it hides
-        all of it."""
+        side. The box itself (and 0) when the airframe cannot reach it or hides none of it; NaN (4,) (and 1)
+        when it hides all of it."""
         b = np.asarray(box_px, dtype=float)
         if not np.isfinite(b).all() or not (checked or self.may_hide(R_frd_from_cam, b)):
-            return b
+            return b, 0.0
         u0, v0, u1, v1 = b
         polys = [q for q in self.silhouettes(R_frd_from_cam)
                  if q[:, 0].max() >= u0 and q[:, 0].min() <= u1 and q[:, 1].max() >= v0 and q[:, 1].min() <= v1]
         if not polys:
-            return b
+            return b, 0.0
         import cv2  # OpenCV only where a box is cut
 
         step = max(1.0, max(u1 - u0, v1 - v0) / float(self.cfg.grid_cells))
@@ -193,17 +200,62 @@ class AirframeShadow:
 
         drawn = draw(parts_px)
         if not drawn.any():  # (a box too thin for the grid: nothing drawn) the box as it was
-            return b
+            return b, 0.0
         air = draw(polys)
         if not (drawn & air).any():  # the airframe hides none of the ship drawn
-            return b
+            return b, 0.0
         seen = drawn & ~air
         if not seen.any():
-            return np.full(4, np.nan)
+            return np.full(4, np.nan), 1.0
         # each side moved by as much as the grid's seen part stands in from the grid's whole ship: the
         # grid's own rounding cancels
-        return b + step * (_grid_box(seen) - _grid_box(drawn))
+        return b + step * (_grid_box(seen) - _grid_box(drawn)), 1.0 - float(seen.sum()) / float(drawn.sum())
 
+    def aligned_cut(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], detected_px,
+                    iterations: int) -> tuple[np.ndarray, float]:
+        """:meth:`cut` of the ship moved across the image onto the detected box ``detected_px``, then
+        moved back by as much: the cut where the ship is seen, not where the estimate puts it. Close in, the
+        estimate's few metres are tens of pixels, as much as the cut itself, and the airframe's silhouette
+        stays put in the image while the ship moves.
+
+        The move starts with the whole box's centre on the detected box's and is corrected ``iterations``
+        times, each axis by the sides the ship's own outline makes (neither cut by the airframe nor at the
+        image border): one such side is put on the detected box's, two centre the boxes, none centre the cut
+        box on the detected one. ``box_px``: the whole predicted box (clipped to the image); ``parts_px``: as
+        :meth:`cut_box`. The whole ``box_px`` (and 0) when the ship, so moved, is not cut (the detection is
+        then a whole ship); NaN (4,) (and 1) when it is hidden."""
+        b = np.asarray(box_px, dtype=float)
+        d = np.asarray(detected_px, dtype=float)
+        if not (np.isfinite(b).all() and np.isfinite(d).all()):
+            return b, 0.0
+        cam = self.camera
+        hi = np.array([cam.width_px - 1.0 if cam.width_px > 0 else math.inf,
+                       cam.height_px - 1.0 if cam.height_px > 0 else math.inf])
+        border = np.concatenate([d[0:2] <= 0.5, d[2:4] >= hi - 0.5])  # the detected box's sides at the border
+        pts = np.vstack(parts_px)
+        lo_all, hi_all = pts.min(axis=0), pts.max(axis=0)
+        shift = 0.5 * (d[0:2] + d[2:4]) - 0.5 * (b[0:2] + b[2:4])
+        cut, hidden = b, 0.0
+        for _ in range(max(1, int(iterations))):
+            box = np.concatenate([np.maximum(lo_all + shift, 0.0), np.minimum(hi_all + shift, hi)])
+            if box[0] > box[2] or box[1] > box[3]:  # (moved out of the image)
+                return b, 0.0
+            cut, hidden = self.cut(R_frd_from_cam, box, [p + shift for p in parts_px])
+            if not np.isfinite(cut).all():
+                return cut, hidden
+            if hidden == 0.0:  # not cut there
+                return b, 0.0
+            own = (cut == box) & ~border  # the sides the ship's own outline makes
+            step = np.empty(2)
+            for k in range(2):
+                if own[k] != own[k + 2]:
+                    side = k if own[k] else k + 2
+                    step[k] = d[side] - cut[side]
+                else:
+                    step[k] = 0.5 * (d[k] + d[k + 2] - cut[k] - cut[k + 2])
+            cut = cut - np.concatenate([shift, shift])
+            shift = shift + step
+        return cut, hidden
 
 def _grid_box(mask: np.ndarray) -> np.ndarray:
     """(first column, first row, last column, last row) of a mask's true cells."""

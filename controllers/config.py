@@ -874,6 +874,17 @@ class AirframeConfig(StrictModel):
         True, description="a heading's predicted box is cut only when the detected box's size is nearer the cut "
                           "box's than the whole one's (a box next to the airframe's silhouette but whole keeps "
                           "the whole prediction); false: cut whenever the detected box touches the silhouette")
+    align_iterations: int = Field(
+        3, ge=0, le=20,
+        description="cut the ship where the detection puts it in the image, not where the estimate does: the "
+                    "predicted ship is moved until its cut box is centred on the detected box, correcting the "
+                    "move this many times (AirframeShadow.aligned_cut), and its cut is moved back; 0: cut at "
+                    "the estimate's position (before 2026-11-26)")
+    max_hidden_share: float = Field(
+        0.5, ge=0, le=1,
+        description="skip a detection (reason airframe_hidden) when the airframe hides more than this share of "
+                    "the ship's pixels in the cut prediction (weighted over the headings): the fix then rests on "
+                    "the cut, whose errors (a heading a few degrees off, the outline's) grow with it; 1: never")
     grid_cells: int = Field(
         96, ge=8, le=1000, description="a box the airframe may cut is drawn on a grid of this many cells "
                                        "across its longer side (the cut's resolution)")

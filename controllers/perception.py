@@ -275,13 +275,18 @@ class Perception:
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
+            hidden = None
             if cut_by_airframe is not None and np.isfinite(boxes).all():
-                boxes = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes)
+                boxes, hidden = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes)
             if not np.isfinite(boxes).all():
                 boxes = None
             else:
                 best = int(weights.argmax())
                 pred = boxes[best].copy()
+                if hidden is not None and float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
+                    # so much of the ship behind the airframe that the cut decides the fix: the cut's own
+                    # errors (the heading's, the outline's) would
+                    return u, v, pred, FusionReason.AIRFRAME_HIDDEN, _ZERO22, _NO_NOISE
                 sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
                 mismatch = self._no_heading_fits(det, sizes)
@@ -360,30 +365,37 @@ class Perception:
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
     def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
-                         scale, boxes: np.ndarray) -> np.ndarray:
-        """The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
-        the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see. A course
-        whose whole ship the airframe would hide keeps its box (the detection says the ship is not where
-        that predicts). ``R``: the camera's rotation in the body frame."""
+                         scale, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
+        the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see; the share
+        of each course's ship hidden, 0 where its box is kept whole). A course whose whole ship the airframe
+        would hide keeps its box (the detection says the ship is not where that predicts). ``R``: the
+        camera's rotation in the body frame."""
         air = self.airframe
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height
+        aligned = air.cfg.align_iterations > 0  # (then cut_box checks each moved box itself)
         union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
-        if not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
-            return boxes
+        hidden = np.zeros(len(boxes))
+        if not aligned and not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
+            return boxes, hidden
         out = boxes.copy()
         outline = self.ship.outline
         several = len(boxes) > 1
         for i, course in enumerate(np.asarray(courses, dtype=float).tolist()):
-            if several and not air.may_hide(R, boxes[i]):
+            if several and not aligned and not air.may_hide(R, boxes[i]):
                 continue
             pts = projected_points_px(outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, course, scale)
             if pts is None:
                 continue
-            cut = air.cut_box(R, boxes[i], [pts[s] for s in outline.parts], checked=True)
+            parts = [pts[s] for s in outline.parts]
+            if aligned:
+                cut, share = air.aligned_cut(R, boxes[i], parts, b, air.cfg.align_iterations)
+            else:
+                cut, share = air.cut(R, boxes[i], parts, checked=True)
             if np.isfinite(cut).all() and (not air.cfg.cut_only_if_closer or _closer_in_size(det, cut, boxes[i])):
-                out[i] = cut
-        return out
+                out[i], hidden[i] = cut, share
+        return out, hidden
 
     def _clear_of_airframe(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> bool:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
