@@ -32,8 +32,11 @@ Per tick (:meth:`Perception.step`):
    detected box touches the UAV's own airframe in the image, less the part of
    the ship the airframe hides from the camera, so that a box the fuselage or
    wing cuts is corrected by the centre of the cut box (and sized against it),
-   not of the whole ship. Such a box teaches the heading, layout and size fits
-   nothing (as one at the image border does not). A box whose width or
+   not of the whole ship. The ship is cut where the detection puts it in the
+   image, not where the estimate does (``airframe.align_iterations``), and a
+   detection of which the airframe hides more than ``airframe.max_hidden_share``
+   is skipped (``airframe_hidden``). Such a box teaches the heading, layout and
+   size fits nothing (as one at the image border does not). A box whose width or
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
@@ -284,8 +287,8 @@ class Perception:
                 best = int(weights.argmax())
                 pred = boxes[best].copy()
                 if hidden is not None and float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
-                    # so much of the ship behind the airframe that the cut decides the fix: the cut's own
-                    # errors (the heading's, the outline's) would
+                    # so much of the ship behind the airframe that the cut decides the fix, and the cut's
+                    # own errors (a heading a few degrees off, the outline's) with it: the estimate coasts
                     return u, v, pred, FusionReason.AIRFRAME_HIDDEN, _ZERO22, _NO_NOISE
                 sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
