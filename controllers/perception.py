@@ -286,7 +286,8 @@ class Perception:
             else:
                 best = int(weights.argmax())
                 pred = boxes[best].copy()
-                if hidden is not None and float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
+                if hidden is not None and course is None and \
+                        float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
                     # so much of the ship behind the airframe that the cut decides the fix, and the cut's
                     # own errors (a heading a few degrees off, the outline's) with it: the estimate coasts
                     return u, v, pred, FusionReason.AIRFRAME_HIDDEN, _ZERO22, _NO_NOISE
