@@ -243,3 +243,101 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
     assert len(errs) >= 15
     with_rule, without = np.median(errs, axis=0)
     assert with_rule < 1.0 and without > 10.0 * with_rule, (with_rule, without)
+
+
+def test_the_cut_gives_the_share_of_the_ship_hidden():
+    """The share of the ship's pixels the cut says the airframe hides is the ray cast's, to within a few
+    hundredths at the median (the outline is the class's convex parts, the mesh the ship's faces)."""
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    outline = ShipOutline(ShipModelConfig())
+    shadow = _shadow()
+    diffs = []
+    for cp, Rc, R_fc, frame, course in _dive_views():
+        if not frame.visible_px:
+            continue
+        whole = predicted_box_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)
+        pts = projected_points_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)
+        box, share = shadow.cut(R_fc, whole, [pts[s] for s in outline.parts])
+        if frame.occluded_fraction == 0.0 and share == 0.0:
+            assert np.array_equal(box, whole)
+        if 0.05 <= frame.occluded_fraction <= 0.9:
+            diffs.append(share - frame.occluded_fraction)
+    assert len(diffs) >= 15
+    assert abs(np.median(diffs)) < 0.05 and np.median(np.abs(diffs)) < 0.1, np.round(np.sort(diffs), 2)
+
+
+def _perception(airframe, fsw_cam):
+    from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.perception import Perception
+    from controllers.target_model import ShipModel
+
+    p = Perception(DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0),
+                   AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam), fsw_cam,
+                   airframe=airframe)
+    p.lock.locked = True
+    return p
+
+
+def test_the_cut_is_made_where_the_detection_puts_the_ship():
+    """With the estimate 4-8 m off the ship (as it can be at the end of a dive), the cut made where the
+    detection puts the ship in the image (``align_iterations``) fixes a cut box nearer the tracked point than
+    the cut made where the estimate puts it, whose hidden part is not the one the camera saw; with the
+    estimate on the ship the two agree."""
+    from controllers.messages import TargetState
+    from controllers.ukf import UkfConfig
+
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - 30.0)
+    vel = 6.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    views = [v for v in _dive_views() if v[3].visible_px and 0.05 <= v[3].occluded_fraction <= 0.5]
+    assert len(views) >= 15
+
+    def errors(off) -> np.ndarray:  # (views, [aligned, at the estimate]) fix errors, px
+        prior = TargetState(0.0, "estimator", np.array([off[0], off[1], h]), vel, 0.05, h)
+        out = []
+        for cp, Rc, R_fc, frame, _ in views:
+            meas, motion, truth = _detection(cp, Rc, R_fc, np.asarray(frame.bbox_px, dtype=float), h)
+            row = []
+            for n in (3, 0):
+                air = AirframeShadow(AirframeConfig(enabled=True, align_iterations=n), fsw_cam, MOUNT)
+                fix = _perception(air, fsw_cam).step(meas, motion, prior)
+                row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
+            out.append(row)
+        return np.array(out)
+
+    on = np.median(errors([0.0, 0.0]), axis=0)
+    assert abs(on[0] - on[1]) < 1.0, on
+    off = np.vstack([errors(o) for o in ([4.0, 0.0], [8.0, 0.0], [0.0, 8.0], [-5.7, -5.7])])
+    aligned, at_estimate = np.median(off, axis=0)
+    assert aligned < 0.75 * at_estimate, (aligned, at_estimate)
+    assert np.percentile(off[:, 0], 90) < 0.75 * np.percentile(off[:, 1], 90)
+
+
+def test_a_mostly_hidden_ship_of_unknown_course_is_skipped():
+    """A detection of which the cut says the airframe hides more than ``max_hidden_share`` is skipped
+    (``airframe_hidden``) while the ship's course is unknown (its heading from the box shapes alone: the cut
+    rests on it), and used when the course is known."""
+    from controllers.messages import FusionReason, TargetState
+    from controllers.ukf import UkfConfig
+
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - 30.0)
+    moving = 6.0 * np.array([math.cos(course), math.sin(course), 0.0])
+    skipped = {"known": 0, "unknown": 0}
+    heavy = 0
+    for cp, Rc, R_fc, frame, _ in _dive_views():
+        if not (frame.visible_px and frame.occluded_fraction >= 0.6):
+            continue
+        heavy += 1
+        meas, motion, _ = _detection(cp, Rc, R_fc, np.asarray(frame.bbox_px, dtype=float), h)
+        for kind, vel in (("known", moving), ("unknown", np.zeros(3))):
+            prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.05, h)
+            per = _perception(_shadow(), fsw_cam)
+            if kind == "unknown":  # the heading from the box shapes' posterior (flat here)
+                per.ship.shape.updates = per.ship.shape.cfg.min_updates
+            fix = per.step(meas, motion, prior)
+            skipped[kind] += fix.reason == FusionReason.AIRFRAME_HIDDEN
+    assert heavy >= 4
+    assert skipped["known"] == 0 and skipped["unknown"] >= 0.6 * heavy, (skipped, heavy)
