@@ -880,6 +880,9 @@ class AirframeConfig(StrictModel):
                     "predicted ship is moved until its cut box is centred on the detected box, correcting the "
                     "move this many times (AirframeShadow.aligned_cut), and its cut is moved back; 0: cut at "
                     "the estimate's position (before 2026-11-26)")
+    align_when: Literal["always", "course_unknown"] = Field(
+        "always", description="align_iterations apply always, or only while the ship's course is unknown (its "
+                              "heading from the box shapes alone)")
     max_hidden_share: float = Field(
         0.5, ge=0, le=1,
         description="skip a detection (reason airframe_hidden) when the airframe hides more than this share of "

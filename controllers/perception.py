@@ -280,7 +280,8 @@ class Perception:
                                        courses, scale)
             hidden = None
             if cut_by_airframe is not None and np.isfinite(boxes).all():
-                boxes, hidden = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes)
+                boxes, hidden = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes,
+                                                      course_known=course is not None)
             if not np.isfinite(boxes).all():
                 boxes = None
             else:
@@ -369,7 +370,7 @@ class Perception:
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
     def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
-                         scale, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                         scale, boxes: np.ndarray, course_known: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
         the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see; the share
         of each course's ship hidden, 0 where its box is kept whole). A course whose whole ship the airframe
@@ -378,7 +379,8 @@ class Perception:
         air = self.airframe
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height
-        aligned = air.cfg.align_iterations > 0  # (then cut_box checks each moved box itself)
+        aligned = air.cfg.align_iterations > 0 and (air.cfg.align_when == "always" or not course_known)
+        # (aligned: cut_box checks each moved box itself)
         union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
         hidden = np.zeros(len(boxes))
         if not aligned and not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
