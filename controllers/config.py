@@ -855,12 +855,11 @@ class AirframeConfig(StrictModel):
     0.12 m, high wing of 2.4 m span and 0.146 m chord, tails 0.6 m aft)."""
 
     enabled: bool = Field(
-        False, description="predict the ship's box with the part the airframe hides removed when the detected "
-                           "box touches the airframe's silhouette (the box-centre correction then subtracts the "
-                           "centre of the box a detector sees); false (the default): the whole ship's box, as if "
-                           "the airframe were not there. README, \"The airframe's cut, predicted\": at three "
-                           "fresh envelope seeds within 3 m / 3 deg 111 -> 124 of 192, but the terminal sweep's "
-                           "still broadside case 2.80 -> 3.00 m (outside its bar)")
+        True, description="predict the ship's box with the part the airframe hides removed when the detected "
+                          "box touches the airframe's silhouette (the box-centre correction then subtracts the "
+                          "centre of the box a detector sees); false: the whole ship's box, as if the airframe "
+                          "were not there (the default before 2026-11-26). README, \"The airframe's cut, "
+                          "predicted\"")
     fuselage_x_m: list[float] = Field(
         default_factory=lambda: [-0.65, 0.35], min_length=2, max_length=2,
         description="the fuselage cylinder's tail and nose, body x (forward), m")
@@ -876,13 +875,17 @@ class AirframeConfig(StrictModel):
                           "the whole prediction); false: cut whenever the detected box touches the silhouette")
     align_iterations: int = Field(
         3, ge=0, le=20,
-        description="cut the ship where the detection puts it in the image, not where the estimate does: the "
-                    "predicted ship is moved until its cut box is centred on the detected box, correcting the "
-                    "move this many times (AirframeShadow.aligned_cut), and its cut is moved back; 0: cut at "
-                    "the estimate's position (before 2026-11-26)")
+        description="cut the ship where the detection puts it in the image, not where the estimate does (see "
+                    "align_when): the predicted ship is moved onto the detected box by the sides its own outline "
+                    "makes, the move corrected this many times (AirframeShadow.aligned_cut), and its cut is "
+                    "moved back; 0: always cut at the estimate's position")
     align_when: Literal["always", "course_unknown"] = Field(
-        "always", description="align_iterations apply always, or only while the ship's course is unknown (its "
-                              "heading from the box shapes alone)")
+        "course_unknown",
+        description="align_iterations apply only while the ship's course is unknown (its heading from the box "
+                    "shapes alone, which can be tens of degrees off a turning ship's, and the cut at the "
+                    "estimate with it), or always (at envelope seeds 1618, 1621-1623 the cut at the estimate did "
+                    "as well or better once the course was known: within 3 m / 3 deg 42 -> 40 at 1621, 43 -> 40 "
+                    "at 1623)")
     max_hidden_share: float = Field(
         0.5, ge=0, le=1,
         description="skip a detection (reason airframe_hidden) when the airframe hides more than this share of "

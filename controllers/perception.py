@@ -28,11 +28,12 @@ Per tick (:meth:`Perception.step`):
    fix does not see it; it leans on the hull's size (the size fit's) instead. A
    box off in size (it may be cut at that edge) keeps the centre's fix. The
    predicted boxes are those a detector would see: clipped to the image, and
-   (``controllers.airframe``, with ``airframe.enabled``, an option), when the
+   (``controllers.airframe``, unless ``airframe.enabled`` is false), when the
    detected box touches the UAV's own airframe in the image, less the part of
    the ship the airframe hides from the camera, so that a box the fuselage or
    wing cuts is corrected by the centre of the cut box (and sized against it),
-   not of the whole ship. The ship is cut where the detection puts it in the
+   not of the whole ship. While the ship's course is unknown (its heading from
+   the box shapes alone) the ship is cut where the detection puts it in the
    image, not where the estimate does (``airframe.align_iterations``), and a
    detection of which the airframe hides more than ``airframe.max_hidden_share``
    is skipped (``airframe_hidden``). Such a box teaches the heading, layout and

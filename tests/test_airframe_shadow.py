@@ -160,8 +160,10 @@ def test_the_airframe_settings_are_checked():
         AirframeConfig(boxes_frd_m=[[0.1, 0.0, -1, 1, -1, 1]])
     with pytest.raises(ValueError, match="tail < nose"):
         AirframeConfig(fuselage_x_m=[0.3, -0.6])
-    assert Controllers().airframe.enabled is False  # an option (README, "The airframe's cut, predicted")
-    assert Controllers.model_validate({"airframe": {"enabled": True}}).airframe.enabled is True
+    assert Controllers().airframe.enabled is True  # the default since 2026-11-26 (README, "The airframe's cut")
+    assert Controllers.model_validate({"airframe": {"enabled": False}}).airframe.enabled is False
+    with pytest.raises(ValueError, match="align_when"):
+        Controllers.model_validate({"airframe": {"align_when": "sometimes"}})
 
 
 def test_the_perception_corrects_a_cut_box_by_the_cut():
@@ -280,9 +282,9 @@ def _perception(airframe, fsw_cam):
 
 def test_the_cut_is_made_where_the_detection_puts_the_ship():
     """With the estimate 4-8 m off the ship (as it can be at the end of a dive), the cut made where the
-    detection puts the ship in the image (``align_iterations``) fixes a cut box nearer the tracked point than
-    the cut made where the estimate puts it, whose hidden part is not the one the camera saw; with the
-    estimate on the ship the two agree."""
+    detection puts the ship in the image (``align_iterations``; here with the course known too,
+    ``align_when: always``) fixes a cut box nearer the tracked point than the cut made where the estimate
+    puts it, whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
     from controllers.messages import TargetState
     from controllers.ukf import UkfConfig
 
@@ -300,7 +302,8 @@ def test_the_cut_is_made_where_the_detection_puts_the_ship():
             meas, motion, truth = _detection(cp, Rc, R_fc, np.asarray(frame.bbox_px, dtype=float), h)
             row = []
             for n in (3, 0):
-                air = AirframeShadow(AirframeConfig(enabled=True, align_iterations=n), fsw_cam, MOUNT)
+                air = AirframeShadow(AirframeConfig(enabled=True, align_iterations=n, align_when="always"),
+                                     fsw_cam, MOUNT)
                 fix = _perception(air, fsw_cam).step(meas, motion, prior)
                 row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
             out.append(row)
