@@ -290,8 +290,9 @@ class Perception:
                 pred = boxes[best].copy()
                 if hidden is not None and course is None and \
                         float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
-                    # so much of the ship behind the airframe that the cut decides the fix, and the cut's
-                    # own errors (a heading a few degrees off, the outline's) with it: the estimate coasts
+                    # the course unknown and so much of the ship behind the airframe that the cut decides
+                    # the fix, and the cut the box shapes' heading (tens of degrees off a turning ship's):
+                    # the estimate coasts
                     return u, v, pred, FusionReason.AIRFRAME_HIDDEN, _ZERO22, _NO_NOISE
                 sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
                 det = np.array([b[2] - b[0], b[3] - b[1]])
