@@ -37,7 +37,7 @@ class FusionReason(StrEnum):
     TOO_CLOSE = "too_close"  # the target is closer than detection_gate.min_range_m
     OVERFLOWING_BOX = "overflowing_box"  # the box spans the image: the ship is larger than the frame
     SIZE_MISMATCH = "size_mismatch"  # no heading of the ship model explains the box's size
-    AIRFRAME_HIDDEN = "airframe_hidden"  # course unknown, airframe.max_hidden_share of the ship or more hidden
+    AIRFRAME_HIDDEN = "airframe_hidden"  # course unknown, over airframe.max_hidden_share of the ship hidden
     INNOVATION_GATE = "innovation_gate"  # the estimator's chi-square test rejected it
     REJECTED = "rejected"  # the estimator could not use it (e.g. its ray misses the sea plane)
     ESTIMATOR_RESET = "estimator_reset"  # the estimator diverged on it and reset itself
