@@ -14,11 +14,13 @@ FRD, origin at the CG), and the camera's place on it (the gimbal's mount
 offset and encoders). Each part is a convex solid, so its silhouette is the
 convex hull of its corners' projections (:meth:`AirframeShadow.silhouettes`;
 a part reaching behind the camera is cut at a plane just in front of it
-first). :meth:`AirframeShadow.cut_box` takes a predicted ship box and the
+first). :meth:`AirframeShadow.cut` takes a predicted ship box and the
 ship's projected parts (convex solids too), draws them and the airframe's
 silhouettes on a grid over the box, and returns the box of the ship's cells
-the airframe leaves: the box a detector would report had the ship been where
-the estimate puts it. The perception (``controllers.perception``) does this
+the airframe leaves (and the share of the ship it hides): the box a detector
+would report had the ship been where the estimate puts it.
+:meth:`AirframeShadow.aligned_cut` first moves the ship onto the detected box,
+so that the cut is the one where the camera sees the ship. The perception (``controllers.perception``) does this
 when the detected box touches the silhouette (:meth:`AirframeShadow.touches`),
 and its box-centre correction then subtracts the centre of the cut box, as it
 already does for a box cut by the image border
@@ -157,12 +159,6 @@ class AirframeShadow:
         return False
 
     # ------------------------------------------------------------------ boxes
-    def cut_box(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
-                ) -> np.ndarray:
-        """The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves (see
-        :meth:`cut`, which also gives the share of the ship hidden)."""
-        return self.cut(R_frd_from_cam, box_px, parts_px, checked)[0]
-
     def cut(self, R_frd_from_cam: np.ndarray, box_px, parts_px: list[np.ndarray], checked: bool = False
             ) -> tuple[np.ndarray, float]:
         """(The box (u0, v0, u1, v1) of the ship's pixels in ``box_px`` that the airframe leaves, the share of
@@ -222,7 +218,7 @@ class AirframeShadow:
         times, each axis by the sides the ship's own outline makes (neither cut by the airframe nor at the
         image border): one such side is put on the detected box's, two centre the boxes, none centre the cut
         box on the detected one. ``box_px``: the whole predicted box (clipped to the image); ``parts_px``: as
-        :meth:`cut_box`. The whole ``box_px`` (and 0) when the ship, so moved, is not cut (the detection is
+        :meth:`cut`. The whole ``box_px`` (and 0) when the ship, so moved, is not cut (the detection is
         then a whole ship); NaN (4,) (and 1) when it is hidden."""
         b = np.asarray(box_px, dtype=float)
         d = np.asarray(detected_px, dtype=float)

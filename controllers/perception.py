@@ -382,7 +382,7 @@ class Perception:
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height
         aligned = air.cfg.align_iterations > 0 and (air.cfg.align_when == "always" or not course_known)
-        # (aligned: cut_box checks each moved box itself)
+        # (aligned: AirframeShadow.cut checks each moved box itself)
         union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
         hidden = np.zeros(len(boxes))
         if not aligned and not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)

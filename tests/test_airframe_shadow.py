@@ -120,7 +120,7 @@ def test_a_box_the_airframe_cuts_is_predicted_cut():
             continue
         whole = predicted_box_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)
         pts = projected_points_px(outline, fsw_cam, cp, Rc, np.zeros(3), course)
-        cut = shadow.cut_box(R_fc, whole, [pts[s] for s in outline.parts])
+        cut = shadow.cut(R_fc, whole, [pts[s] for s in outline.parts])[0]
         occ = frame.occluded_fraction
         if occ == 0.0 and not shadow.may_hide(R_fc, whole):
             assert np.array_equal(cut, whole)
