@@ -160,11 +160,69 @@ def _seeds(value: Any, where: str) -> list[int] | None:
     return seeds
 
 
-def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]:
+@dataclass(frozen=True)
+class SpecChanges:
+    """Changes to a spec from the command line (``fwsim batch --seed/--set/--hold``), applied to every entry.
+
+    ``seed``: the dispersions' draws' seed instead of the spec's (the same envelope, other draws).
+    ``sets``: fixed overrides added to each entry's ``set``; a dispersed field set here is no longer drawn.
+    ``hold``: dispersed fields no longer drawn (they keep the scenario's value); a path holds every
+    dispersed field at or under it (``camera.detector`` holds its noise, misses and latency). The other
+    fields' draws are as they were (each field draws from its own stream), so the batch flies the same
+    draws with one factor held: what that factor costs.
+    """
+
+    seed: int | None = None
+    sets: dict[str, Any] = field(default_factory=dict)
+    hold: tuple[str, ...] = ()
+
+    def __bool__(self) -> bool:
+        return self.seed is not None or bool(self.sets) or bool(self.hold)
+
+    def describe(self) -> dict[str, Any]:
+        """For the summary's ``batch`` info (empty parts left out)."""
+        return {k: v for k, v in (("seed", self.seed), ("set", self.sets), ("hold", list(self.hold)))
+                if v is not None and v != {} and v != []}
+
+
+def _under(path: str, prefix: str) -> bool:
+    return path == prefix or path.startswith(prefix + ".")
+
+
+def _apply_changes(data: dict, path: Path, changes: SpecChanges) -> None:
+    """``changes`` applied to a parsed spec in place (BatchSpecError naming the option on a mismatch)."""
+    if changes.seed is not None:
+        data["seed"] = changes.seed
+    held: set[str] = set()
+    for i, entry in enumerate(data["runs"]):
+        if not isinstance(entry, dict):
+            continue  # reported by _entry_jobs
+        if changes.sets:
+            fixed = entry.get("set") or {}
+            if not isinstance(fixed, dict):
+                continue  # reported by _entry_jobs
+            entry["set"] = {**fixed, **changes.sets}
+        disp = entry.get("dispersions")
+        if not isinstance(disp, dict):
+            continue
+        drop = {p for p in disp if any(_under(str(p), h) for h in (*changes.hold, *changes.sets))}
+        held |= {h for h in changes.hold for p in drop if _under(str(p), h)}
+        if drop and drop == set(disp):
+            raise BatchSpecError(f"{path}: runs.{i}: --hold/--set leave none of its dispersions to draw "
+                                 f"({', '.join(sorted(map(str, drop)))})")
+        entry["dispersions"] = {p: d for p, d in disp.items() if p not in drop}
+    for h in changes.hold:
+        if h not in held:
+            raise BatchSpecError(f"--hold {h}: no entry of {path.name} disperses a field at or under it")
+
+
+def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None = None
+              ) -> tuple[str, list[RunJob]]:
     """Read a batch spec and expand it into jobs (validating every scenario once).
 
     Returns ``(batch name, jobs)`` in spec order: entries in order, then grid
     points (cartesian product in the order the keys are written), then seeds.
+    ``changes``: the command line's changes to every entry (:class:`SpecChanges`).
     Raises :class:`BatchSpecError` (or ScenarioError for a bad scenario) with
     one line per problem.
     """
@@ -175,6 +233,8 @@ def load_spec(path: str | Path, out_dir: str | Path) -> tuple[str, list[RunJob]]
     unknown = set(data) - _SPEC_KEYS
     if unknown:
         raise BatchSpecError(f"{path}: {sorted(unknown)[0]}: unknown key (allowed: {sorted(_SPEC_KEYS)})")
+    if changes:
+        _apply_changes(data, path, changes)
     name = str(data.get("name") or path.stem)
     seed = data.get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
@@ -560,8 +620,9 @@ def resumable(job: RunJob) -> bool:
 
 def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
               ray_address: str | None = None, on_start: Callable[[int, int], None] | None = None,
-              on_row: RowCallback | None = None, run_fn: Callable[[RunJob], dict] = run_one) -> BatchResult:
-    """Expand a spec, fly what is needed, write the summary files.
+              on_row: RowCallback | None = None, run_fn: Callable[[RunJob], dict] = run_one,
+              changes: SpecChanges | None = None) -> BatchResult:
+    """Expand a spec (with ``changes``, :class:`SpecChanges`), fly what is needed, write the summary files.
 
     ``on_start(total, resumed)`` is called once before flying and
     ``on_row(row)`` after each finished run (for a progress bar). ``run_fn``
@@ -569,7 +630,7 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
     Ctrl-C writes the summary of the runs finished so far, then re-raises.
     """
     out_dir = Path(out_dir)
-    name, jobs = load_spec(spec_path, out_dir)
+    name, jobs = load_spec(spec_path, out_dir, changes)
     (out_dir / "logs").mkdir(parents=True, exist_ok=True)
     workers = workers or os.cpu_count() or 1
     rows: dict[str, dict[str, Any]] = {}
@@ -612,7 +673,8 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
             ray.shutdown()
         result.rows = [rows[j.id] for j in jobs if j.id in rows]
         result.files = write_summary(result.rows, out_dir, {
-            "name": name, "spec": str(Path(spec_path).resolve()), "fwsim_version": fwsim.__version__,
+            "name": name, "spec": str(Path(spec_path).resolve()),
+            **({"changes": changes.describe()} if changes else {}), "fwsim_version": fwsim.__version__,
             "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "runs": len(jobs), "finished": len(result.rows),
             "failed": sum(r["status"] != "completed" for r in result.rows),

@@ -199,7 +199,13 @@ def cmd_bench(args) -> int:
 def cmd_batch(args) -> int:
     from rich.progress import TimeRemainingColumn
 
-    from fwsim.batch import run_batch
+    from fwsim.batch import SpecChanges, run_batch
+    if args.seed is not None and args.seed < 0:
+        raise ScenarioError(f"--seed: expected an integer >= 0 for the dispersions' draws (got {args.seed})")
+    bad = [h for h in args.hold if not h.strip() or any(not p for p in h.strip().split("."))]
+    if bad:
+        raise ScenarioError(f"--hold {bad[0]!r}: expected a dotted field path (e.g. world.wind_enu_m_s)")
+    changes = SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold))
     out = Path(args.out) if args.out else Path("runs") / Path(args.spec).stem
     failed = 0
     with Progress(TextColumn("runs {task.completed:>4.0f} / {task.total:.0f}"), BarColumn(),
@@ -219,7 +225,7 @@ def cmd_batch(args) -> int:
 
         try:
             result = run_batch(args.spec, out, workers=args.workers, resume=args.resume, ray_address=args.ray,
-                               on_start=on_start, on_row=on_row)
+                               on_start=on_start, on_row=on_row, changes=changes)
         except KeyboardInterrupt as exc:
             from fwsim._entry import exit_code
             bar.stop()
@@ -361,6 +367,14 @@ def build_parser() -> argparse.ArgumentParser:
     ba.add_argument("--ray", metavar="auto|local|ADDRESS",
                     help="run as Ray tasks: 'auto' (running cluster), 'local' (start one here) or an address")
     ba.add_argument("--quiet", action="store_true", help="no progress bar")
+    ba.add_argument("--seed", type=int, default=None, metavar="N",
+                    help="draw the dispersions with this seed instead of the spec's (the same envelope, new draws)")
+    ba.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                    help="override a field in every run (repeatable); a dispersed field set here is not drawn")
+    ba.add_argument("--hold", action="append", default=[], metavar="PATH",
+                    help="do not draw this dispersed field, or those under it (repeatable): it keeps the "
+                         "scenario's value and the other fields keep their draws, so the batch shows what "
+                         "the field costs (e.g. --hold camera.detector)")
     ba.set_defaults(func=cmd_batch)
     c = sub.add_parser("compare", help="compare a run's metrics with a baseline; exit 1 on a regression")
     c.add_argument("baseline", help="baseline: a log (.mcap), metrics (.json) or baseline file (.yaml)")

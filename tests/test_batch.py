@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 
 from fwsim import SCENARIO_DIR
-from fwsim.batch import BASE_COLUMNS, BatchSpecError, load_spec, run_batch, run_id, run_one
+from fwsim.batch import BASE_COLUMNS, BatchSpecError, SpecChanges, load_spec, run_batch, run_id, run_one
 from fwsim.log import read_log
+from fwsim.scenario import load_scenario
 
 CHECKOUT = (SCENARIO_DIR / "autopilot_checkout.yaml").as_posix()
 
@@ -187,6 +188,19 @@ def test_cli_batch(tmp_path):
                            "--workers", "2", "--quiet"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "2 completed, 0 failed" in proc.stderr and "summary.csv" in proc.stdout
+    disp = write_spec(tmp_path, DISPERSED.replace("samples: 6", "samples: 2"), "disp.yaml")
+    proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(disp), "--out", str(tmp_path / "o3"),
+                           "--workers", "2", "--quiet", "--seed", "5", "--hold", "world", "--set", "duration_s=1"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads((tmp_path / "o3" / "summary.json").read_text())["batch"]
+    assert info["changes"] == {"seed": 5, "set": {"duration_s": 1}, "hold": ["world"]}
+    assert "world.wind_enu_m_s" not in info["dispersed"]
+    for args, message in ((["--hold", "nothing.here"], "--hold nothing.here: no entry"),
+                          (["--set", "duration_s"], "expected PATH=VALUE"), (["--seed", "-1"], "--seed: expected")):
+        proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(disp), "--out", str(tmp_path / "o4"),
+                               *args], capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     bad = write_spec(tmp_path, "runs: [{scenario: nope.yaml}]", "bad.yaml")
     proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(bad), "--out", str(tmp_path / "o2")],
                           capture_output=True, text=True, timeout=300)
@@ -323,6 +337,38 @@ def test_dispersion_errors_are_one_line(tmp_path, body, message):
     spec = write_spec(tmp_path, f"runs:\n  - scenario: {CHECKOUT}\n    {body}\n")
     with pytest.raises(BatchSpecError, match=message) as exc:
         load_spec(spec, tmp_path)
+    assert "\n" not in str(exc.value)
+
+
+def test_command_line_changes_draw_hold_and_set(tmp_path):
+    """--seed draws as the spec's own seed would; --hold keeps a field at the scenario's value (a prefix holds
+    every field under it) and leaves the others' draws as they were; --set wins over a dispersion."""
+    spec = write_spec(tmp_path, DISPERSED)
+    jobs = load_spec(spec, tmp_path)[1]
+    reseeded = load_spec(spec, tmp_path, SpecChanges(seed=12))[1]
+    own = load_spec(write_spec(tmp_path, DISPERSED.replace("seed: 11", "seed: 12"), "s12.yaml"), tmp_path)[1]
+    assert [j.overrides for j in reseeded] == [j.overrides for j in own] != [j.overrides for j in jobs]
+    held = load_spec(spec, tmp_path, SpecChanges(hold=("world.wind_enu_m_s", "camera.detector")))[1]
+    plain = load_scenario(CHECKOUT)[0]
+    assert held[0].dispersed == ("initial.airspeed_m_s", "initial.heading_deg")
+    for j, h in zip(jobs, held):
+        assert "world.wind_enu_m_s" not in h.overrides and "camera.detector.pixel_noise_px" not in h.overrides
+        assert h.overrides["initial.airspeed_m_s"] == j.overrides["initial.airspeed_m_s"]
+        assert list(h.load()[0].world.wind_enu_m_s) == list(plain.world.wind_enu_m_s)  # the scenario's own
+    fixed = load_spec(spec, tmp_path, SpecChanges(sets={"initial.airspeed_m_s": 21.5, "duration_s": 1}))[1]
+    assert all(j.overrides["initial.airspeed_m_s"] == 21.5 and j.overrides["duration_s"] == 1 for j in fixed)
+    assert "initial.airspeed_m_s" not in fixed[0].dispersed
+    assert [j.overrides["initial.heading_deg"] for j in fixed] == [j.overrides["initial.heading_deg"] for j in jobs]
+
+
+@pytest.mark.parametrize("changes, message", [
+    (SpecChanges(hold=("target.speed_m_s",)), "--hold target.speed_m_s: no entry of spec.yaml disperses"),
+    (SpecChanges(hold=("initial.air",)), "no entry"),  # a prefix is whole path segments
+    (SpecChanges(hold=("initial.airspeed_m_s", "initial.heading_deg", "world", "camera")), "none of its dispersions"),
+])
+def test_command_line_change_errors_are_one_line(tmp_path, changes, message):
+    with pytest.raises(BatchSpecError, match=message) as exc:
+        load_spec(write_spec(tmp_path, DISPERSED), tmp_path, changes)
     assert "\n" not in str(exc.value)
 
 
