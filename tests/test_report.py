@@ -193,3 +193,16 @@ def test_longest_hidden_stretch_by_hand():
     assert longest_gap_s(t, [False, False, True, True, True, True, False]) == 2.0  # from the start to 2
     assert longest_gap_s(t, [True, True, True, True, False, False, False]) == 3.0  # 3 to the end
     assert longest_gap_s(t, [False] * 7) == 6.0 and longest_gap_s([], []) == 0.0
+
+
+def test_the_envelope_verdict_by_folder(tmp_path, capsys):
+    """--by folder: one row per output folder, in the order given (the envelope and its draws with a factor
+    held, fwsim batch --hold), each scored on its own rows."""
+    (tmp_path / "full").mkdir()
+    (tmp_path / "held").mkdir()
+    rows = _rows()
+    (tmp_path / "full" / "summary.json").write_text(json.dumps({"rows": rows}))
+    (tmp_path / "held" / "summary.json").write_text(json.dumps({"rows": rows[:4]}))
+    _envelope_tool().main([str(tmp_path / "held"), str(tmp_path / "full"), "--by", "folder"])
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| held") or ln.startswith("| full")]
+    assert [ln.split(" | ")[0:2] for ln in lines] == [["| held", "4"], ["| full", str(len(rows))]]

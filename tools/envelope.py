@@ -4,6 +4,8 @@
     fwsim batch scenarios/batches/envelope_ct_ukf.yaml --workers 2 --out runs/envelope_ct_ukf  # same draws
     python tools/envelope.py runs/envelope runs/envelope_ct_ukf   # a Markdown table: each bar, each estimator
     python tools/envelope.py runs/envelope --by set.target.motion  # split another way
+    fwsim batch scenarios/batches/envelope.yaml --workers 2 --hold world --out runs/no_wind  # a factor held
+    python tools/envelope.py runs/envelope runs/no_wind --by folder  # one row per folder: what wind costs
     python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
@@ -61,7 +63,7 @@ def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], floa
     for r in rows:
         groups[_label(r.get(by))].append(r)
     out = []
-    for name, rs in sorted(groups.items()):
+    for name, rs in (groups.items() if by == "folder" else sorted(groups.items())):  # folders as given
         rep = summarise(rs, name)
         out.append((name, rep.runs, [rep.hits / rep.runs if rep.runs else math.nan, rep.within_3m_3deg,
                                      rep.visible_after_lock["share_99"], rep.estimator_error_m["share_8m"]],
@@ -161,7 +163,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out_dirs", type=Path, nargs="+", help="output folders of fwsim batch (with summary.json)")
     ap.add_argument("--by", default="set.controllers.estimator",
-                    help="the summary column to group by (default: the estimator)")
+                    help="the summary column to group by (default: the estimator), or 'folder': one row per "
+                         "output folder (e.g. the envelope and the same draws with a factor held: "
+                         "fwsim batch --hold)")
     ap.add_argument("--why", action="store_true",
                     help="also list each run outside 3 m / 3 deg with its estimate's error and its last "
                          "detections (reads the logs)")
@@ -170,7 +174,7 @@ def main(argv=None) -> int:
     for out_dir in args.out_dirs:
         try:
             these = json.loads((out_dir / "summary.json").read_text())["rows"]
-            rows += these
+            rows += [{**r, "folder": out_dir.name} for r in these] if args.by == "folder" else these
             per_dir.append((out_dir, these))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"error: {out_dir}/summary.json: {type(exc).__name__}: {exc}", file=sys.stderr)
