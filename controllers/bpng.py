@@ -137,6 +137,18 @@ can level off a few metres below the sea hundreds of metres short. The law
 knows nothing of the sea: keep |theta_f| near or above the LOS angle, or
 switch farther out.
 
+The capture guard (``capture_turn_deg_s``; a departure from the printed law).
+From a loiter round a fast ship in wind the UAV's ground velocity at the
+switch can point 77-105 deg off the line of sight with a LOS rate of only
+0.01 rad/s: the PN term is then ~1 m/s^2 and the bias term, under its cap,
+~0.8-1 m/s^2 against it, so the UAV flies on beside the ship, its range held
+for 20 s (the go-around's stall rule), lap after lap. Far off the nose (the
+look angle above ``capture_look_deg``, 60) the guard requires the command to
+turn V_p toward the line of sight at ``capture_turn_deg_s`` or more, and
+scales the bias term down (to zero at most) where it would take that away;
+elsewhere, and wherever PN already wins, the command is the law's.
+``bias_scale`` in the status says how much of the bias is applied.
+
 The bias angle cap (``bias_angle_cap_deg``, 90 by default; a departure from
 the printed law). Around a fast ship the loiter's ground velocity at the
 switch can point more than 90 deg off V_f (a 10 m/s ship crossing the impact
@@ -204,6 +216,7 @@ class BpngTerms(NamedTuple):
     accel_bias: np.ndarray  # -(N_f theta / t_go) n x V_p
     accel_cmd: np.ndarray  # perpendicular part of the sum, capped
     saturated: np.ndarray  # the cap was active
+    bias_scale: np.ndarray  # the share of the bias term in the command (< 1: held back by the capture guard)
 
 
 def _cross(a, b):
@@ -223,12 +236,14 @@ def _norm(a):
 
 
 def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: float,
-               max_accel_m_s2: float, bias_angle_cap_rad: float = math.inf) -> BpngTerms:
+               max_accel_m_s2: float, bias_angle_cap_rad: float = math.inf,
+               capture_turn_rad_s: float | None = None, capture_look_rad: float = math.pi / 3) -> BpngTerms:
     """Eq. (1) with its guards, vectorised over leading axes (inputs (..., 3), world ENU).
 
     ``r = r_q - r_p``, ``r_dot = V_q - V_p``, ``v_p`` the UAV velocity, ``v_f``
     the wanted terminal direction (any length > 0). ``bias_angle_cap_rad``: the
     bias term takes ``min(theta, cap)`` (``BpngConfig.bias_angle_cap_deg``).
+    ``capture_turn_rad_s``: the capture guard (``BpngConfig.capture_turn_deg_s``; None: off).
     """
     r = np.asarray(r, dtype=float)
     r_dot = np.asarray(r_dot, dtype=float)
@@ -262,13 +277,33 @@ def bpng_accel(r, r_dot, v_p, v_f, *, n_sigma: float, n_f: float, min_tgo_s: flo
 
     a_pn = n_sigma * _cross(omega, v_p)
     a_bias = -(n_f * np.minimum(theta, bias_angle_cap_rad) / t_go)[..., None] * _cross(n, v_p)  # AWAY from V_f
-    a = a_pn + a_bias
+    scale = np.ones(rng.shape)
+    if capture_turn_rad_s is not None:
+        scale = _capture_scale(r, rng, v_hat, spd, a_pn, a_bias, capture_turn_rad_s, capture_look_rad)
+    a = a_pn + scale[..., None] * a_bias
     a = a - _dot(a, v_hat)[..., None] * v_hat  # perpendicular to V_p
     mag = _norm(a)
     saturated = mag > max_accel_m_s2
     a = a * np.where(saturated, max_accel_m_s2 / np.where(saturated, mag, 1.0), 1.0)[..., None]
     a = np.where(moving[..., None], a, 0.0)
-    return BpngTerms(omega, t_go, rng, theta, a_pn, a_bias, a, saturated & moving)
+    return BpngTerms(omega, t_go, rng, theta, a_pn, a_bias, a, saturated & moving, scale)
+
+
+def _capture_scale(r, rng, v_hat, speed, a_pn, a_bias, turn_rad_s: float, look_min_rad: float):
+    """The capture guard's share of the bias term (1: all of it). Far off the nose (the look angle, between
+    V_p and the line of sight, above ``look_min_rad``) the command must turn V_p toward the line of sight at
+    ``turn_rad_s`` or more; where the bias term takes that away from the PN term it is scaled down until it
+    does not (to zero when PN alone falls short)."""
+    r_hat = r / np.where(rng > 0.0, rng, 1.0)[..., None]
+    c = _dot(r_hat, v_hat)
+    e = r_hat - c[..., None] * v_hat  # the line of sight's part across V_p: the way toward it
+    s = _norm(e)
+    look = np.arctan2(s, c)
+    e = e / np.where(s > 0.0, s, 1.0)[..., None]
+    need = turn_rad_s * speed
+    t_pn, t_b = _dot(a_pn, e), _dot(a_bias, e)
+    short = (look > look_min_rad) & (s > 1e-9) & (t_b < 0.0) & (t_pn + t_b < need)
+    return np.where(short, np.clip((t_pn - need) / np.where(t_b < 0.0, -t_b, 1.0), 0.0, 1.0), 1.0)
 
 
 def _antiparallel_axis(v_hat, r):
@@ -303,6 +338,7 @@ class BpngStatus:
     accel_bias: np.ndarray  # (3,) -(N_f theta / t_go) n x V_p, m/s^2
     accel_cmd: np.ndarray  # (3,) commanded (perpendicular, capped), m/s^2
     saturated: bool = False  # the max_accel cap was active
+    bias_scale: float = 1.0  # the share of the bias term in the command (< 1: held back by the capture guard)
     aim_enu_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) the point steered to
     endgame: bool = False  # inside endgame_tgo_s: the law dropped (V turned onto V_f, or straight)
 
@@ -354,7 +390,10 @@ class Bpng:
         k = bpng_accel(q - p, vq - v, v, self.v_f_enu, n_sigma=cfg.n_sigma, n_f=cfg.n_f,
                        min_tgo_s=cfg.min_tgo_s, max_accel_m_s2=cfg.max_accel_m_s2,
                        bias_angle_cap_rad=math.inf if cfg.bias_angle_cap_deg is None
-                       else math.radians(cfg.bias_angle_cap_deg))
+                       else math.radians(cfg.bias_angle_cap_deg),
+                       capture_turn_rad_s=None if cfg.capture_turn_deg_s is None
+                       else math.radians(cfg.capture_turn_deg_s),
+                       capture_look_rad=math.radians(cfg.capture_look_deg))
         # once inside, stay inside: past the steering point the range grows again and the LOS turns round
         endgame = self._endgame = self._endgame or float(k.range_m) < cfg.endgame_tgo_s * math.sqrt(v.dot(v))
         a = self._endgame_accel(v, float(k.theta_err_rad)) if endgame else k.accel_cmd.copy()
@@ -362,5 +401,6 @@ class Bpng:
         status = BpngStatus(t_s=t_s, t_go_s=float(k.t_go_s), range_m=float(k.range_m),
                             los_rate_rad_s=k.los_rate_rad_s, theta_err_rad=float(k.theta_err_rad),
                             accel_pn=k.accel_pn, accel_bias=k.accel_bias, accel_cmd=a,
-                            saturated=bool(k.saturated) and not endgame, aim_enu_m=q.copy(), endgame=endgame)
+                            saturated=bool(k.saturated) and not endgame, aim_enu_m=q.copy(), endgame=endgame,
+                            bias_scale=float(k.bias_scale))
         return cmd, status

@@ -15,6 +15,7 @@ CFG = BpngConfig()
 GAINS = dict(n_sigma=CFG.n_sigma, n_f=CFG.n_f, min_tgo_s=CFG.min_tgo_s, max_accel_m_s2=CFG.max_accel_m_s2,
              bias_angle_cap_rad=math.radians(CFG.bias_angle_cap_deg))
 PRINTED = dict(GAINS, bias_angle_cap_rad=math.inf)  # the law as printed (no cap on the bias angle)
+GUARD = dict(GAINS, capture_turn_rad_s=math.radians(3.0))  # with the capture guard at 3 deg/s
 
 
 def _angle(a, b):
@@ -290,7 +291,7 @@ def _fly(p, v, q, vq, vf, bias_sign=1.0, t_max_s=250.0, gains=None):
         p, v, q = p1, v1, q1
         if done.all():
             break
-    gam = np.degrees(np.arcsin(v_imp[:, 2] / V_UAV))
+    gam = np.degrees(np.arcsin(v_imp[:, 2] / np.maximum(np.linalg.norm(v_imp, axis=-1), 1e-12)))
     hdg = np.degrees(np.arctan2(v_imp[:, 0], v_imp[:, 1]))
     return miss, gam, hdg, min_h, done
 
@@ -310,10 +311,11 @@ def _sweep_cases(ship):
     return th, ps, dist, start, p, v, np.zeros_like(p), vq, vf
 
 
+@pytest.mark.parametrize("guard", [False, True])
 @pytest.mark.parametrize("ship", sorted(SHIPS))
-def test_closed_loop_sweep_hits_with_the_impact_angle(ship):
+def test_closed_loop_sweep_hits_with_the_impact_angle(ship, guard):
     th, ps, dist, start, p, v, q, vq, vf = _sweep_cases(ship)
-    miss, gam, hdg, min_h, done = _fly(p, v, q, vq, vf)
+    miss, gam, hdg, min_h, done = _fly(p, v, q, vq, vf, gains=GUARD if guard else GAINS)
     e_gam = np.abs(gam - th)
     e_hdg = np.abs((hdg - ps + 180.0) % 360.0 - 180.0)
     # Sea clearance (not one of the 3 m / 3 deg bars; a sanity check of the path): the UAV stays above the sea
@@ -377,6 +379,71 @@ def test_from_a_loiter_round_a_fast_ship_the_cap_keeps_the_ship_in_the_capture_r
     miss, gam, hdg, _, done = _fly(p, v, np.zeros((1, 3)), vq, vf)
     assert done[0] and miss[0] < MISS_M, miss[0]
     assert abs(gam[0] - th) < ANGLE_DEG and abs((hdg[0] - ps + 180.0) % 360.0 - 180.0) < ANGLE_DEG, (gam, hdg)
+
+
+# Dive starts from loiters round fast ships in wind, taken from flights whose dives held their range (the UAV's
+# ground velocity and the ship's at the switch; r from the UAV to the steering point; theta_f, psi_f): far off
+# the nose (look angles 77-104 deg) with a LOS rate of 0.010-0.012 rad/s, where the bias cancels the PN term.
+STALLS = {
+    "range_held": ([-386.4, 532.5, -747.1], [-9.97, -14.43, 0.2], [-1.68, -8.52, 0.0], -39.5, 324.2),
+    "flies_away": ([474.1, -354.6, -425.6], [-15.07, -8.99, 0.4], [-9.72, -2.27, 0.0], -41.3, 126.5),
+    "slow_close": ([742.6, 5.1, -721.3], [5.61, -16.6, 0.02], [5.56, -5.81, 0.0], -47.6, 89.4),
+}
+
+
+def _range_after(r, v, vq, vf, gains, t_s):
+    p, v, q, vq = -np.array([r]), np.array([v]), np.zeros((1, 3)), np.array([vq])
+    for _ in range(int(t_s / DT)):
+        v1 = _rotate_velocity(v, bpng_accel(q - p, vq - v, v, vf, **gains).accel_cmd, DT)
+        p, v, q = p + 0.5 * (v + v1) * DT, v1, q + vq * DT
+    return float(np.linalg.norm(q - p))
+
+
+def test_the_capture_guard_turns_a_stalled_dive_toward_the_ship():
+    """The three stalls: the printed law (with the bias cap) holds the range for 20 s or flies away; with the
+    capture guard every one closes (5 % or more of its range in 20 s) and hits within 3 m and 3 deg."""
+    for name, (r, v, vq, th, ps) in STALLS.items():
+        vf = vf_enu(th, ps)[None]
+        r0 = float(np.linalg.norm(r))
+        off = _range_after(r, v, vq, vf, GAINS, 20.0)
+        on = _range_after(r, v, vq, vf, GUARD, 20.0)
+        assert on < 0.95 * r0, (name, r0, on)
+        miss, gam, hdg, _, done = _fly(-np.array([r]), np.array([v]), np.zeros((1, 3)), np.array([vq]), vf,
+                                       gains=GUARD, t_max_s=300.0)
+        assert done[0] and miss[0] < MISS_M, (name, miss)
+        assert abs(gam[0] - th) < ANGLE_DEG and abs((hdg[0] - ps + 180.0) % 360.0 - 180.0) < ANGLE_DEG, (name, gam)
+        if name != "slow_close":  # without it: the range held (the go-around's 2 %) or growing
+            assert off > 0.98 * r0, (name, r0, off)
+    miss, *_, done = _fly(-np.array([STALLS["flies_away"][0]]), np.array([STALLS["flies_away"][1]]),
+                          np.zeros((1, 3)), np.array([STALLS["flies_away"][2]]),
+                          vf_enu(*STALLS["flies_away"][3:])[None], gains=GAINS, t_max_s=300.0)
+    assert not (done[0] and miss[0] < MISS_M)  # the printed law does not get there
+
+
+def test_the_capture_guard_only_acts_far_off_the_nose_where_the_bias_cancels_pn():
+    """The guard's share of the bias: 1 wherever the command already turns V toward the line of sight at the
+    guard's rate, or the look angle is under capture_look_deg; below 1 only in the stall, where it lifts the
+    turn toward the line of sight to exactly the guard's rate."""
+    rate = math.radians(3.0)
+    r, v, vq, th, ps = STALLS["range_held"]
+    k = bpng_accel(r, np.subtract(vq, v), v, vf_enu(th, ps), **GUARD)
+    assert 0.0 < float(k.bias_scale) < 1.0
+    off = bpng_accel(r, np.subtract(vq, v), v, vf_enu(th, ps), **GAINS)
+    assert float(off.bias_scale) == 1.0 and np.allclose(off.accel_pn, k.accel_pn)
+    r_hat, v_hat = np.asarray(r) / np.linalg.norm(r), np.asarray(v) / np.linalg.norm(v)
+    e = r_hat - (r_hat @ v_hat) * v_hat
+    e /= np.linalg.norm(e)
+    assert float(k.accel_cmd @ e) == pytest.approx(rate * np.linalg.norm(v), rel=1e-6)
+    assert float(off.accel_cmd @ e) < 0.5 * rate * np.linalg.norm(v)
+    # the kinematic sweep's starts pointing at the ship: never held back
+    for ship in SHIPS:
+        _, _, dist, _, p, v0, q, vq0, vf = _sweep_cases(ship)
+        assert np.all(bpng_accel(q - p, vq0 - v0, v0, vf, **GUARD).bias_scale[dist == D0] == 1.0)
+    # near the nose nothing changes, whatever the bias (look angle 30 deg, a bias far larger than PN)
+    r2, v2 = [1000.0, 577.0, -50.0], [25.0, 0.0, 0.0]
+    k2 = bpng_accel(r2, [-25.0, 0.0, 0.0], v2, vf_enu(-60.0, 300.0), **GUARD)
+    assert float(k2.bias_scale) == 1.0
+    assert BpngConfig(capture_turn_deg_s=None).capture_turn_deg_s is None
 
 
 def test_endgame_flies_straight_and_the_caller_may_place_the_aim():
