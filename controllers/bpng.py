@@ -137,7 +137,7 @@ can level off a few metres below the sea hundreds of metres short. The law
 knows nothing of the sea: keep |theta_f| near or above the LOS angle, or
 switch farther out.
 
-The capture guard (``capture_turn_deg_s``; a departure from the printed law).
+The capture guard (``capture_turn_deg_s``, 3 deg/s by default; a departure from the printed law).
 From a loiter round a fast ship in wind the UAV's ground velocity at the
 switch can point 77-105 deg off the line of sight with a LOS rate of only
 0.01 rad/s: the PN term is then ~1 m/s^2 and the bias term, under its cap,

@@ -680,12 +680,13 @@ class BpngConfig(StrictModel):
                     "(away from V_f) cancels the PN term and the UAV flies straight on, away from the ship; "
                     "none: the paper's law as printed")
     capture_turn_deg_s: float | None = Field(
-        None, gt=0, le=90,
+        3.0, gt=0, le=90,
         description="the capture guard: far off the nose (the look angle above capture_look_deg) the command turns "
                     "the velocity toward the line of sight at this rate or more, the bias term scaled down where "
                     "it would take that away, deg/s. From a loiter round a fast ship the LOS rate can be so low "
                     "that the bias cancels PN and the UAV flies on beside the ship, its range held (the "
-                    "go-around's stall); none: off")
+                    "go-around's stall; README, envelope section: 'Dives that hold their range'); none: the "
+                    "law as printed")
     capture_look_deg: float = Field(
         60.0, ge=0, le=180, description="the look angle (between the velocity and the line of sight) above which "
                                         "the capture guard acts, deg")

@@ -13,9 +13,9 @@ from fwsim.messages import AccelCommand
 
 CFG = BpngConfig()
 GAINS = dict(n_sigma=CFG.n_sigma, n_f=CFG.n_f, min_tgo_s=CFG.min_tgo_s, max_accel_m_s2=CFG.max_accel_m_s2,
-             bias_angle_cap_rad=math.radians(CFG.bias_angle_cap_deg))
+             bias_angle_cap_rad=math.radians(CFG.bias_angle_cap_deg))  # the cap, without the capture guard
 PRINTED = dict(GAINS, bias_angle_cap_rad=math.inf)  # the law as printed (no cap on the bias angle)
-GUARD = dict(GAINS, capture_turn_rad_s=math.radians(3.0))  # with the capture guard at 3 deg/s
+GUARD = dict(GAINS, capture_turn_rad_s=math.radians(CFG.capture_turn_deg_s))  # the defaults: the guard too
 
 
 def _angle(a, b):

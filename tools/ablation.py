@@ -69,6 +69,8 @@ DEPARTURES: dict[str, tuple[str, dict]] = {
                      {"controllers.nmpc.air_relative": False}),
     "contact_aim": ("BPNG steers to the hull's surface, not the aim point", {"controllers.bpng.aim_at_contact": False}),
     "bias_cap": ("BPNG's bias term capped at 90 deg", {"controllers.bpng.bias_angle_cap_deg": None}),
+    "capture_guard": ("BPNG's capture guard (3 deg/s toward the ship far off the nose)",
+                      {"controllers.bpng.capture_turn_deg_s": None}),
     "endgame": ("angle-hold endgame for the last 0.4 s", {"controllers.bpng.endgame_tgo_s": 0.0}),
 }
 
