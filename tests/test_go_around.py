@@ -26,11 +26,13 @@ def test_a_tail_chase_that_never_dived_goes_round_and_hits(tmp_path):
     the ship's speed: BPNG's bias and PN terms cancel, the range holds ~560 m for 40 s and then grows, and the
     run flew on for 600 s without a dive. Now the dive goes round once (since 2fb3e86 20 s after the switch,
     the range held: ``switch.go_around_stall_s``), the window is placed by the closing bearing (~355 deg, not
-    64 deg), and the second dive hits within 3 m and 3 deg."""
+    64 deg), and the second dive hits within 3 m and 3 deg. Flown without BPNG's capture guard, which keeps
+    this dive from stalling at all (the next test): here the go-around itself is under test."""
     from fwsim.log import read_log
     from fwsim.loop import run
     from fwsim.metrics import compute_metrics
-    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", TAIL_CHASE)
+    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml",
+                                   {**TAIL_CHASE, "controllers.bpng.capture_turn_deg_s": None})
     res = run(scenario, text, tmp_path / "tail_chase.mcap")
     m = compute_metrics(res.log_path)
     events = [e[2] for e in read_log(res.log_path).events()]
@@ -42,3 +44,21 @@ def test_a_tail_chase_that_never_dived_goes_round_and_hits(tmp_path):
     assert abs(m["impact_fpa_error_deg"]) <= 3.0 and abs(m["impact_heading_error_deg"]) <= 3.0
     first = float(switches[0].split("at t = ")[1].split(" s")[0])
     assert m["switch_time_s"] > first + 20.0  # the dive that hit is the second
+
+
+@pytest.mark.slow
+def test_the_capture_guard_closes_the_tail_chase_on_its_first_dive(tmp_path):
+    """The same draw with the defaults: far off the nose BPNG turns toward the ship at 3 deg/s or more
+    (``bpng.capture_turn_deg_s``), the bias held back where it cancelled PN, so the first dive closes and hits
+    within 3 m and 3 deg, without going round."""
+    from fwsim.log import read_log
+    from fwsim.loop import run
+    from fwsim.metrics import compute_metrics
+    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", TAIL_CHASE)
+    res = run(scenario, text, tmp_path / "tail_chase_guard.mcap")
+    m = compute_metrics(res.log_path)
+    assert m["go_arounds"] == 0.0
+    assert m["hit"] == 1.0 and m["miss_distance_m"] <= 3.0, m["miss_distance_m"]
+    assert abs(m["impact_fpa_error_deg"]) <= 3.0 and abs(m["impact_heading_error_deg"]) <= 3.0
+    bpng = read_log(res.log_path).table("/fsw/bpng")
+    assert (bpng["bias_scale"] < 1.0).any()  # the guard acted
