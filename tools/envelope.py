@@ -174,7 +174,7 @@ def main(argv=None) -> int:
     for out_dir in args.out_dirs:
         try:
             these = json.loads((out_dir / "summary.json").read_text())["rows"]
-            rows += [{**r, "folder": out_dir.name} for r in these] if args.by == "folder" else these
+            rows += [{**r, "folder": str(out_dir)} for r in these] if args.by == "folder" else these
             per_dir.append((out_dir, these))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"error: {out_dir}/summary.json: {type(exc).__name__}: {exc}", file=sys.stderr)
