@@ -20,9 +20,10 @@ silhouettes on a grid over the box, and returns the box of the ship's cells
 the airframe leaves (and the share of the ship it hides): the box a detector
 would report had the ship been where the estimate puts it.
 :meth:`AirframeShadow.aligned_cut` first moves the ship onto the detected box,
-so that the cut is the one where the camera sees the ship. The perception (``controllers.perception``) does this
-when the detected box touches the silhouette (:meth:`AirframeShadow.touches`),
-and its box-centre correction then subtracts the centre of the cut box, as it
+so that the cut is the one where the camera sees the ship. The perception
+(``controllers.perception``) does this when the detected box touches the
+silhouette (:meth:`AirframeShadow.touches`), and its box-centre correction
+then subtracts the centre of the cut box, as it
 already does for a box cut by the image border
 (:func:`controllers.target_model.predicted_box_px` clips to the image). A box
 no ray of which can meet the airframe is returned unchanged at the cost of a
