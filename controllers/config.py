@@ -655,6 +655,20 @@ class SwitchConfig(StrictModel):
         description="the window's centre lies this far past the approach bearing in the direction the UAV goes "
                     "round the target: the middle of the terminal law's capture region from a loiter, which "
                     "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
+    entry_depression_margin_deg: float | None = Field(
+        None, ge=0, le=60,
+        description="the dive's entry ring: when the switch condition first holds and the ship lies more than "
+                    "|bpng.impact_flight_path_deg| - this below the horizon seen from the ring (atan(H / R)), "
+                    "the loiter first descends on its ring (at entry_descent_rate_m_s) to the altitude that "
+                    "puts it there, R tan(|theta_f| - this), no lower than entry_min_altitude_m, and the "
+                    "switch is then armed at that altitude. A dive that must end shallower than its line of "
+                    "sight at the switch dives under it and pulls up, the ship over the nose, where a belly "
+                    "camera's view is cut by the airframe. The loiter block must take an altitude offset "
+                    "(nmpc, orbit). None: the dive starts from the ring at H (the paper's)")
+    entry_min_altitude_m: float = Field(
+        100.0, gt=10, le=5000, description="see entry_depression_margin_deg: the entry ring's lowest altitude, m")
+    entry_descent_rate_m_s: float = Field(
+        5.0, gt=0, le=30, description="see entry_depression_margin_deg: the loiter altitude's descent rate, m/s")
 
 
 class BpngConfig(StrictModel):
@@ -960,4 +974,19 @@ class Controllers(StrictModel):
             times = [s.t_s for s in self.script]
             if times != sorted(times):
                 raise ValueError("script steps must be in increasing t_s")
+        return self
+
+    @model_validator(mode="after")
+    def _entry_ring(self, info: ValidationInfo):
+        """The dive's entry ring needs a loiter that flies below its ring (``altitude_offset_m``)."""
+        from controllers import blocks  # light: no solver or filter
+
+        use = self.after_lock.use
+        if self.switch.entry_depression_margin_deg is None or use in blocks.builtin_names("after_lock"):
+            return self
+        ctx = info.context or {}
+        if ctx.get("check_plugins", True) and not hasattr(
+                blocks.resolve_class(use, "after_lock", ctx.get("search_dirs", ())), "altitude_offset_m"):
+            raise ValueError(f"switch.entry_depression_margin_deg: {use} has no altitude_offset_m to fly below "
+                             "its ring; set it to null")
         return self

@@ -56,10 +56,12 @@ class OrbitLoiter:
         o = orbit_cfg
         self.follower = OrbitFollower(o.airspeed_m_s, o.radius_m, o.altitude_m, o.clockwise, max_bank_deg)
         self.radius_m, self.altitude_m = o.radius_m, o.altitude_m
+        self.altitude_offset_m = 0.0  # flown this far below H (the dive's entry ring: controllers.phases)
 
     def step(self, nav: Measurements, target: TargetState) -> Guidance:
+        self.follower.altitude_m = self.altitude_m - self.altitude_offset_m
         cmd, chi_c, _ = self.follower.step(nav, target.pos_enu_m)
-        return Guidance(cmd, "loiter:orbit", course_sp_rad=chi_c, altitude_sp_m=self.altitude_m)
+        return Guidance(cmd, "loiter:orbit", course_sp_rad=chi_c, altitude_sp_m=self.follower.altitude_m)
 
 
 class NmpcLoiter:
@@ -90,6 +92,10 @@ class NmpcLoiter:
         self._psi = None  # the last state's psi (its unwrapping)
         self._ahead = float(nmpc_cfg.solve_ahead_s)
         self._pending = None  # the time of a solve submitted ahead
+        # flown this far below H (the dive's entry ring: controllers.phases): the solver is given the UAV and
+        # the target both raised by it, so that it holds its ring at H with every relative quantity (the
+        # radius, the barrier's geometry) as flown; the model knows no absolute height but H
+        self.altitude_offset_m = 0.0
 
     def step(self, nav: Measurements, target: TargetState) -> Guidance:
         t = nav.t_s
@@ -99,13 +105,14 @@ class NmpcLoiter:
                 self._take(*res)
             self._pending = None
         if t + 1e-9 >= self._next_t:  # (a solve ahead is for _next_t: it was taken or dropped above)
-            self.solver.submit(t, self._state(nav), target.pos_enu_m, self._target_velocity(nav, target))
+            self.solver.submit(t, self._state(nav), self._raised(target.pos_enu_m),
+                               self._target_velocity(nav, target))
             self._take(*self.solver.result())
         elif self._pending is None and self._ahead > 0.0 and t + self._ahead + 1e-9 >= self._next_t:
             self._solve_ahead(nav, target, self._next_t)
         c = self._cmd
         cmd = type(c)(t, c.airspeed_m_s, c.roll_rate_rad_s, c.pitch_rate_rad_s)
-        return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m)
+        return Guidance(cmd, "loiter:nmpc", altitude_sp_m=self.altitude_m - self.altitude_offset_m)
 
     def close(self) -> None:
         """Stop the solver's worker (if it has one)."""
@@ -114,7 +121,17 @@ class NmpcLoiter:
     def _state(self, nav: Measurements) -> np.ndarray:
         x0 = self._from_meas(nav, self.cfg.pitch_from, self._psi)
         self._psi = float(x0[5])
+        if self.altitude_offset_m:
+            x0[2] += self.altitude_offset_m
         return x0
+
+    def _raised(self, pos_enu_m: np.ndarray) -> np.ndarray:
+        """The target's position as the solver is given it (raised by ``altitude_offset_m``)."""
+        if not self.altitude_offset_m:
+            return pos_enu_m
+        p = np.array(pos_enu_m, dtype=float)
+        p[2] += self.altitude_offset_m
+        return p
 
     def _target_velocity(self, nav: Measurements, target: TargetState) -> np.ndarray:
         v_q = target.vel_enu_m_s
@@ -127,7 +144,7 @@ class NmpcLoiter:
         the target by its estimated velocity."""
         dt = t_solve - nav.t_s
         x0 = self._predict(self._state(nav), self._command_input(self._cmd), dt, self.cfg)
-        self.solver.submit(t_solve, x0, target.pos_enu_m + dt * target.vel_enu_m_s,
+        self.solver.submit(t_solve, x0, self._raised(target.pos_enu_m + dt * target.vel_enu_m_s),
                            self._target_velocity(nav, target))
         self._pending = t_solve
 

@@ -38,7 +38,7 @@ from controllers.guidance import PathGuidance
 from controllers.messages import DetectionFix, Guidance, TargetState
 from controllers.nav import Navigation
 from controllers.perception import Perception
-from controllers.phases import PhaseState, Ring, next_phase, radial_error_m, window_bearing_deg
+from controllers.phases import PhaseState, Ring, entry_altitude_m, next_phase, radial_error_m, window_bearing_deg
 from controllers.pointing import Pointing
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
@@ -79,6 +79,11 @@ class FlightSoftware:
         self.guidance = {1: PathGuidance(cfg.initial_path, initial_cfg), 2: loiter,
                          3: build_block("terminal", cfg.terminal, ctx, search_dirs)}
         self.ring = None if loiter is None else Ring(float(loiter.radius_m), float(loiter.altitude_m))
+        self.entry_altitude_m = entry_altitude_m(self.ring, cfg.switch, cfg.bpng.impact_flight_path_deg)
+        if self.entry_altitude_m is not None and not hasattr(loiter, "altitude_offset_m"):
+            raise ValueError(f"controllers.switch.entry_depression_margin_deg: the loiter block "
+                             f"({cfg.after_lock.use}) cannot fly below its ring's altitude (it has no "
+                             f"altitude_offset_m); set it to null or use nmpc or orbit")
         law = build_block("pointing", cfg.pointing, ctx, search_dirs)
         self.pointing = Pointing(GimbalSearch(cfg.acquisition), law, cfg.reacquire, cfg.ibvs.tilt_limits_rad,
                                  self.recorder)
@@ -107,7 +112,11 @@ class FlightSoftware:
         approach = window_bearing_deg(self.phase, self.cfg.switch, self.cfg.bpng, nav.wind_enu_m_s, est)
         self.phase, events = next_phase(self.phase, nav.t_s, nav.pos_enu_m, nav.vel_enu_m_s, nav.height_above_sea_m,
                                         est, fix.locked, self.ring, self.cfg.switch, approach,
-                                        self.cfg.after_lock.use)
+                                        self.cfg.after_lock.use, self.entry_altitude_m)
+        if self.phase.descending:  # the loiter's altitude ramps down to the entry ring's
+            sw = self.cfg.switch
+            self.guidance[2].altitude_offset_m = min(self.ring.altitude_m - self.entry_altitude_m,
+                                                     sw.entry_descent_rate_m_s * (nav.t_s - self.phase.descent_t_s))
         for e in events:
             self.recorder.event(e)
         self.perception.in_dive = self.phase.phase == 3
@@ -121,6 +130,8 @@ class FlightSoftware:
         phase = self.phase.phase
         name = "acquisition:" + ("path" if fix.locked else "search") if phase == 1 else guide.name
         ring = self.ring if phase > 1 else _NO_RING
+        if phase > 1 and self.phase.descending:
+            ring = Ring(ring.radius_m, self.entry_altitude_m)
         radial = radial_error_m(nav.pos_enu_m, est, ring.radius_m) if phase > 1 else math.nan
         status = FlightSoftwareStatus(nav.t_s, phase, name, guide.command.mode, guide.course_sp_rad,
                                       guide.bank_sp_rad, guide.altitude_sp_m, guide.cross_track_m, fix.locked,

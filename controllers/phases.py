@@ -20,6 +20,11 @@
    ``go_around_stall_fraction`` below its value at the switch, the
    mission returns to Phase 2 (the loiter takes the UAV back to its ring) and
    the switch is armed again, its dwell and minimum loiter counted afresh.
+   With ``switch.entry_depression_margin_deg`` (off by default) the first
+   time the switch condition holds the loiter instead descends on its ring
+   to the dive's entry ring (:func:`entry_altitude_m`: the ship
+   ``|theta_f|`` less the margin below the horizon), and the switch is armed
+   there, its dwell counted afresh; a go-around keeps the entry ring.
 
 :func:`next_phase` takes the previous :class:`PhaseState` and this tick's
 inputs and returns the next state and why it changed; it keeps nothing of its
@@ -35,8 +40,8 @@ import numpy as np
 from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 
-__all__ = ["PhaseState", "Ring", "approach_bearing_deg", "next_phase", "radial_error_m", "switch_reason",
-           "window_bearing_deg"]
+__all__ = ["PhaseState", "Ring", "approach_bearing_deg", "entry_altitude_m", "next_phase", "radial_error_m",
+           "switch_reason", "window_bearing_deg"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +63,12 @@ class PhaseState:
     phase3_t_s: float = math.nan  # when Phase 3 started
     switch_m: float = math.nan  # in Phase 3: the range to the target estimate at its first tick
     go_arounds: int = 0  # dives that did not close and went back to the loiter
+    descent_t_s: float = math.nan  # since when the loiter descends to the dive's entry ring (NaN: it does not)
+
+    @property
+    def descending(self) -> bool:
+        """The loiter has left H for the dive's entry ring (``switch.entry_depression_margin_deg``)."""
+        return not math.isnan(self.descent_t_s)
 
 
 def radial_error_m(pos_enu_m, target: TargetState, radius_m: float) -> float:
@@ -115,19 +126,29 @@ def window_bearing_deg(state: PhaseState, sw: SwitchConfig, bpng: BpngConfig, wi
 
 def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: float, target: TargetState,
                locked: bool, ring: Ring | None, switch: SwitchConfig, approach_deg: float,
-               loiter_name: str = "") -> tuple[PhaseState, tuple[str, ...]]:
+               loiter_name: str = "", entry_altitude_m: float | None = None) -> tuple[PhaseState, tuple[str, ...]]:
     """The phase after this tick and the events that say why it changed (none: it did not).
 
     ``ring``: the loiter's (None: no Phase 2); ``approach_deg``: the approach window's centre before the lead
     (:func:`approach_bearing_deg`, or the mission's impact heading), clockwise from North.
+    ``entry_altitude_m``: the dive's entry ring's altitude (:func:`entry_altitude_m`; None: the dive starts
+    at H): the first time the switch condition holds the loiter starts its descent there instead (an event
+    says so), and from then on the switch is armed at that altitude.
     """
     events = []
     if state.phase == 1 and locked and ring is not None and target.known:
         state = PhaseState(2, t_s)
         events.append(f"phase 1 -> 2 at t = {t_s:.2f} s: target locked, loiter ({loiter_name})")
     if state.phase == 2:
-        state, why = switch_reason(state, t_s, pos_enu_m, vel_enu_m_s, height_m, target, ring, switch,
+        armed = ring if entry_altitude_m is None or not state.descending else Ring(ring.radius_m, entry_altitude_m)
+        state, why = switch_reason(state, t_s, pos_enu_m, vel_enu_m_s, height_m, target, armed, switch,
                                    approach_deg)
+        if why and entry_altitude_m is not None and not state.descending:
+            state = replace(state, descent_t_s=t_s, in_tol_since_s=math.nan)
+            events.append(f"phase 2 at t = {t_s:.2f} s: the switch condition holds; the loiter descends from "
+                          f"{ring.altitude_m:.0f} m to the dive's entry ring at {entry_altitude_m:.0f} m "
+                          f"(switch.entry_depression_margin_deg) and the switch is armed there")
+            why = ""
         if why:
             state = replace(state, phase=3, closest_m=math.nan, phase3_t_s=t_s, switch_m=math.nan)
             events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {why}")
@@ -149,8 +170,19 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
         if why and ring is not None:
             events.append(f"phase 3 -> 2 at t = {t_s:.2f} s: the dive is not closing ({why}): going round, "
                           f"back to the loiter ({loiter_name}), the switch armed again")
-            state = PhaseState(2, t_s, go_arounds=state.go_arounds + 1)
+            state = PhaseState(2, t_s, go_arounds=state.go_arounds + 1, descent_t_s=state.descent_t_s)
     return state, tuple(events)
+
+
+def entry_altitude_m(ring: Ring | None, switch: SwitchConfig, impact_fpa_deg: float) -> float | None:
+    """The dive's entry ring's altitude (``switch.entry_depression_margin_deg``): ``R tan(|theta_f| - margin)``,
+    between ``entry_min_altitude_m`` and H; None when it is off, there is no ring, or the ring at H already
+    lies within the altitude tolerance of it (no descent)."""
+    if switch.entry_depression_margin_deg is None or ring is None:
+        return None
+    depression = max(abs(float(impact_fpa_deg)) - switch.entry_depression_margin_deg, 1.0)
+    h = min(max(ring.radius_m * math.tan(math.radians(depression)), switch.entry_min_altitude_m), ring.altitude_m)
+    return h if ring.altitude_m - h > switch.altitude_tol_m else None
 
 
 def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: float, target: TargetState,
