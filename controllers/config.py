@@ -656,7 +656,7 @@ class SwitchConfig(StrictModel):
                     "round the target: the middle of the terminal law's capture region from a loiter, which "
                     "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
     entry_depression_margin_deg: float | None = Field(
-        None, ge=0, le=60,
+        0.0, ge=0, le=60,
         description="the dive's entry ring: when the switch condition first holds and the ship lies more than "
                     "|bpng.impact_flight_path_deg| - this below the horizon seen from the ring (atan(H / R)), "
                     "the loiter first descends on its ring (at entry_descent_rate_m_s) to the altitude that "
@@ -664,7 +664,8 @@ class SwitchConfig(StrictModel):
                     "switch is then armed at that altitude. A dive that must end shallower than its line of "
                     "sight at the switch dives under it and pulls up, the ship over the nose, where a belly "
                     "camera's view is cut by the airframe. The loiter block must take an altitude offset "
-                    "(nmpc, orbit). None: the dive starts from the ring at H (the paper's)")
+                    "(nmpc, orbit). None: the dive starts from the ring at H (the paper's; "
+                    "scenarios/paper_mission.yaml keeps it)")
     entry_min_altitude_m: float = Field(
         100.0, gt=10, le=5000, description="see entry_depression_margin_deg: the entry ring's lowest altitude, m")
     entry_descent_rate_m_s: float = Field(

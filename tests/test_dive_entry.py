@@ -15,7 +15,9 @@ SHIP = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
 
 def test_entry_altitude_puts_the_ship_at_the_impact_angle_less_the_margin():
     ring = Ring(500.0, 500.0)  # the ship 45 deg below the horizon
-    assert entry_altitude_m(ring, SwitchConfig(), -30.0) is None  # off by default (the paper's dive)
+    # on by default: the ship at the impact angle below the horizon (R tan 30 deg)
+    assert entry_altitude_m(ring, SwitchConfig(), -30.0) == pytest.approx(500.0 * math.tan(math.radians(30.0)))
+    assert entry_altitude_m(ring, SwitchConfig(entry_depression_margin_deg=None), -30.0) is None  # the paper's
     sw = SwitchConfig(entry_depression_margin_deg=5.0)
     h = entry_altitude_m(ring, sw, -30.0)
     assert h == pytest.approx(500.0 * math.tan(math.radians(25.0)))
@@ -112,5 +114,6 @@ def test_the_entry_ring_with_a_loiter_that_cannot_descend_is_a_one_line_scenario
     assert "\n" not in text and "switch.entry_depression_margin_deg: test_dive_entry:RingOnly has no " \
                                 "altitude_offset_m" in text, text
     for fine in ({**entry, "controllers.after_lock": "test_dive_entry:RingAndOffset"},
-                 {"controllers.after_lock": "test_dive_entry:RingOnly"}, {**entry, "controllers.after_lock": "orbit"}):
+                 {"controllers.after_lock": "test_dive_entry:RingOnly"},  # paper_mission.yaml: the paper's dive
+                 {**entry, "controllers.after_lock": "orbit"}):
         load_scenario(SCENARIO_DIR / "paper_mission.yaml", fine)
