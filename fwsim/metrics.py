@@ -157,7 +157,8 @@ def _fusion_metrics(log: RunLog, m: dict) -> None:
             m[f"estimator_{k}"] = float(last[k])
 
 
-LOITER_SETTLE_S = 60.0  # loiter errors are scored from Phase 2 start + this
+#: loiter errors are scored from Phase 2 start + this, to the switch (or to the descent to the dive's entry ring)
+LOITER_SETTLE_S = 60.0
 
 
 def _loiter_metrics(log: RunLog, m: dict) -> None:
@@ -196,6 +197,10 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
         fr = log.table(topics.CAMERA_FRAME)
         wf = (fr["t_s"] >= t2) & (fr["t_s"] <= t_end)
         m["occluded_frames_phase2"] = float(np.sum(fr["in_fov"][wf].astype(bool) & (fr["visible_px"][wf] <= 0)))
+    if "loiter_altitude_m" in fs:  # the ring's hold ends where the loiter leaves H for the dive's entry ring
+        left = np.flatnonzero((fs["phase"] == 2) & (np.abs(fs["loiter_altitude_m"] - H) > 1e-6))
+        if left.size:
+            t_end = min(t_end, float(fs["t_s"][left[0]]))
     st, tg = log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
     w = (st["t_s"] >= t2 + LOITER_SETTLE_S) & (st["t_s"] <= t_end)
     m["loiter_settle_s"] = LOITER_SETTLE_S
