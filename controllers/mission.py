@@ -79,11 +79,8 @@ class FlightSoftware:
         self.guidance = {1: PathGuidance(cfg.initial_path, initial_cfg), 2: loiter,
                          3: build_block("terminal", cfg.terminal, ctx, search_dirs)}
         self.ring = None if loiter is None else Ring(float(loiter.radius_m), float(loiter.altitude_m))
+        # (a loiter that cannot fly below its ring is a scenario error: Controllers._entry_ring)
         self.entry_altitude_m = entry_altitude_m(self.ring, cfg.switch, cfg.bpng.impact_flight_path_deg)
-        if self.entry_altitude_m is not None and not hasattr(loiter, "altitude_offset_m"):
-            raise ValueError(f"controllers.switch.entry_depression_margin_deg: the loiter block "
-                             f"({cfg.after_lock.use}) cannot fly below its ring's altitude (it has no "
-                             f"altitude_offset_m); set it to null or use nmpc or orbit")
         law = build_block("pointing", cfg.pointing, ctx, search_dirs)
         self.pointing = Pointing(GimbalSearch(cfg.acquisition), law, cfg.reacquire, cfg.ibvs.tilt_limits_rad,
                                  self.recorder)
