@@ -75,12 +75,15 @@ class Interrupted(Signalled):
 class _StopOnSigint:
     """Turns Ctrl-C (SIGINT) and SIGTERM (what a batch scheduler, a container or Ray sends) into a flag the
     loop checks once per tick, so a signal never lands in the middle of writing the log; a second one
-    interrupts at once. Main thread only."""
+    interrupts at once, unless the log is already being finished (``closing``: a process pool that breaks
+    as its first worker stops sends SIGTERM to the others, which may be closing their logs after the
+    first signal; their logs still get their footers). Main thread only."""
 
     _SIGNALS = STOP_SIGNALS  # SIGINT, SIGTERM and (where there is one) SIGHUP
 
     def __init__(self):
         self.requested = False
+        self.closing = False  # the loop is finishing the log after a signal: later ones wait for it
         self.signum = signal.SIGINT
         self._previous: dict[int, object] = {}
 
@@ -92,7 +95,7 @@ class _StopOnSigint:
         return self
 
     def _handle(self, signum, frame):
-        if self.requested:
+        if self.requested and not self.closing:
             raise Interrupted(signum)
         self.requested, self.signum = True, signum
 
@@ -317,6 +320,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
                 if progress is not None and tick % progress_every == 0:
                     progress(sim_t, scenario.duration_s)
                 if sigint.requested:
+                    sigint.closing = True
                     _log_truth(log, truth, origin, trails)
                     trails.flush(log, sim_t)
                     log.close("interrupted", f"interrupted ({sigint.description}) at t = {sim_t:.2f} s")

@@ -147,6 +147,20 @@ def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
     assert main_cli(["metrics", str(log_path)]) == 0  # and fwsim scores it
 
 
+def test_a_second_signal_interrupts_at_once_unless_the_log_is_being_finished():
+    """A second signal raises at once (a stuck loop), but not while the loop finishes the log after the first:
+    a process pool that breaks terminates its other workers, and their logs must still get their footers."""
+    from fwsim.loop import Interrupted, _StopOnSigint
+    flag = _StopOnSigint()
+    flag._handle(signal.SIGTERM, None)
+    assert flag.requested and flag.signum == signal.SIGTERM
+    flag.closing = True
+    flag._handle(signal.SIGTERM, None)  # deferred: the log is being closed
+    flag.closing = False
+    with pytest.raises(Interrupted):
+        flag._handle(signal.SIGTERM, None)
+
+
 def test_after_sigkill_the_log_reads_to_its_last_chunk(tmp_path):
     """A hard kill leaves no footer: fwsim and mcap's non-seeking reader still read every complete chunk."""
     from mcap.exceptions import EndOfFile
