@@ -214,7 +214,7 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     m["loiter_alt_rmse_m"] = _rms(st["pos_enu_m"][w, 2] - H)
 
 
-class _LoggedShip:
+class LoggedShip:
     """The ship as the log recorded it (/target/state: whatever moved it, a model or an event's manoeuvre):
     its pose and aim point at a logged time, or carried on at its last velocity past the log's end."""
 
@@ -279,7 +279,7 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
         why = short(exc, 160) or type(exc).__name__
         m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
         return
-    ship = _LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
+    ship = LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
     t = st["t_s"]
     pos = st["pos_enu_m"]
     if ended:

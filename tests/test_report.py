@@ -181,6 +181,21 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     errs = [tuple(float(v) for v in c.split(",")) for c in cells[8:11]]
     assert all(math.isfinite(b) and math.isfinite(p) and math.hypot(b, p) < 8.0 for b, p in errs), cells
     assert cells[11].endswith("%") and 0.0 < float(cells[11].rstrip(" %")) <= 100.0, cells
+    assert 0.0 <= float(cells[13]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
+
+
+def test_the_envelope_aim_line_offset_by_hand():
+    """--why's aim line: a UAV at the origin steering to (60, 0, 0) (range 60 m, in the band) passes a true
+    aim point at (30, 4, 3) by 5 m (the along-line error costs nothing); ticks out of the 50-80 m band are
+    left out; none in the band: NaN."""
+    import numpy as np
+    tool = _envelope_tool()
+    uav_t, uav_p = np.array([0.0, 10.0]), np.zeros((2, 3))
+    aim = np.array([[60.0, 0.0, 0.0], [200.0, 50.0, 0.0]])  # the second tick 206 m out: not counted
+    off = tool.aim_line_offset([1.0, 2.0], aim, [60.0, 206.2], uav_t, uav_p, lambda t: np.array([30.0, 4.0, 3.0]))
+    assert off == pytest.approx(5.0)
+    far = tool.aim_line_offset([1.0], aim[1:], [206.2], uav_t, uav_p, lambda t: np.zeros(3))
+    assert math.isnan(far)
 
 
 def test_longest_hidden_stretch_by_hand():

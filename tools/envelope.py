@@ -44,6 +44,8 @@ from fwsim.report import summarise, within
 #: seconds before the end of a run at which --why gives the estimate's error (the end itself too)
 WHY_TIMES_S = (5.0, 2.0)
 WHY_WINDOW_S = 5.0  # --why: the detections of the last this many seconds
+#: --why: the aim line's offset is the median over the dive's ticks this far (m) from the point it steers to
+AIM_LINE_RANGES_M = (50.0, 80.0)
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
         ("estimate <= 8 m", 0.90))
@@ -116,6 +118,28 @@ def last_detections(t_s, reasons, end_s: float, window_s: float = WHY_WINDOW_S) 
     return used / len(last), (f"{top[0][0]} {top[0][1]}" if top else "")
 
 
+def aim_line_offset(t_s, aim_enu_m, range_m, uav_t_s, uav_pos_enu_m, truth_aim_at,
+                    ranges_m: tuple[float, float] = AIM_LINE_RANGES_M) -> float:
+    """Median, over the dive's ticks whose range to the point it steers to (``aim_enu_m``, ``range_m``: the
+    log's /fsw/bpng) lies within ``ranges_m``, of the distance from the ship's true aim point
+    (``truth_aim_at(t)`` -> (3,)) to the line from the UAV (``uav_pos_enu_m`` at ``uav_t_s``, interpolated)
+    through that point. NaN when no tick is in the band or the line is undefined."""
+    t = np.asarray(t_s, dtype=float)
+    rng = np.asarray(range_m, dtype=float)
+    lo, hi = ranges_m
+    out = []
+    for i in np.flatnonzero((rng >= lo) & (rng <= hi)).tolist():
+        p = np.array([np.interp(t[i], uav_t_s, uav_pos_enu_m[:, k]) for k in range(3)])
+        d = np.asarray(aim_enu_m[i], dtype=float) - p
+        n = float(np.linalg.norm(d))
+        if not (math.isfinite(n) and n > 1e-6):
+            continue
+        w = np.asarray(truth_aim_at(float(t[i])), dtype=float) - p
+        u = d / n
+        out.append(float(np.linalg.norm(w - w.dot(u) * u)))
+    return float(np.median(out)) if out else math.nan
+
+
 def _failed_bar(row: dict) -> str:
     """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
     if row.get("hit") != 1.0:
@@ -124,6 +148,23 @@ def _failed_bar(row: dict) -> str:
     off = not max(abs(row.get("impact_fpa_error_deg", math.inf)),
                   abs(row.get("impact_heading_error_deg", math.inf))) <= 3.0
     return "distance and angle" if far and off else "distance" if far else "angle"
+
+
+def _aim_line_cell(log) -> str:
+    """--why's aim-line cell for one log ("-" without a dive or a readable scenario)."""
+    from fwsim import topics
+    from fwsim.metrics import LoggedShip
+    from fwsim.scenario import parse_scenario
+    if topics.FSW_BPNG not in log.topics or topics.TARGET_STATE not in log.topics:
+        return "-"
+    try:
+        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+    except ValueError:  # ScenarioError among them
+        return "-"
+    b, uav = log.table(topics.FSW_BPNG), log.table(topics.UAV_STATE)
+    off = aim_line_offset(b["t_s"], b["aim_enu_m"], b["range_m"], uav["t_s"], uav["pos_enu_m"],
+                          LoggedShip(log, scenario).aim_point_enu_m)
+    return f"{off:.1f}" if math.isfinite(off) else "-"
 
 
 def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
@@ -153,8 +194,9 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             fu = log.table(topics.FSW_DETECTION_FUSION)
             share, top = last_detections(fu["t_s"], fu["reason"], end)
             cells += [f"{100 * share:.0f} %" if math.isfinite(share) else "-", top or "-"]
+            cells.append(_aim_line_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 2)
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 3)
         table.append(cells)
     return table
 
@@ -207,7 +249,9 @@ def main(argv=None) -> int:
                 "longest hidden after lock, s"] + [
             f"estimate error (bow, port) {dt:g} s before the end, m" for dt in WHY_TIMES_S] + [
             "estimate error (bow, port) at the end, m",
-            f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest"]
+            f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest",
+            f"the line to the steered-to point passes the aim point by, {AIM_LINE_RANGES_M[1]:g}-"
+            f"{AIM_LINE_RANGES_M[0]:g} m out, m"]
         for out_dir, these in per_dir:
             print(f"\nRuns outside 3 m / 3 deg in {out_dir} (worst first):\n")
             print("| " + " | ".join(head) + " |")
