@@ -20,7 +20,7 @@
    ``go_around_stall_fraction`` below its value at the switch, the
    mission returns to Phase 2 (the loiter takes the UAV back to its ring) and
    the switch is armed again, its dwell and minimum loiter counted afresh.
-   With ``switch.entry_depression_margin_deg`` (0 by default; the paper
+   With ``switch.entry_depression_margin_deg`` (5° by default; the paper
    mission's file sets it to null, the paper's dive from H) the first
    time the switch condition holds the loiter instead descends on its ring
    to the dive's entry ring (:func:`entry_altitude_m`: the ship

@@ -15,8 +15,10 @@ SHIP = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
 
 def test_entry_altitude_puts_the_ship_at_the_impact_angle_less_the_margin():
     ring = Ring(500.0, 500.0)  # the ship 45 deg below the horizon
-    # on by default: the ship at the impact angle below the horizon (R tan 30 deg)
-    assert entry_altitude_m(ring, SwitchConfig(), -30.0) == pytest.approx(500.0 * math.tan(math.radians(30.0)))
+    # on by default, 5 deg: the ship 5 deg shallower than the impact angle below the horizon (R tan 25 deg)
+    assert entry_altitude_m(ring, SwitchConfig(), -30.0) == pytest.approx(500.0 * math.tan(math.radians(25.0)))
+    no_margin = SwitchConfig(entry_depression_margin_deg=0.0)  # the ship at the impact angle (R tan 30 deg)
+    assert entry_altitude_m(ring, no_margin, -30.0) == pytest.approx(500.0 * math.tan(math.radians(30.0)))
     assert entry_altitude_m(ring, SwitchConfig(entry_depression_margin_deg=None), -30.0) is None  # the paper's
     sw = SwitchConfig(entry_depression_margin_deg=5.0)
     h = entry_altitude_m(ring, sw, -30.0)
