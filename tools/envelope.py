@@ -157,13 +157,13 @@ def _aim_line_cell(log) -> str:
     from fwsim.scenario import parse_scenario
     if topics.FSW_BPNG not in log.topics or topics.TARGET_STATE not in log.topics:
         return "-"
-    try:
+    try:  # a cell of its own: a log it cannot read leaves the row's other cells as they are
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
-    except ValueError:  # ScenarioError among them
+        b, uav = log.table(topics.FSW_BPNG), log.table(topics.UAV_STATE)
+        off = aim_line_offset(b["t_s"], b["aim_enu_m"], b["range_m"], uav["t_s"], uav["pos_enu_m"],
+                              LoggedShip(log, scenario).aim_point_enu_m)
+    except (KeyError, ValueError, IndexError):  # ScenarioError is a ValueError
         return "-"
-    b, uav = log.table(topics.FSW_BPNG), log.table(topics.UAV_STATE)
-    off = aim_line_offset(b["t_s"], b["aim_enu_m"], b["range_m"], uav["t_s"], uav["pos_enu_m"],
-                          LoggedShip(log, scenario).aim_point_enu_m)
     return f"{off:.1f}" if math.isfinite(off) else "-"
 
 
