@@ -124,20 +124,22 @@ def aim_line_offset(t_s, aim_enu_m, range_m, uav_t_s, uav_pos_enu_m, truth_aim_a
     log's /fsw/bpng) lies within ``ranges_m``, of the distance from the ship's true aim point
     (``truth_aim_at(t)`` -> (3,)) to the line from the UAV (``uav_pos_enu_m`` at ``uav_t_s``, interpolated)
     through that point. NaN when no tick is in the band or the line is undefined."""
+    from fwsim.log.truth import interp_at
     t = np.asarray(t_s, dtype=float)
     rng = np.asarray(range_m, dtype=float)
     lo, hi = ranges_m
-    out = []
-    for i in np.flatnonzero((rng >= lo) & (rng <= hi)).tolist():
-        p = np.array([np.interp(t[i], uav_t_s, uav_pos_enu_m[:, k]) for k in range(3)])
-        d = np.asarray(aim_enu_m[i], dtype=float) - p
-        n = float(np.linalg.norm(d))
-        if not (math.isfinite(n) and n > 1e-6):
-            continue
-        w = np.asarray(truth_aim_at(float(t[i])), dtype=float) - p
-        u = d / n
-        out.append(float(np.linalg.norm(w - w.dot(u) * u)))
-    return float(np.median(out)) if out else math.nan
+    band = np.flatnonzero((rng >= lo) & (rng <= hi))
+    if not band.size:
+        return math.nan
+    p = interp_at(t[band], uav_t_s, uav_pos_enu_m)
+    d = np.asarray(aim_enu_m, dtype=float)[band] - p
+    n = np.linalg.norm(d, axis=1)
+    ok = np.isfinite(n) & (n > 1e-6)
+    if not ok.any():
+        return math.nan
+    u = d[ok] / n[ok, None]
+    w = np.array([truth_aim_at(float(ti)) for ti in t[band][ok]], dtype=float) - p[ok]
+    return float(np.median(np.linalg.norm(w - np.einsum("ij,ij->i", w, u)[:, None] * u, axis=1)))
 
 
 def _failed_bar(row: dict) -> str:
