@@ -361,11 +361,25 @@ class ShapeHeading:
         self.courses_enu_rad = 2.0 * math.pi * np.arange(cfg.headings) / cfg.headings
         lo, hi = cfg.size_bias_range
         self.size_biases = np.linspace(lo, hi, cfg.size_bias_steps) if hi > lo else np.array([lo])
-        # bias, heading, (width, height): bias-major, so that the marginalisation's reductions over the biases
-        # run down whole rows
-        self._loglik_bias = np.zeros((len(self.size_biases), cfg.headings, 2))
-        self.loglik = np.zeros(cfg.headings)  # marginalised over the size bias
+        # the turn rates while the course is unknown (turn_rates_deg_s), as course rates (counter-clockwise,
+        # rad/s), their a priori log weights, and how far each has turned the ship since the first box (rad):
+        # rate j's evidence at grid index k is for the course courses[k] + _rot[j] now
+        rates = np.asarray(cfg.turn_rates_deg_s, dtype=float)
+        self.turn_rates_rad_s = -np.radians(rates)
+        zero = rates == 0.0
+        if zero.any() and len(rates) > 1:
+            prior = np.where(zero, cfg.turn_rate_prior_zero, (1.0 - cfg.turn_rate_prior_zero) / (len(rates) - 1))
+        else:
+            prior = np.full(len(rates), 1.0 / len(rates))
+        self._log_rate_prior = np.log(np.maximum(prior, 1e-300))
+        self._rot = np.zeros(len(rates))
+        self._one_rate = True  # every rate's evidence is the same, turned alike (_keep_likeliest_rate)
+        # per rate: bias, heading, (width, height): bias-major, so that the marginalisation's reductions over
+        # the biases run down whole rows
+        self._loglik_bias = [np.zeros((len(self.size_biases), cfg.headings, 2)) for _ in rates]
+        self._loglik_rate = np.zeros((len(rates), cfg.headings))  # marginalised over the size bias
         self.updates = 0
+        self._count = 0.0  # the updates the evidence holds (fewer than updates when it fades, memory_s)
         self._last_t = -math.inf
         self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
         self._axis = None  # axis_enu_rad() of the current loglik
@@ -387,24 +401,41 @@ class ShapeHeading:
         pred = predicted_boxes_px(self.outline, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, self.courses_enu_rad)
         if not np.all(np.isfinite(pred)):
             return False
+        dt = t_s - self._last_t if self.updates else 0.0
         if c.follow_course:
             if course_enu_rad is not None and self._course is not None and self.updates:
-                most = math.radians(c.follow_course_max_rate_deg_s) * (t_s - self._last_t)
+                most = math.radians(c.follow_course_max_rate_deg_s) * dt
                 d = (course_enu_rad - self._course + math.pi) % (2.0 * math.pi) - math.pi
                 self.turn(min(max(d, -most), most))
             self._course = None if course_enu_rad is None else float(course_enu_rad)
-        size_pred = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
+        if course_enu_rad is not None and len(self._rot) > 1 and not self._one_rate:
+            self._keep_likeliest_rate()  # the course turns the ship now: no rate of its own to tell apart
+        if course_enu_rad is None and dt > 0.0:
+            # the course is not followed: each rate turns the ship on by itself, and the evidence fades
+            self._one_rate = False
+            self._rot += self.turn_rates_rad_s * dt
+            if c.memory_s is not None:
+                f = math.exp(-dt / c.memory_s)
+                for lb in self._loglik_bias:
+                    lb *= f
+                self._count *= f
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
-        scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
-        if c.centre_fit and np.any(np.all(np.abs(size_det[None, None, :] - scaled)
-                                          <= _CENTRE_FIT_SIZE_TOL * scaled + _CENTRE_FIT_SIZE_TOL_PX, axis=2)):
-            # (a box no heading's size explains, at any of the size biases, is cut short or wrong: its centre
-            # would mislead the fit)
-            self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred)
-        r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
-        self._loglik_bias -= np.log1p(0.5 * r * r)
-        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
+        size_now = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
+        for j, (lb, shift) in enumerate(zip(self._loglik_bias, self._shifts())):
+            # rate j's evidence at grid index k is for the heading courses[k + shift] now (to the grid's step)
+            size_pred = size_now if not shift else np.roll(size_now, -shift, axis=0)
+            scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
+            if j == 0 and c.centre_fit and np.any(np.all(
+                    np.abs(size_det[None, None, :] - scaled)
+                    <= _CENTRE_FIT_SIZE_TOL * scaled + _CENTRE_FIT_SIZE_TOL_PX, axis=2)):
+                # (a box no heading's size explains, at any of the size biases, is cut short or wrong: its
+                # centre would mislead the fit)
+                self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred)
+            r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
+            lb -= np.log1p(0.5 * r * r)
+            self._loglik_rate[j] = np.sum(_logsumexp_rows(lb), axis=1)
         self.updates += 1
+        self._count += 1.0
         self._weights = self._axis = None
         self._last_t = t_s
         return True
@@ -471,9 +502,10 @@ class ShapeHeading:
         i = math.floor(s)
         f = s - i
         # evidence that was at heading k - s now belongs to heading k
-        a = _roll_headings(self._loglik_bias, i)
-        self._loglik_bias = a if f == 0.0 else (1.0 - f) * a + f * _roll_headings(self._loglik_bias, i + 1)
-        self.loglik = np.sum(_logsumexp_rows(self._loglik_bias), axis=1)
+        for j, lb in enumerate(self._loglik_bias):
+            a = _roll_headings(lb, i)
+            self._loglik_bias[j] = a if f == 0.0 else (1.0 - f) * a + f * _roll_headings(lb, i + 1)
+            self._loglik_rate[j] = np.sum(_logsumexp_rows(self._loglik_bias[j]), axis=1)
         self._weights = self._axis = None
 
     def weights(self) -> np.ndarray:
@@ -483,10 +515,57 @@ class ShapeHeading:
             self._weights = self._posterior()
         return self._weights.copy()
 
+    @property
+    def loglik(self) -> np.ndarray:
+        """Each heading's (now) log-likelihood, untempered: the rates' (turned to the headings they have now)
+        summed with their prior weights; with one rate that rate's own."""
+        lr = self._now_rows()
+        if len(lr) == 1:
+            return lr[0]
+        m = float(np.max(lr))
+        return m + np.log(np.sum(np.exp(self._log_rate_prior[:, None] + lr - m), axis=0))
+
+    def _keep_likeliest_rate(self) -> None:
+        """Once the course is followed, the ship's turn is the course's: every rate's evidence becomes the most
+        likely rate's (moved to the headings now), with no turn of its own, until the course is lost again.
+        (A ship whose course is known most of the time is then weighed as with the one rate 0, bar the boxes
+        of the seconds before its course was known.)"""
+        j = int(np.argmax(self.rate_weights()))
+        best = np.roll(self._loglik_bias[j], self._shifts()[j], axis=1)
+        self._loglik_bias = [best.copy() for _ in self._loglik_bias]
+        self._loglik_rate[:] = np.sum(_logsumexp_rows(best), axis=1)
+        self._rot[:] = 0.0
+        self._one_rate = True
+        self._weights = self._axis = None
+
+    def _shifts(self) -> list[int]:
+        """How many grid steps each rate has turned the ship since the first box (to the nearest step)."""
+        return [int(k) for k in np.rint(self._rot / (2.0 * math.pi / self.cfg.headings))]
+
+    def _now_rows(self) -> np.ndarray:
+        """Each rate's log-likelihood row moved to the headings now (:meth:`_shifts`)."""
+        shifts = self._shifts()
+        if not any(shifts):
+            return self._loglik_rate
+        return np.stack([np.roll(row, s) for row, s in zip(self._loglik_rate, shifts)])
+
+    def rate_weights(self) -> np.ndarray:
+        """Posterior weight of each of ``turn_rates_deg_s`` (tempered as the headings' are)."""
+        lr = self._now_rows()
+        scale = min(1.0, self.cfg.max_effective_updates / max(self._count, 1.0))
+        lw = self._log_rate_prior[:, None] + scale * (lr - np.max(lr))
+        w = np.sum(np.exp(lw - np.max(lw)), axis=1)
+        return w / np.sum(w)
+
     def _posterior(self) -> np.ndarray:
-        scale = min(1.0, self.cfg.max_effective_updates / max(self.updates, 1))
-        lw = scale * (self.loglik - np.max(self.loglik))
-        w = np.exp(lw)
+        scale = min(1.0, self.cfg.max_effective_updates / max(self._count, 1.0))
+        if len(self._loglik_rate) == 1:
+            lr = self._loglik_rate[0] if not self._rot[0] else self._now_rows()[0]
+            w = np.exp(scale * (lr - np.max(lr)))
+        else:
+            lr = self._now_rows()
+            lw = self._log_rate_prior[:, None] + scale * (lr - np.max(lr))
+            w = np.sum(np.exp(lw - np.max(lw)), axis=0)
         w = w / np.sum(w)
         n = len(w)
         if not self.cfg.tell_bow_from_stern and n % 2 == 0:
@@ -989,6 +1068,7 @@ class ShipHeadingStatus:
     size_in_use: bool  # the correction uses the fitted outline
     layout_other_end: float  # the probability that the superstructure stands at the other end (LayoutFit)
     layout_in_use: str  # the layout the correction uses: "class" or "other_end"
+    turn_rate_deg_s: float  # the most likely of heading_from_shape.turn_rates_deg_s (clockwise seen from above)
 
 
 class ShipModel:
@@ -1100,7 +1180,8 @@ class ShipModel:
                                  float(w[(k + len(w) // 2) % len(w)]), sh.updates, bool(course is None and sh.ready),
                                  math.nan if course is None else heading_deg_from_course_enu(course),
                                  np.exp(sz.theta), sz.updates, sz.scale is not None, self.layout.p_other_end,
-                                 "other_end" if self.layout.other_end else "class")
+                                 "other_end" if self.layout.other_end else "class",
+                                 float(sh.cfg.turn_rates_deg_s[int(np.argmax(sh.rate_weights()))]))
 
     def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
         """The estimated velocity's course when the box shapes' posterior may follow it

@@ -359,6 +359,87 @@ def test_the_shape_heading_follows_a_turning_ships_course(rate_deg_s):
     assert _deg_off(best[False], final, 180.0) > 15.0, best
 
 
+def slow_turning_ship_views(rate_deg_s: float, h0_deg: float = 200.0, lap_s: float = 150.0, span_s: float = 180.0,
+                            hz: float = 3.0):
+    """A ship turning at ``rate_deg_s`` too slowly for its course to be known, seen from the loiter ring (a lap
+    in ``lap_s``) for ``span_s``: (t, cam_pos, R_enu_cam, box, its heading, deg)."""
+    ship = Ship(TargetConfig())
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    for k in range(int(span_s * hz)):
+        t = k / hz
+        heading = (h0_deg + rate_deg_s * t) % 360.0
+        pos_ship, R_ship = Ship(TargetConfig(heading_deg=heading)).pose(0.0)
+        cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), 707.0, 45.0, 360.0 * t / lap_s)
+        yield t, cp, Rc, frame.bbox_px, heading
+
+
+_RATES = (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
+
+
+@pytest.mark.parametrize("rate_deg_s", [1.2, -0.7])
+def test_turn_rate_hypotheses_follow_a_slow_ship_that_turns(rate_deg_s):
+    """A ship turning at a rate between the hypotheses' (its course unknown, nothing to follow): weighed at
+    the headings each rate would have turned it to, with its evidence fading over 30 s, the posterior keeps
+    within 12 deg of the ship's axis over the last two minutes (p90), the turn rate near the true one most likely;
+    with the one rate 0 it is spread over the headings the ship had and lies tens of degrees off."""
+    views_ = list(slow_turning_ship_views(rate_deg_s))
+    worst = {}
+    for rates, memory in (((0.0,), None), (_RATES, 30.0)):
+        sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=rates, memory_s=memory),
+                          ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+        off = []
+        for t, cp, Rc, box, heading in views_:
+            assert sh.update(t, cp, Rc, np.zeros(3), box, None)
+            if t >= 60.0:
+                best = 90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))]))
+                off.append(_deg_off(best, heading, 180.0))
+        worst[rates] = float(np.percentile(off, 90))
+        if len(rates) > 1:
+            assert abs(rates[int(np.argmax(sh.rate_weights()))] - rate_deg_s) <= 0.5
+            assert sh._count < 95.0  # faded: about 3 Hz x 30 s
+    assert worst[_RATES] <= 12.0, worst
+    assert worst[(0.0,)] > 30.0, worst
+
+
+def test_with_the_course_followed_the_turn_rates_change_nothing():
+    """A ship whose course is followed from its first box: the rates have nothing to weigh (the course turns
+    the posterior), which is the one rate 0's to rounding. Lost for 20 s and found again, the rates' evidence
+    becomes the likeliest rate's, whose turn the posterior then follows."""
+    views_ = list(turning_ship_views(1.5))
+    one, many = (ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=r, memory_s=30.0), ShipOutline(ShipModelConfig()),
+                              PinholeCamera.from_config(CAM_CFG)) for r in ((0.0,), _RATES))
+    for t, cp, Rc, box, course in views_:
+        assert one.update(t, cp, Rc, np.zeros(3), box, course) and many.update(t, cp, Rc, np.zeros(3), box, course)
+    np.testing.assert_allclose(many.weights(), one.weights(), rtol=1e-9, atol=1e-12)
+    sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, memory_s=30.0), ShipOutline(ShipModelConfig()),
+                      PinholeCamera.from_config(CAM_CFG))
+    for t, cp, Rc, box, course in views_:
+        sh.update(t, cp, Rc, np.zeros(3), box, None if 20.0 <= t < 40.0 else course)
+        if 35.0 <= t < 40.0:
+            assert not sh._one_rate and sh._rot.any()
+    assert sh._one_rate and not sh._rot.any()
+    final = 90.0 - math.degrees(views_[-1][4])
+    assert _deg_off(90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))])), final) <= 5.0
+
+
+def test_turn_rate_hypotheses_leave_a_still_ship_where_it_is():
+    """A still ship seen round the ring: the rates' posterior keeps the heading to a bin and favours rate 0."""
+    sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, memory_s=30.0), ShipOutline(ShipModelConfig()),
+                      PinholeCamera.from_config(CAM_CFG))
+    for t, cp, Rc, box, heading in slow_turning_ship_views(0.0, h0_deg=37.0):
+        sh.update(t, cp, Rc, np.zeros(3), box, None)
+    best = 90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))]))
+    assert _deg_off(best, 37.0) <= 5.0
+    assert _RATES[int(np.argmax(sh.rate_weights()))] == 0.0
+
+
+def test_turn_rates_must_be_distinct_and_bounded():
+    from pydantic import ValidationError
+    for bad in ((0.0, 0.0), (0.0, 45.0), ()):
+        with pytest.raises(ValidationError, match="turn_rates_deg_s"):
+            ShapeHeadingConfig(turn_rates_deg_s=bad)
+
+
 def test_the_shape_posterior_turns_by_the_courses_change():
     sh = _shape_from(ring_views(37.0, range(0, 360, 10)))
     w0 = sh.weights()
