@@ -262,21 +262,25 @@ class ShapeHeadingConfig(StrictModel):
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
                     "course: a ship moves along its axis, so such a velocity is the estimate's error")
     turn_rates_deg_s: tuple[float, ...] = Field(
-        (0.0,), min_length=1, max_length=15,
+        (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0), min_length=1, max_length=15,
         description="while the course is not followed (unknown: a still or slow ship), the ship may be turning "
                     "at any of these rates, deg/s (clockwise seen from above: the heading grows): each is a "
                     "hypothesis whose boxes are weighed at the headings it would have turned the ship to, and "
-                    "the posterior is over the heading now, summed over them. (0,): a ship that keeps its "
-                    "heading while its course is unknown")
+                    "the posterior is over the heading now, summed over them. The default, -2..2 by 0.5, spans "
+                    "turns up to 1.5 deg/s with room and a +-30 deg zigzag's fastest turn (about 2 deg/s over "
+                    "90 s). (0,): a ship that keeps its heading while its course is unknown (as before "
+                    "2026-11-26)")
     turn_rate_prior_zero: float = Field(
         0.5, gt=0, le=1,
         description="a priori weight of the rate 0 among turn_rates_deg_s (the rest share the remainder "
                     "equally): most slow ships keep their heading")
     memory_s: float | None = Field(
-        None, gt=0, le=100000,
+        120.0, gt=0, le=100000,
         description="while the course is not followed, the box shapes' evidence fades with this time constant, "
                     "s: a ship that turns otherwise than at one of turn_rates_deg_s (a zigzag) is then weighed "
-                    "at the heading it has had lately, not at all it had. None: kept for good")
+                    "at the heading it has had lately, not at all it had. 120 s: at 30 s a still ship's bow "
+                    "and stern, which the box shapes tell only weakly, came and went with the last boxes "
+                    "(README, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
 
     @field_validator("turn_rates_deg_s")
     @classmethod

@@ -326,6 +326,14 @@ class ShapeHeading:
     ``max_effective_updates`` detections. A detection whose box touches the image border says nothing of the
     size and is not used; nor is one taken less than ``1 / rate_hz`` after the last used one.
 
+    A ship may turn while its course is unknown (a slow ship turning or zigzagging: nothing to follow). Each
+    of ``turn_rates_deg_s`` is a hypothesis with evidence of its own, each box weighed at the heading that rate
+    would have turned the ship to since the first (to the grid's step); the posterior over the heading now
+    sums them, weighted by their likelihoods and a prior (``turn_rate_prior_zero`` on rate 0). ``memory_s``
+    fades the evidence meanwhile, so that a turn no one rate fits (a zigzag) is weighed at the headings of
+    late. Once the course is followed again, the likeliest rate's evidence is kept alone (the course turns
+    the posterior from then on).
+
     The sizes barely tell a still ship's bow from its stern (a box is much the same either way round). Where
     its centre falls does (``centre_fit``, off by default): each heading's predicted box centre, at the
     estimate, is off the detected one by the ship's shift from a fixed reference seen through this view
