@@ -751,6 +751,8 @@ class UkfTargetEstimator:
                                                 c.target_plane_height_m)
             core.last_nis = nis
             rejected = gating and nis > c.innovation_gate
+            if rejected and c.innovation_gate_box_bias:
+                rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
             if not rejected:
                 core.set_posterior(x_new, P_new)
         except FloatingPointError:
@@ -769,6 +771,21 @@ class UkfTargetEstimator:
         self._consider = self._box_bias_cov(fix, motion)
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
+
+    def _gate_box_bias_nis(self, fix: DetectionFix, core, z, r, motion: CameraMotion) -> float:
+        """The normalised innovation squared with the box centre's systematic error (``box_centre_bias_frac``
+        of the detected box's width and height) added to the pixel noise: for the gate alone."""
+        b = np.asarray(fix.bbox_px, dtype=float)
+        k = self.cfg.box_centre_bias_frac
+        if b.shape != (4,) or not np.all(np.isfinite(b)) or k <= 0.0:
+            return core.last_nis
+        rg = list(r)
+        rg[0] += (k * float(b[2] - b[0])) ** 2
+        rg[1] += (k * float(b[3] - b[1])) ** 2
+        cam = self.camera
+        _, nis, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy, cam.cx,
+                                    cam.cy, motion.R_enu_from_cam, motion.height_m, self.cfg.target_plane_height_m)
+        return float(nis)
 
     def _box_bias_cov(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:
         """Horizontal covariance (2 x 2, m^2) on the target plane of a systematic box-centre error of

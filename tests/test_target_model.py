@@ -150,6 +150,38 @@ def test_innovation_gate_rejects_an_outlier_and_keeps_the_state():
     np.testing.assert_allclose(core.x, [10.0 / 1.01, 0.0], rtol=1e-9)
 
 
+def test_the_gate_may_allow_for_the_box_centres_systematic_error():
+    """``innovation_gate_box_bias``: a settled estimate, a large box (500 x 200 px) whose centre is 30 px off
+    the prediction. Against noise alone the gate turns it away; allowing for the box centre's systematic
+    error (4 % of the box's sides, 20 px across) it passes and is fused as before; 200 px off it is still
+    turned away."""
+    from controllers.messages import DetectionFix
+    from controllers.ukf import CameraMotion, UkfTargetEstimator
+    cam = PinholeCamera.from_config(CAM_CFG)
+    cp = np.array([-400.0, 0.0, 300.0])
+    p = np.array([0.0, 0.0, UkfConfig().target_plane_height_m]) - cp
+    d = p / np.linalg.norm(p)
+    x = np.cross(np.array([0.0, 0.0, 1.0]), d)
+    x = x / np.linalg.norm(x)
+    Rc = np.column_stack([x, np.cross(d, x), d])  # optical axis on the point
+    box = np.array([cam.cx - 250, cam.cy - 100, cam.cx + 250, cam.cy + 100])
+    used = {}
+    for allow in (False, True):
+        f = UkfTargetEstimator(cam, UkfConfig(innovation_gate_box_bias=allow))
+        base = DetectionFix(0.0, True, 0.0, cam.cx, cam.cy, box, cam.cx, cam.cy, np.full(4, np.nan), True, "", "",
+                            True, False, 0.0, 0.0)
+        f.initialise(base, CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2])))
+        for k in range(1, 60):  # settle on the same view
+            t = 0.1 * k
+            assert f.update(dataclasses.replace(base, t_s=t),
+                            CameraMotion(t, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))).used
+        motion = CameraMotion(6.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
+        used[allow] = [f.update(dataclasses.replace(base, t_s=6.0 + 0.1 * i, u_px=cam.cx + off), motion).used
+                       for i, off in enumerate((30.0, 200.0))]
+    assert used[False] == [False, False]
+    assert used[True] == [True, False]
+
+
 def test_ukf_gate_config_defaults_are_on():
     c = UkfConfig()
     assert c.innovation_gate > 0 and c.innovation_gate_max_rejects >= 1
