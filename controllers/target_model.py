@@ -523,16 +523,6 @@ class ShapeHeading:
             self._weights = self._posterior()
         return self._weights.copy()
 
-    @property
-    def loglik(self) -> np.ndarray:
-        """Each heading's (now) log-likelihood, untempered: the rates' (turned to the headings they have now)
-        summed with their prior weights; with one rate that rate's own."""
-        lr = self._now_rows()
-        if len(lr) == 1:
-            return lr[0]
-        m = float(np.max(lr))
-        return m + np.log(np.sum(np.exp(self._log_rate_prior[:, None] + lr - m), axis=0))
-
     def _keep_likeliest_rate(self) -> None:
         """Once the course is followed, the ship's turn is the course's: every rate's evidence becomes the most
         likely rate's (moved to the headings now), with no turn of its own, until the course is lost again.
@@ -557,23 +547,21 @@ class ShapeHeading:
             return self._loglik_rate
         return np.stack([np.roll(row, s) for row, s in zip(self._loglik_rate, shifts)])
 
-    def rate_weights(self) -> np.ndarray:
-        """Posterior weight of each of ``turn_rates_deg_s`` (tempered as the headings' are)."""
+    def _tempered_log_weights(self) -> np.ndarray:
+        """(rates, headings now): each rate's a priori log weight plus its tempered log-likelihood (the
+        posterior never counts more than ``max_effective_updates`` detections), less the largest."""
         lr = self._now_rows()
         scale = min(1.0, self.cfg.max_effective_updates / max(self._count, 1.0))
         lw = self._log_rate_prior[:, None] + scale * (lr - np.max(lr))
-        w = np.sum(np.exp(lw - np.max(lw)), axis=1)
+        return lw - np.max(lw)
+
+    def rate_weights(self) -> np.ndarray:
+        """Posterior weight of each of ``turn_rates_deg_s`` (tempered as the headings' are)."""
+        w = np.sum(np.exp(self._tempered_log_weights()), axis=1)
         return w / np.sum(w)
 
     def _posterior(self) -> np.ndarray:
-        scale = min(1.0, self.cfg.max_effective_updates / max(self._count, 1.0))
-        if len(self._loglik_rate) == 1:
-            lr = self._loglik_rate[0] if not self._rot[0] else self._now_rows()[0]
-            w = np.exp(scale * (lr - np.max(lr)))
-        else:
-            lr = self._now_rows()
-            lw = self._log_rate_prior[:, None] + scale * (lr - np.max(lr))
-            w = np.sum(np.exp(lw - np.max(lw)), axis=0)
+        w = np.sum(np.exp(self._tempered_log_weights()), axis=0)
         w = w / np.sum(w)
         n = len(w)
         if not self.cfg.tell_bow_from_stern and n % 2 == 0:
