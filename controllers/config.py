@@ -427,12 +427,6 @@ class UkfConfig(StrictModel):
                     "geometry-dependent box-centre errors pass into the velocity, which the last seconds coast on")
     target_vertical_accel_noise_m_s2: float = Field(
         0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
-    turn_accel_noise_deg_s: float = Field(
-        0.0, ge=0, le=30,
-        description="a turn rate, deg/s: adds a horizontal white-noise acceleration across the estimated "
-                    "course of this rate times the estimated speed (PSD (rate |V|)^2 per second), so the "
-                    "estimate follows a fast ship's turns without loosening a slow or still one's (the ukf estimator; "
-                    "ct_ukf models the turn in its state); 0: off")
     feature_process_noise: float = Field(
         0.01, gt=0, le=10,
         description="random walk of x1, x2 (gyro/encoder-rate errors), normalised units per sqrt(s)")

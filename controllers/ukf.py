@@ -641,25 +641,8 @@ class UkfTargetEstimator:
     _fx = staticmethod(_fx_compiled)  # fx_batch of UnscentedCore.predict: the sigma points over dt
 
     def _process_noise(self, dt: float) -> np.ndarray:
-        """Q over dt (:func:`_process_noise`), plus (``turn_accel_noise_deg_s``) a white-noise acceleration
-        across the estimated course of the turn rate times the estimated speed: a ship's sideways
-        acceleration in a turn grows with its speed, its acceleration along the course does not."""
-        Q = _process_noise(dt, self.cfg)
-        w = math.radians(self.cfg.turn_accel_noise_deg_s)
-        if w <= 0.0:
-            return Q
-        vx, vy = (float(v) for v in self._core._x[5:7])
-        s2 = w * w * (vx * vx + vy * vy)  # (omega |V|)^2, the sideways acceleration's PSD
-        if not (s2 > 0.0 and math.isfinite(s2)):
-            return Q
-        nx, ny = -vy, vx  # across the course, unnormalised: (n n^T) s2 = w^2 (n' n'^T) with |n'| = |V|
-        A = (w * w) * np.array([[nx * nx, nx * ny], [nx * ny, ny * ny]])
-        Q = Q.copy()
-        Q[2:4, 2:4] += A * (dt ** 3 / 3.0)
-        Q[2:4, 5:7] += A * (dt ** 2 / 2.0)
-        Q[5:7, 2:4] += A * (dt ** 2 / 2.0)
-        Q[5:7, 5:7] += A * dt
-        return Q
+        """Q over dt (:func:`_process_noise`)."""
+        return _process_noise(dt, self.cfg)
 
     @staticmethod
     def _initial_state(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

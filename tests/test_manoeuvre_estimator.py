@@ -172,34 +172,6 @@ def test_on_a_straight_line_it_is_within_a_stated_margin_of_the_ukf():
         assert abs(np.degrees(np.mean(ct[late, 3]))) < 0.3
 
 
-def test_the_ukfs_turn_noise_follows_a_fast_turn_and_leaves_a_still_ship_alone():
-    """The UKF's turn_accel_noise_deg_s (1 deg/s): a sideways white-noise acceleration of that rate times the
-    estimated speed. A 9 m/s ship on a 1.5 deg/s turn: after 30 s the position error is under 0.6 times the
-    plain UKF's (measured ~0.4), the velocity error under 0.75 times; the same ship running straight loses at
-    most 0.15 m of position and 0.15 m/s of velocity RMS (measured ~0.05 and ~0.07); and for a still ship
-    the process noise is the plain UKF's exactly."""
-    turning, straight = TurningShip(ship_speed=9.0), TurningShip(turn_deg_s=0.0, ship_speed=9.0)
-    for seed in (1, 2):
-        on = fly(UkfTargetEstimator(CAM, UkfConfig(turn_accel_noise_deg_s=1.0)), turning, seed=seed)
-        off = fly(UkfTargetEstimator(CAM, UkfConfig()), turning, seed=seed)
-        late = on[:, 0] >= 30.0
-        assert rms(on[late, 1]) < 0.6 * rms(off[late, 1]), (seed, rms(on[late, 1]), rms(off[late, 1]))
-        assert rms(on[late, 2]) < 0.75 * rms(off[late, 2]), (seed, rms(on[late, 2]), rms(off[late, 2]))
-        on = fly(UkfTargetEstimator(CAM, UkfConfig(turn_accel_noise_deg_s=1.0)), straight, seed=seed)
-        off = fly(UkfTargetEstimator(CAM, UkfConfig()), straight, seed=seed)
-        assert rms(on[late, 1]) < rms(off[late, 1]) + 0.15, (seed, rms(on[late, 1]), rms(off[late, 1]))
-        assert rms(on[late, 2]) < rms(off[late, 2]) + 0.15, (seed, rms(on[late, 2]), rms(off[late, 2]))
-    ukf = UkfTargetEstimator(CAM, UkfConfig(turn_accel_noise_deg_s=1.0))
-    plain = UkfTargetEstimator(CAM, UkfConfig())
-    ukf._core._x[5:8] = 0.0  # a still ship's estimate
-    np.testing.assert_array_equal(ukf._process_noise(0.1), plain._process_noise(0.1))
-    # a moving one's: the added noise is across its course only, (omega |V|)^2 dt on the velocity
-    ukf._core._x[5:8] = [3.0, 4.0, 0.0]
-    dQ = ukf._process_noise(0.1) - plain._process_noise(0.1)
-    np.testing.assert_allclose(dQ[5:7, 5:7] @ [0.6, 0.8], 0.0, atol=1e-15)
-    assert [-0.8, 0.6] @ dQ[5:7, 5:7] @ [-0.8, 0.6] == pytest.approx((math.radians(1.0) * 5.0) ** 2 * 0.1)
-
-
 # ---------------------------------------------------------------- the hold in a dive, the estimate message
 
 
