@@ -357,13 +357,6 @@ class LayoutFitConfig(StrictModel):
         description="the evidence is tempered to count at most this many boxes (consecutive boxes' errors are "
                     "not independent)")
     prior_other_end: float = Field(0.2, gt=0, lt=1, description="the other end's probability a priori")
-    banked_log_odds_max: float = Field(
-        0.0, ge=0, le=100,
-        description="the evidence of windows gone by is kept (a ship's layout does not change): each time the "
-                    "window has rolled over, the log-odds of the window just ended are banked, and the layouts "
-                    "are weighed on the bank plus the current window; the bank is held within +- this (4.4: "
-                    "two windows that each reach the switch probability), so later boxes can still overturn "
-                    "it; 0: the current window alone")
     switch_probability: float = Field(
         0.9, gt=0.5, lt=1,
         description="the correction takes the other layout once its probability reaches this, and goes back once "

@@ -904,9 +904,6 @@ class LayoutFit:
         self.held = False
         self.switches = 0
         self.misfit_per_dof = math.nan  # the better layout's reduced chi-square about its track
-        # the log-odds of windows gone by (cfg.banked_log_odds_max): those of disjoint windows up to the last
-        # roll-over (_bank), and the window that ended there (_last_window: banked at the next roll-over)
-        self._bank, self._last_window, self._bank_t = 0.0, 0.0, math.nan
 
     def hold(self) -> None:
         """Stop learning (the terminal switch): the layout stays as it is."""
@@ -1026,20 +1023,6 @@ class LayoutFit:
             out.append(float(np.einsum("ia,iab,ib->", r, W, r)))
         return out[0], out[1], n
 
-    def _roll_over(self, window: float) -> None:
-        """Each time the window has rolled over (``window_s`` since the last time), bank the window that
-        ended then (disjoint from the current one) and keep this one's log-odds as the next to bank."""
-        c = self.cfg
-        if c.banked_log_odds_max <= 0.0:
-            return
-        t = float(self._t[self._hi - 1])
-        if not math.isfinite(self._bank_t):
-            self._last_window, self._bank_t = window, t
-        elif t - self._bank_t >= c.window_s:
-            cap = c.banked_log_odds_max
-            self._bank = min(max(self._bank + self._last_window, -cap), cap)
-            self._last_window, self._bank_t = window, t
-
     def _decide(self) -> bool:
         fit = self.misfits()
         if fit is None:
@@ -1052,9 +1035,7 @@ class LayoutFit:
         # learnt): a misfit both layouts share is no evidence for either
         self.misfit_per_dof = min(ss_class, ss_other) / max(2.0 * n - 6.0, 1.0)
         k /= max(self.misfit_per_dof, 1.0)
-        window = 0.5 * k * (ss_class - ss_other)
-        self._roll_over(window)
-        logit = math.log(c.prior_other_end / (1.0 - c.prior_other_end)) + self._bank + window
+        logit = math.log(c.prior_other_end / (1.0 - c.prior_other_end)) + 0.5 * k * (ss_class - ss_other)
         self.p_other_end = float(scipy.special.expit(logit))
         was = self.other_end
         if not was and self.p_other_end >= c.switch_probability:

@@ -1134,45 +1134,6 @@ def test_the_layout_fit_tells_which_end_the_superstructure_stands_at(elevation_d
     assert not blind.other_end and blind.p_other_end == blind.cfg.prior_other_end and blind.misfits() is None
 
 
-def _layout_fit_fed_log_odds(window_log_odds, banked_max: float):
-    """A LayoutFit whose window, at one box a second for 300 s, weighs the layouts at ``window_log_odds(t)``
-    (its misfits stand in for the boxes'): the other end's probability and the layout in use, each second."""
-    from controllers.config import LayoutFitConfig
-    from controllers.target_model import LayoutFit
-    cfg = ShipModelConfig()
-    fit = LayoutFit(LayoutFitConfig(banked_log_odds_max=banked_max), (ShipOutline(cfg), ShipOutline(cfg, True)),
-                    PinholeCamera.from_config(CAM_CFG))
-    out = []
-    for t in range(300):
-        fit._append(float(t), np.zeros(2), np.zeros(2), np.eye(2))
-        lo = float(window_log_odds(t))  # misfits with 30 boxes and the better layout's at 0: k = 1
-        fit.misfits = lambda lo=lo: (max(2.0 * lo, 0.0), max(-2.0 * lo, 0.0), 30)
-        fit._decide()
-        out.append((fit.p_other_end, fit.other_end))
-    return out
-
-
-def test_the_layout_fit_banks_the_evidence_of_windows_gone_by():
-    """Two minutes of windows that favour the other end (+4 each), then windows that lean to the class (-1.5).
-    The current window alone goes back to the class (p 0.05 <= 0.1). With the bank (the windows that ended
-    60 s apart, held within +-4.4) the other end stays: at 60 s the window that ended at 0 s is banked, at
-    120 s the next (4 + 4, held at 4.4), then the class-leaning ones wear it down (at 300 s: p = expit(logit
-    0.2 + 4.4 - 1.5 - 1.5 - 1.5) = 0.18, above 0.1). Windows that favour the class strongly (-8) overturn it at
-    once, and the bank then leans to the class. Off (0), it is the current window alone, as before."""
-    from scipy.special import expit
-
-    prior = math.log(0.2 / 0.8)
-    off = _layout_fit_fed_log_odds(lambda t: 4.0 if t < 120 else -1.5, 0.0)
-    on = _layout_fit_fed_log_odds(lambda t: 4.0 if t < 120 else -1.5, 4.4)
-    assert off[100] == (pytest.approx(expit(prior + 4.0)), True)
-    assert off[-1] == (pytest.approx(expit(prior - 1.5)), False)
-    assert on[59][0] == pytest.approx(expit(prior + 4.0)) and on[60][0] == pytest.approx(expit(prior + 8.0))
-    assert on[150] == (pytest.approx(expit(prior + 4.4 - 1.5)), True)
-    assert on[-1] == (pytest.approx(expit(prior + 4.4 - 3 * 1.5)), True)
-    strong = _layout_fit_fed_log_odds(lambda t: 4.0 if t < 120 else -8.0, 4.4)
-    assert strong[121][1] is False and strong[-1][0] == pytest.approx(expit(prior - 4.4 - 8.0))
-
-
 def test_the_other_end_s_outline_mirrors_the_superstructure_on_the_same_hull():
     """``ShipOutline(other_end=True)``: the hull's points as the class's, every superstructure point at minus its
     distance along the ship (x), beam and height as they were."""
