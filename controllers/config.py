@@ -257,6 +257,15 @@ class ShapeHeadingConfig(StrictModel):
         3.0, gt=0, le=90,
         description="the posterior turns at most this fast, deg/s: a ship turns slower (the estimate's jumps "
                     "are not turns)")
+    held_course_spread_deg_s: float = Field(
+        1.5, ge=0, le=90,
+        description="once the course has been followed and then is lost (the estimated speed dips under "
+                    "min_speed_for_course_m_s, as a slow ship's does round the loiter), the shapes' headings are "
+                    "weighed by the course last followed, with a std of fuse_min_course_std_deg growing by this "
+                    "many deg per second since (the ship may have turned), until it spans the circle: a ship "
+                    "that moved along a course does not face the other way seconds later, and the shapes of a "
+                    "ship unlike the class may prefer its stern (1.5: the turn rate the envelope's ships "
+                    "reach). 0: off, the shapes alone")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "

@@ -1084,6 +1084,8 @@ class ShipModel:
         self.size = ShipSize(cfg.size_fit, self.outlines[0], camera, edge_px)
         self.layout = LayoutFit(cfg.layout_fit, self.outlines, camera, cfg.layout_fit.pixel_noise_px, edge_px)
         self._course_known_since = math.nan  # since when the course has been known without a break
+        self._now = math.nan  # the time of the latest box (observe_box)
+        self._held = (math.nan, math.nan)  # the course last followed and when (held_course_spread_deg_s)
 
     @property
     def outline(self) -> ShipOutline:
@@ -1135,9 +1137,30 @@ class ShipModel:
             return self.shape.courses_enu_rad[keep], wk / wk.sum(), course
         shaped = self.shape.headings()
         if shaped is not None:
+            held = self._held_course_weights(shaped[0])
+            if held is not None:
+                w = shaped[1] * held
+                if w.sum() > 0.0:
+                    keep = w >= sh.min_weight * w.max()
+                    wk = w[keep]
+                    return shaped[0][keep], wk / wk.sum(), None
             return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
+
+    def _held_course_weights(self, headings: np.ndarray) -> np.ndarray | None:
+        """The likelihood of ``headings`` (ENU, rad) under the course last followed, its std
+        ``fuse_min_course_std_deg`` plus ``held_course_spread_deg_s`` per second since; None when off, when no
+        course has been followed, or once the std spans the circle (180 deg)."""
+        sh = self.cfg.heading_from_shape
+        course, t = self._held
+        if sh.held_course_spread_deg_s <= 0.0 or not math.isfinite(course):
+            return None
+        sig = sh.fuse_min_course_std_deg + sh.held_course_spread_deg_s * max(self._now - t, 0.0)
+        if not sig < 180.0:  # (also NaN)
+            return None
+        d = (headings - course + math.pi) % (2.0 * math.pi) - math.pi
+        return np.exp(-0.5 * (d / math.radians(sig)) ** 2)
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
                    t_s: float | None = None) -> bool:
@@ -1165,8 +1188,11 @@ class ShipModel:
                                                     self.size.scale, vel_enu):
             self.size.outline = self.outline  # the size fit goes on with the layout in use
         sh = self.shape
-        if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
-                         self._course_to_follow(t_s, vel_enu, vel_std_m_s)):
+        self._now = float(t_s)
+        follow = self._course_to_follow(t_s, vel_enu, vel_std_m_s)
+        if follow is not None:
+            self._held = (follow, float(t_s))
+        if not sh.update(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, follow):
             return None
         w = sh.weights()
         k = int(np.argmax(w))
