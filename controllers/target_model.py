@@ -584,6 +584,15 @@ class ShapeHeading:
 
     def headings(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(courses, weights) of the plausible headings (weights renormalised), or None while not ready."""
+        w = self.heading_weights()
+        if w is None:
+            return None
+        keep = w >= self.cfg.min_weight * np.max(w)
+        return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+
+    def heading_weights(self) -> np.ndarray | None:
+        """The weight of every heading of the grid (:attr:`courses_enu_rad`; the sizes' weights with the
+        centres sharing each heading's and its opposite's between them), or None while not ready."""
         if not self.ready:
             return None
         w = self.weights()
@@ -605,8 +614,7 @@ class ShapeHeading:
             share = w / np.maximum(w + wo * np.exp(np.clip(d, -50.0, 50.0)), 1e-300)
             w = pair * share
             w = w / w.sum()
-        keep = w >= c.min_weight * np.max(w)
-        return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+        return w
 
     def doubt_class(self) -> None:
         """The boxes disagree with the ship class: its layout no longer tells the bow from the stern by where
@@ -1135,15 +1143,15 @@ class ShipModel:
             keep = w >= sh.min_weight * w.max()
             wk = w[keep]
             return self.shape.courses_enu_rad[keep], wk / wk.sum(), course
+        held = self._held_course_weights(self.shape.courses_enu_rad)
+        if held is not None and self.shape.ready:  # the shapes' headings weighed by the course last followed
+            w = self.shape.heading_weights() * held
+            if w.sum() > 0.0:
+                keep = w >= sh.min_weight * w.max()
+                wk = w[keep]
+                return self.shape.courses_enu_rad[keep], wk / wk.sum(), None
         shaped = self.shape.headings()
         if shaped is not None:
-            held = self._held_course_weights(shaped[0])
-            if held is not None:
-                w = shaped[1] * held
-                if w.sum() > 0.0:
-                    keep = w >= sh.min_weight * w.max()
-                    wk = w[keep]
-                    return shaped[0][keep], wk / wk.sum(), None
             return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
