@@ -526,6 +526,38 @@ def test_a_velocity_off_the_ship_axis_gives_no_course():
     assert len(fresh.headings(np.zeros(3))[0]) == fresh.cfg.headings_when_unknown
 
 
+def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
+    """A ship whose box shapes put its bow at its stern (here the class's own ship, its shapes saying 240 deg,
+    counter-clockwise from East, while it moved along 60 deg: as a ship of the other layout looks to the
+    class). While the course is followed the headings are the course's side; when it is lost (the speed dips
+    under 1.5 m/s) they stay on that side, the held course's std 3 deg growing 1.5 deg/s, until it spans the
+    circle (118 s), and then the shapes alone say 240 again. Off (0), the shapes alone at once."""
+    from controllers.config import ShapeHeadingConfig
+
+    def best(ship, vel):
+        courses, weights, _ = ship.headings_and_course(vel)
+        return math.degrees(float(courses[int(np.argmax(weights))])) % 360.0
+
+    along = 3.0 * np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
+    for spread in (1.5, 0.0):
+        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(held_course_spread_deg_s=spread))
+        ship = _ship_with_shape(210.0, cfg=cfg)  # the shapes: bow 210 deg from North, course 240 deg ENU
+        assert _deg_off(best(ship, np.zeros(3)), 240.0) <= 5.0
+        views_ = list(ring_views(210.0, range(0, 360, 10)))
+        for k in range(20):  # moving along 60 deg: followed after 10 s
+            cp, Rc, box = views_[k]
+            ship.observe_box(100.0 + k, cp, Rc, np.zeros(3), box, along, 0.1)
+        assert _deg_off(best(ship, along), 60.0) <= 5.0  # the course fused in
+        slow = along / 3.0  # 1 m/s: the course lost
+        cp, Rc, box = views_[20]
+        ship.observe_box(140.0, cp, Rc, np.zeros(3), box, slow, 0.1)
+        if spread:
+            assert _deg_off(best(ship, slow), 60.0) <= 10.0  # 21 s on: the held course's side
+            cp, Rc, box = views_[21]
+            ship.observe_box(119.0 + 120.0, cp, Rc, np.zeros(3), box, slow, 0.1)
+        assert _deg_off(best(ship, slow), 240.0) <= 10.0  # the shapes alone
+
+
 def _perception(ship: ShipModel, size_mismatch_action: str = "skip") -> Perception:
     """The perception with that ship model, locked (its gates and correction at work). The size gate skips a
     box off in size however the ship lies (``skip``; the default, ``own_headings``, takes a smaller box too
