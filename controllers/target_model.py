@@ -585,10 +585,7 @@ class ShapeHeading:
     def headings(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(courses, weights) of the plausible headings (weights renormalised), or None while not ready."""
         w = self.heading_weights()
-        if w is None:
-            return None
-        keep = w >= self.cfg.min_weight * np.max(w)
-        return self.courses_enu_rad[keep], w[keep] / np.sum(w[keep])
+        return None if w is None else _plausible(self.courses_enu_rad, w, self.cfg.min_weight)
 
     def heading_weights(self) -> np.ndarray | None:
         """The weight of every heading of the grid (:attr:`courses_enu_rad`; the sizes' weights with the
@@ -626,6 +623,14 @@ class ShapeHeading:
         """How far (rad, 0..pi/2) a direction lies off the ship's axis."""
         d = (course_enu_rad - self.axis_enu_rad()) % math.pi
         return min(d, math.pi - d)
+
+
+def _plausible(courses: np.ndarray, w: np.ndarray, min_weight: float) -> tuple[np.ndarray, np.ndarray]:
+    """(courses, weights) of the headings with at least ``min_weight`` of the largest weight, renormalised (the
+    array methods: np.max's and np.sum's numbers, without their wrappers)."""
+    keep = w >= min_weight * w.max()
+    wk = w[keep]
+    return courses[keep], wk / wk.sum()
 
 
 def _roll_headings(a: np.ndarray, k: int) -> np.ndarray:
@@ -1138,36 +1143,33 @@ class ShipModel:
             sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
             w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
-            if not w.sum() > 0.0:  # (the array methods: np.sum's and np.max's numbers, without their wrappers)
+            if not w.sum() > 0.0:
                 return np.array([course]), np.ones(1), course
-            keep = w >= sh.min_weight * w.max()
-            wk = w[keep]
-            return self.shape.courses_enu_rad[keep], wk / wk.sum(), course
-        held = self._held_course_weights(self.shape.courses_enu_rad)
-        if held is not None and self.shape.ready:  # the shapes' headings weighed by the course last followed
+            return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), course)
+        held = self._held_course_weights()
+        if held is not None:  # the shapes' headings weighed by the course last followed
             w = self.shape.heading_weights() * held
             if w.sum() > 0.0:
-                keep = w >= sh.min_weight * w.max()
-                wk = w[keep]
-                return self.shape.courses_enu_rad[keep], wk / wk.sum(), None
+                return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), None)
         shaped = self.shape.headings()
         if shaped is not None:
             return shaped[0], shaped[1], None
         n = self.cfg.headings_when_unknown
         return 2.0 * math.pi * np.arange(n) / n, np.full(n, 1.0 / n), None
 
-    def _held_course_weights(self, headings: np.ndarray) -> np.ndarray | None:
-        """The likelihood of ``headings`` (ENU, rad) under the course last followed, its std
-        ``fuse_min_course_std_deg`` plus ``held_course_spread_deg_s`` per second since; None when off, when no
-        course has been followed, or once the std spans the circle (180 deg)."""
+    def _held_course_weights(self) -> np.ndarray | None:
+        """The likelihood of the shapes' headings (:attr:`ShapeHeading.courses_enu_rad`) under the course last
+        followed, its std ``fuse_min_course_std_deg`` plus ``held_course_spread_deg_s`` per second since; None
+        when off, before the shapes are ready, when no course has been followed, or once the std spans the
+        circle (180 deg)."""
         sh = self.cfg.heading_from_shape
         course, t = self._held
-        if sh.held_course_spread_deg_s <= 0.0 or not math.isfinite(course):
+        if sh.held_course_spread_deg_s <= 0.0 or not math.isfinite(course) or not self.shape.ready:
             return None
         sig = sh.fuse_min_course_std_deg + sh.held_course_spread_deg_s * max(self._now - t, 0.0)
         if not sig < 180.0:  # (also NaN)
             return None
-        d = (headings - course + math.pi) % (2.0 * math.pi) - math.pi
+        d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
         return np.exp(-0.5 * (d / math.radians(sig)) ** 2)
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
