@@ -372,6 +372,17 @@ class LayoutFitConfig(StrictModel):
                     "the class's does")
     min_boxes: int = Field(30, ge=3, le=100000, description="boxes in the window before the fit decides")
     pixel_noise_px: float = Field(2.0, gt=0, le=100, description="a box centre's pixel noise, 1-sigma, px")
+    shape_weight: float = Field(
+        1.0, ge=0, le=10,
+        description="the box shapes' say as well (0: the box centres' alone, the default before 2026-11-27): "
+                    "the heading-from-shapes posterior is worked out with the class's layout, and the class's "
+                    "outline turned end for end is the other end's, so with the course known the log ratio of "
+                    "its weight at the reverse of the course to its weight at the course is the shapes' "
+                    "evidence for the other end; its mean over the fit's window (each box's clipped to "
+                    "+-shape_clip), times this, is added to the log-odds")
+    shape_clip: float = Field(
+        5.0, gt=0, le=50, description="each box's shape log ratio is clipped to +- this before the window's mean "
+                                      "(the shapes' posterior is sure of itself far beyond what it knows)")
 
 
 class ShipModelConfig(StrictModel):

@@ -613,6 +613,19 @@ class ShapeHeading:
             w = w / w.sum()
         return w
 
+    def reverse_log_ratio(self, course_enu_rad: float) -> float | None:
+        """The log of the posterior's weight at the reverse of ``course_enu_rad`` over its weight at it (the
+        grid's nearest heading), or None while not ready or when bow and stern share their weight
+        (``tell_bow_from_stern`` off). Worked out with the class's layout, whose outline turned end for end is
+        the other end's (:class:`ShipOutline` ``other_end``; the hull is the same either way round): with the
+        course known, it is the shapes' evidence that the superstructure stands at the other end."""
+        n = self.cfg.headings
+        if not self.ready or not self.cfg.tell_bow_from_stern or n % 2:
+            return None
+        lw = _logsumexp_rows(self._tempered_log_weights())  # (headings,): the posterior's log, unnormalised
+        k = int(round(float(course_enu_rad) / (2.0 * math.pi / n))) % n
+        return float(lw[(k + n // 2) % n] - lw[k])
+
     def doubt_class(self) -> None:
         """The boxes disagree with the ship class: its layout no longer tells the bow from the stern by where
         the box centres fall (the centre fit is off for the rest of the flight; a ship of another layout, a
@@ -908,6 +921,7 @@ class LayoutFit:
         # layout's ground point (east, north; relative to the dead reckoning), its weight (2 x 2)
         cap = int(math.ceil(cfg.window_s * cfg.rate_hz)) + 16
         self._t, self._g, self._w = np.zeros(cap), np.zeros((2, cap, 2)), np.zeros((cap, 2, 2))
+        self._s = np.full(cap, math.nan)  # the box shapes' log ratio for the other end (shape_weight), clipped
         self._lo = self._hi = 0
         self._last_t = -math.inf
         self._dr = (0.0, 0.0)  # the estimated velocity integrated (dead reckoning), east, north, m
@@ -923,11 +937,12 @@ class LayoutFit:
         self.held = True
 
     def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, course_enu_rad,
-                tracked_height_m: float, scale=None, vel_enu=None) -> bool:
+                tracked_height_m: float, scale=None, vel_enu=None, shape_log_ratio=None) -> bool:
         """Take one box (the ship's waterline centre estimated at ``ref_enu_m``, on ``course_enu_rad``: a float,
         None when unknown, or a function that gives it, asked only when the box is taken; its estimated
-        velocity ``vel_enu``, which the ground points are taken relative to); True when the layout in use
-        changed."""
+        velocity ``vel_enu``, which the ground points are taken relative to; ``shape_log_ratio``: a function of
+        the course that gives the box shapes' log ratio for the other end, or None, :meth:`ShapeHeading.
+        reverse_log_ratio`); True when the layout in use changed."""
         c = self.cfg
         if vel_enu is not None and c.enabled and not self.held:
             ve, vn = float(vel_enu[0]), float(vel_enu[1])
@@ -974,7 +989,9 @@ class LayoutFit:
         cov = (self.pixel_noise_px ** 2) * (J @ J.T) + (c.point_floor_m ** 2) * np.eye(2)
         self._last_t = float(t_s)
         dr = np.array(self._dr)
-        self._append(float(t_s), g0 - dr, points[1][0] - dr, np.linalg.inv(cov))
+        shape = shape_log_ratio(course_enu_rad) if shape_log_ratio is not None and c.shape_weight > 0.0 else None
+        shape = math.nan if shape is None else max(-c.shape_clip, min(c.shape_clip, shape))
+        self._append(float(t_s), g0 - dr, points[1][0] - dr, np.linalg.inv(cov), shape)
         while self._lo < self._hi and self._t[self._lo] < t_s - c.window_s:
             self._lo += 1
         return self._decide()
@@ -984,19 +1001,29 @@ class LayoutFit:
         """The boxes in the fit's window."""
         return self._hi - self._lo
 
-    def _append(self, t_s: float, g_class: np.ndarray, g_other: np.ndarray, w: np.ndarray) -> None:
+    def _append(self, t_s: float, g_class: np.ndarray, g_other: np.ndarray, w: np.ndarray,
+                shape: float = math.nan) -> None:
         if self._hi == len(self._t):  # full: the window's rows to the front
             n, lo = self._hi - self._lo, self._lo
             hi = self._hi
             self._t[:n], self._g[:, :n], self._w[:n] = self._t[lo:hi], self._g[:, lo:hi], self._w[lo:hi]
+            self._s[:n] = self._s[lo:hi]
             self._lo, self._hi = 0, n
             if n == len(self._t):  # (a rate above rate_hz cannot happen; grow rather than lose a point)
                 self._t = np.concatenate([self._t, np.zeros(n)])
                 self._g = np.concatenate([self._g, np.zeros((2, n, 2))], axis=1)
                 self._w = np.concatenate([self._w, np.zeros((n, 2, 2))])
+                self._s = np.concatenate([self._s, np.full(n, math.nan)])
         k = self._hi
-        self._t[k], self._g[0, k], self._g[1, k], self._w[k] = t_s, g_class, g_other, w
+        self._t[k], self._g[0, k], self._g[1, k], self._w[k], self._s[k] = t_s, g_class, g_other, w, shape
         self._hi += 1
+
+    def shape_evidence(self) -> float:
+        """The box shapes' log-odds for the other end over the window: ``shape_weight`` times the mean of the
+        boxes' clipped log ratios (those that had one); 0 when none did."""
+        s = self._s[self._lo:self._hi]
+        s = s[np.isfinite(s)]
+        return self.cfg.shape_weight * float(s.mean()) if s.size else 0.0
 
     def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
         """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v: m per px,
@@ -1048,7 +1075,8 @@ class LayoutFit:
         # learnt): a misfit both layouts share is no evidence for either
         self.misfit_per_dof = min(ss_class, ss_other) / max(2.0 * n - 6.0, 1.0)
         k /= max(self.misfit_per_dof, 1.0)
-        logit = math.log(c.prior_other_end / (1.0 - c.prior_other_end)) + 0.5 * k * (ss_class - ss_other)
+        logit = math.log(c.prior_other_end / (1.0 - c.prior_other_end)) + 0.5 * k * (ss_class - ss_other) \
+            + self.shape_evidence()
         self.p_other_end = float(scipy.special.expit(logit))
         was = self.other_end
         if not was and self.p_other_end >= c.switch_probability:
@@ -1195,7 +1223,7 @@ class ShipModel:
         for the log when the shapes took the box, else None."""
         if self.cfg.enabled and self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
                                                     lambda: self.course(vel_enu, vel_std_m_s), tracked_height_m,
-                                                    self.size.scale, vel_enu):
+                                                    self.size.scale, vel_enu, self.shape.reverse_log_ratio):
             self.size.outline = self.outline  # the size fit goes on with the layout in use
         sh = self.shape
         self._now = float(t_s)

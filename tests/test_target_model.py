@@ -1338,3 +1338,79 @@ def test_the_dive_s_fix_blends_the_hull_s_lower_edge_in():
     assert ShipModelConfig().anchor == "box_centre"
     np.testing.assert_allclose(fix("hull_bottom_in_dive", True), by_bottom, atol=1e-6)
     np.testing.assert_allclose(fix("hull_bottom_in_dive", False), by_centre, atol=1e-6)
+
+
+def _shapes_round(ship_type: str, elevation_deg: float = 40.0, heading: float = 40.0):
+    """A ShapeHeading (the class's outline) fed the ray-cast boxes of a still ship of ``ship_type`` seen from round
+    a ring (700 m, a lap in 4 min), its course given and followed: the posterior, and the course (ENU, rad)."""
+    from controllers.config import ShapeHeadingConfig
+    from controllers.target_model import ShapeHeading
+    ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    shapes = ShapeHeading(ShapeHeadingConfig(), ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    course = math.radians(90.0 - heading)
+    for k, az in enumerate(np.arange(0.0, 360.0, 2.0)):
+        cp, Rc, frame = _look_from(cam, pose, 700.0, elevation_deg, az)
+        shapes.update(k / 1.5, cp, Rc, np.zeros(3), frame.bbox_px, course)
+    return shapes, course
+
+
+@pytest.mark.parametrize("elevation_deg", [25.0, 40.0, 60.0])
+def test_the_box_shapes_say_which_end_the_superstructure_stands_at(elevation_deg):
+    """The box shapes' posterior is worked out with the class's layout (bridge aft), whose outline turned end
+    for end is the other end's: round a ship with its bridge forward on a known course its weight at the
+    reverse of the course outweighs its weight at the course (``reverse_log_ratio`` > 0; measured 21.5 and
+    13.8 at 25 and 40 deg), round the class's own layout the other way (< 0; -15.1, -7.7). Seen steeply the
+    shapes tell the two ends apart no more (60 deg: -0.6 and -0.4; from 50 deg on): the centres' fit decides
+    there. Off when bow and stern share their weight, and before the shapes are ready."""
+    from controllers.config import ShapeHeadingConfig
+    from controllers.target_model import ShapeHeading
+    fwd, course = _shapes_round("bridge_forward", elevation_deg)
+    aft, _ = _shapes_round("bridge_aft", elevation_deg)
+    r_fwd, r_aft = fwd.reverse_log_ratio(course), aft.reverse_log_ratio(course)
+    if elevation_deg < 45.0:
+        assert r_fwd > 5.0 and r_aft < -5.0, (r_fwd, r_aft)
+    else:
+        assert abs(r_fwd) < 1.0 and abs(r_aft) < 1.0, (r_fwd, r_aft)
+    # the reverse's ratio is the course's, negated (to the grid's step)
+    assert fwd.reverse_log_ratio(course + math.pi) == pytest.approx(-r_fwd, abs=1e-9)
+    cam = PinholeCamera.from_config(CAM_CFG)
+    assert ShapeHeading(ShapeHeadingConfig(), ShipOutline(ShipModelConfig()), cam).reverse_log_ratio(0.0) is None
+    fwd.cfg = ShapeHeadingConfig(tell_bow_from_stern=False)
+    assert fwd.reverse_log_ratio(course) is None
+
+
+def test_the_layout_fit_weighs_the_box_shapes_evidence_too():
+    """``layout_fit.shape_weight``: the window's mean of the boxes' shape log ratios (clipped to
+    ``shape_clip``) times the weight is added to the centres' log-odds. With the centres made no evidence (a
+    point floor far above their misfits) the probability is the prior's moved by the shapes alone, each way;
+    with the weight 0 it is the prior's."""
+    from controllers.config import LayoutFitConfig
+    from controllers.target_model import LayoutFit
+    heading = 40.0
+    ship = Ship(TargetConfig(type="bridge_aft", heading_deg=heading))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    course = math.radians(90.0 - heading)
+    cfg = ShipModelConfig()
+
+    def fit_with(ratio: float, **settings) -> LayoutFit:
+        fit = LayoutFit(LayoutFitConfig(point_floor_m=50.0, **settings),
+                        (ShipOutline(cfg), ShipOutline(cfg, other_end=True)), PinholeCamera.from_config(CAM_CFG))
+        for k, az in enumerate(np.arange(0.0, 240.0, 2.0)):
+            cp, Rc, frame = _look_from(cam, pose, 700.0, 40.0, az)
+            fit.observe(k / 1.5, cp, Rc, np.zeros(3), frame.bbox_px, course, UkfConfig().target_plane_height_m,
+                        vel_enu=np.zeros(3), shape_log_ratio=lambda c: ratio)
+        return fit
+
+    prior = LayoutFitConfig().prior_other_end
+    logit = lambda p: math.log(p / (1.0 - p))  # noqa: E731
+    none = fit_with(3.0, shape_weight=0.0)
+    assert none.shape_evidence() == 0.0 and abs(none.p_other_end - prior) < 0.01, none.p_other_end
+    for ratio, weight in ((3.0, 1.0), (-2.0, 1.0), (30.0, 0.5)):
+        fit = fit_with(ratio, shape_weight=weight)
+        want = weight * max(-fit.cfg.shape_clip, min(fit.cfg.shape_clip, ratio))
+        assert fit.shape_evidence() == pytest.approx(want)
+        assert logit(fit.p_other_end) - logit(prior) == pytest.approx(want, abs=0.05), (ratio, fit.p_other_end)
+    assert fit_with(4.0).other_end  # the default weight 1: -1.39 + 4 > logit(0.9) = 2.2
