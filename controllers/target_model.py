@@ -1106,6 +1106,7 @@ class ShipHeadingStatus:
     layout_other_end: float  # the probability that the superstructure stands at the other end (LayoutFit)
     layout_in_use: str  # the layout the correction uses: "class" or "other_end"
     turn_rate_deg_s: float  # the most likely of heading_from_shape.turn_rates_deg_s (clockwise seen from above)
+    layout_shape_log_odds: float  # the box shapes' part of layout_other_end's log-odds (LayoutFit.shape_evidence)
 
 
 class ShipModel:
@@ -1241,7 +1242,8 @@ class ShipModel:
                                  math.nan if course is None else heading_deg_from_course_enu(course),
                                  np.exp(sz.theta), sz.updates, sz.scale is not None, self.layout.p_other_end,
                                  "other_end" if self.layout.other_end else "class",
-                                 float(sh.cfg.turn_rates_deg_s[int(np.argmax(sh.rate_weights()))]))
+                                 float(sh.cfg.turn_rates_deg_s[int(np.argmax(sh.rate_weights()))]),
+                                 self.layout.shape_evidence())
 
     def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
         """The estimated velocity's course when the box shapes' posterior may follow it
