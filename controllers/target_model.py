@@ -901,7 +901,11 @@ class LayoutFit:
     each point's error is the pixel noise seen through its view, with a floor, ``point_floor_m``); what the
     fit leaves, divided by the better layout's reduced chi-square when that is above 1 (a misfit both
     share, a manoeuvre the track does not follow or a size not yet learnt, is no evidence) and tempered to
-    ``max_effective`` boxes, weighs the two layouts against the prior (``prior_other_end``). Once the other
+    ``max_effective`` boxes, weighs the two layouts against the prior (``prior_other_end``). The box shapes
+    add their say (``shape_weight``): the heading-from-shapes posterior is worked out with the class's
+    outline, which turned end for end is the other end's, so its log ratio at the reverse of the course over
+    the course (:meth:`ShapeHeading.reverse_log_ratio`; each box's clipped to ``shape_clip``), averaged over
+    the window, is added to the log-odds. Once the other
     end's probability reaches ``switch_probability`` the correction takes it (and back once the class's
     does). The course comes from the estimated velocity: a still ship's
     two layouts are its two headings, which the box shapes weigh (:class:`ShapeHeading`); nothing is learnt
