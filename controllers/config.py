@@ -270,14 +270,6 @@ class ShapeHeadingConfig(StrictModel):
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
                     "course: a ship moves along its axis, so such a velocity is the estimate's error")
-    course_veto_max_sigmas: float = Field(
-        3.0, ge=0, le=100,
-        description="max_course_off_axis_deg vetoes a course only while the estimated velocity across the shapes' "
-                    "axis (speed x sin of the angle off it) is within this many of the velocity's std: the "
-                    "estimate's error can put it there; beyond, it is the shapes' axis that is off (a ship unlike "
-                    "the class, a turn the shapes have not followed). Over 1638-1640, in 89 % of the vetoed "
-                    "boxes the velocity's course was within 15 deg of the ship's heading. 0: the veto whatever the "
-                    "velocity's std (before 2026-11-27)")
     turn_rates_deg_s: tuple[float, ...] = Field(
         (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0), min_length=1, max_length=15,
         description="while the course is not followed (unknown: a still or slow ship), the ship may be turning "

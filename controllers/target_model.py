@@ -1139,32 +1139,25 @@ class ShipModel:
         the other end once the box centres say so (:class:`LayoutFit`)."""
         return self.outlines[1] if self.layout.other_end else self.outlines[0]
 
-    def course(self, vel_enu, vel_std_m_s: float | None = None) -> float | None:
+    def course(self, vel_enu, vel_std_m_s: float = 0.0) -> float | None:
         """The ship's course (bow direction, counter-clockwise from East) from its estimated velocity, or None
         when it is unknown: slower than ``min_speed_for_course_m_s`` or less sure than
         ``max_vel_std_for_course_m_s``, or off the ship's axis as the box shapes tell it (a ship moves along
-        its axis: such a velocity is the estimate's error) by no more across it than
-        ``course_veto_max_sigmas`` of the velocity's std (further, the shapes' axis is what is off; with no std
-        given, ``None``, the veto holds)."""
+        its axis: such a velocity is the estimate's error)."""
         cfg = self.cfg
-        speed = math.hypot(float(vel_enu[0]), float(vel_enu[1]))
-        if speed < cfg.min_speed_for_course_m_s or (vel_std_m_s or 0.0) > cfg.max_vel_std_for_course_m_s:
+        if math.hypot(float(vel_enu[0]), float(vel_enu[1])) < cfg.min_speed_for_course_m_s \
+                or vel_std_m_s > cfg.max_vel_std_for_course_m_s:
             return None
         course = math.atan2(float(vel_enu[1]), float(vel_enu[0]))
-        sh = cfg.heading_from_shape
-        if self.shape.ready:
-            off = self.shape.off_axis_rad(course)
-            if off > math.radians(sh.max_course_off_axis_deg) and (
-                    sh.course_veto_max_sigmas <= 0.0 or vel_std_m_s is None
-                    or speed * math.sin(off) <= sh.course_veto_max_sigmas * vel_std_m_s):
-                return None
+        if self.shape.ready and \
+                self.shape.off_axis_rad(course) > math.radians(cfg.heading_from_shape.max_course_off_axis_deg):
+            return None
         return course
 
-    def headings(self, vel_enu, vel_std_m_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def headings(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         return self.headings_and_course(vel_enu, vel_std_m_s)[:2]
 
-    def headings_and_course(self, vel_enu, vel_std_m_s: float | None = None) -> tuple[np.ndarray, np.ndarray,
-                                                                                   float | None]:
+    def headings_and_course(self, vel_enu, vel_std_m_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, float | None]:
         """The ship's possible headings (bow direction, counter-clockwise from East) and their weights, from
         its estimated velocity (std ``vel_std_m_s``) and the box shapes:
 
@@ -1180,7 +1173,7 @@ class ShipModel:
             if not (self.shape.ready and sh.fuse_with_course):
                 return np.array([course]), np.ones(1), course
             speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
-            sig = max((vel_std_m_s or 0.0) / speed, math.radians(sh.fuse_min_course_std_deg))
+            sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
             w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
             if not w.sum() > 0.0:
