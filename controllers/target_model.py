@@ -638,6 +638,13 @@ class ShapeHeading:
         return min(d, math.pi - d)
 
 
+def _course_likelihood(courses: np.ndarray, course: float, sig_rad: float) -> np.ndarray:
+    """The Gaussian likelihood (unnormalised) of each of ``courses`` under ``course`` with std ``sig_rad``,
+    the difference taken round the circle."""
+    d = (courses - course + math.pi) % (2.0 * math.pi) - math.pi
+    return np.exp(-0.5 * (d / sig_rad) ** 2)
+
+
 def _plausible(courses: np.ndarray, w: np.ndarray, min_weight: float) -> tuple[np.ndarray, np.ndarray]:
     """(courses, weights) of the headings with at least ``min_weight`` of the largest weight, renormalised (the
     array methods: np.max's and np.sum's numbers, without their wrappers)."""
@@ -1174,8 +1181,7 @@ class ShipModel:
                 return np.array([course]), np.ones(1), course
             speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
             sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
-            d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
-            w = self.shape.weights() * np.exp(-0.5 * (d / sig) ** 2)
+            w = self.shape.weights() * _course_likelihood(self.shape.courses_enu_rad, course, sig)
             if not w.sum() > 0.0:
                 return np.array([course]), np.ones(1), course
             return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), course)
@@ -1202,8 +1208,7 @@ class ShipModel:
         sig = sh.fuse_min_course_std_deg + sh.held_course_spread_deg_s * max(self._now - t, 0.0)
         if not sig < 180.0:  # (also NaN)
             return None
-        d = (self.shape.courses_enu_rad - course + math.pi) % (2.0 * math.pi) - math.pi
-        return np.exp(-0.5 * (d / math.radians(sig)) ** 2)
+        return _course_likelihood(self.shape.courses_enu_rad, course, math.radians(sig))
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
                    t_s: float | None = None) -> bool:
