@@ -180,8 +180,28 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     assert cells[7] == "-"  # the row predates target_hidden_longest_s_after_lock
     errs = [tuple(float(v) for v in c.split(",")) for c in cells[8:11]]
     assert all(math.isfinite(b) and math.isfinite(p) and math.hypot(b, p) < 8.0 for b, p in errs), cells
-    assert cells[11].endswith("%") and 0.0 < float(cells[11].rstrip(" %")) <= 100.0, cells
-    assert 0.0 <= float(cells[13]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
+    along, across = (float(v) for v in cells[11].split(","))  # 150 m out, along / across the line of sight
+    assert math.isfinite(along) and math.isfinite(across) and math.hypot(along, across) < 8.0, cells
+    assert cells[12].endswith("%") and 0.0 < float(cells[12].rstrip(" %")) <= 100.0, cells
+    assert 0.0 <= float(cells[14]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
+
+
+def test_the_envelope_line_of_sight_error_by_hand():
+    """--why's line-of-sight split: a UAV flying east along y = 0 towards a ship at (200, 0, 0) is last 150 m
+    or more from it at x = 50 (t = 5); the estimate then, (203, 1), is 3 m beyond the ship along the line of
+    sight and 1 m to its left (north); seen from the south instead it is 1 m beyond and 3 m to the right (the
+    other view turns the same error); never that far: NaN."""
+    import numpy as np
+    tool = _envelope_tool()
+    uav_t = np.arange(0.0, 11.0)
+    east = np.column_stack([10.0 * uav_t, np.zeros(11), np.zeros(11)])  # x = 0 ... 100 m
+    truth_t, ship = [0.0, 10.0], np.array([[200.0, 0.0, 0.0], [200.0, 0.0, 0.0]])
+    est_t, est = [4.5, 5.5], np.array([[203.0, 1.0], [250.0, 50.0]])  # the second comes after: not used
+    assert tool.line_of_sight_error(est_t, est, truth_t, ship, uav_t, east) == pytest.approx((3.0, 1.0))
+    north = np.column_stack([np.full(11, 200.0), 10.0 * uav_t - 205.0, np.zeros(11)])  # 155 m out at t = 5
+    assert tool.line_of_sight_error(est_t, est, truth_t, ship, uav_t, north) == pytest.approx((1.0, -3.0))
+    near = east + np.array([150.0, 0.0, 0.0])  # 50 m out to at most 50 m past: never 150 m away
+    assert all(math.isnan(v) for v in tool.line_of_sight_error(est_t, est, truth_t, ship, uav_t, near))
 
 
 def test_the_envelope_aim_line_offset_by_hand():

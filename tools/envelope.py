@@ -23,10 +23,12 @@ Exit code 0 when every group meets every bar.
 ``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
 angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
 5 s and 2 s before the end and at the end (the dive steers on it: a miss the estimate shares is the
-perception's or the estimator's, one it does not is the guidance's), and what became of the detections of
-the last 5 s (the share fused and the commonest reason for the rest; those of the planned coast of the
-last ~120 m, ``too_close``, left out). The ship's motion, type and speed come from the summary's dispersed columns,
-and so does the longest stretch without the ship seen after the lock (out of view or behind the airframe).
+perception's or the estimator's, one it does not is the guidance's), its error 150 m out along and across
+the horizontal line of sight (a height error of the point the box centre stands for lands along it), and
+what became of the detections of the last 5 s (the share fused and the commonest reason for the rest;
+those of the planned coast of the last ~120 m, ``too_close``, left out). The ship's motion, type and speed
+come from the summary's dispersed columns, and so does the longest stretch without the ship seen after the
+lock (out of view or behind the airframe).
 """
 from __future__ import annotations
 
@@ -46,6 +48,9 @@ WHY_TIMES_S = (5.0, 2.0)
 WHY_WINDOW_S = 5.0  # --why: the detections of the last this many seconds
 #: --why: the aim line's offset is the median over the dive's ticks this far (m) from the point it steers to
 AIM_LINE_RANGES_M = (50.0, 80.0)
+#: --why: the estimate's error along and across the line of sight when the UAV was last this far (m) from the
+#: ship (before the planned coast of the last 80-120 m)
+LOS_RANGE_M = 150.0
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
         ("estimate <= 8 m", 0.90))
@@ -96,6 +101,36 @@ def ship_frame_errors(t_s, est_xy, truth_t_s, truth_xy, truth_heading_ned_rad, a
         bow, port = (math.sin(yaw), math.cos(yaw)), (-math.cos(yaw), math.sin(yaw))
         out.append((float(e[0] * bow[0] + e[1] * bow[1]), float(e[0] * port[0] + e[1] * port[1])))
     return out
+
+
+def line_of_sight_error(t_s, est_xy, truth_t_s, truth_pos_enu_m, uav_t_s, uav_pos_enu_m,
+                        range_m: float = LOS_RANGE_M) -> tuple[float, float]:
+    """The estimate's horizontal error (estimate - truth) when the UAV was last ``range_m`` or more from the
+    ship (truth, 3-D range), split along the horizontal line of sight from the UAV to the ship (+: beyond the
+    ship) and across it (+: to the left, looking along it), m. An error in the height of the point the box
+    centre stands for lands along the line of sight (the height over the tangent of the elevation); one in
+    the ship's layout or heading mostly across it. The latest estimate at or before that time, the truth
+    interpolated to it; NaN where the UAV never was that far or no estimate came before."""
+    from fwsim.log.truth import interp_at
+    ut = np.asarray(uav_t_s, dtype=float)
+    up = np.asarray(uav_pos_enu_m, dtype=float)
+    ship = interp_at(ut, truth_t_s, truth_pos_enu_m)
+    far = np.flatnonzero(np.linalg.norm(ship - up, axis=1) >= range_m)
+    if not far.size:
+        return math.nan, math.nan
+    i = int(far[-1])
+    los = ship[i, :2] - up[i, :2]
+    n = float(np.hypot(los[0], los[1]))
+    t = np.asarray(t_s, dtype=float)
+    est = np.asarray(est_xy, dtype=float)
+    ok = np.isfinite(est).all(axis=1)
+    t, est = t[ok], est[ok]
+    k = int(np.searchsorted(t, ut[i], side="right")) - 1
+    if k < 0 or not n > 1e-9:
+        return math.nan, math.nan
+    e = est[k] - interp_at(t[k:k + 1], truth_t_s, np.asarray(truth_pos_enu_m, dtype=float)[:, :2])[0]
+    u = los / n
+    return float(e @ u), float(-e[0] * u[1] + e[1] * u[0])
 
 
 def last_detections(t_s, reasons, end_s: float, window_s: float = WHY_WINDOW_S) -> tuple[float, str]:
@@ -193,12 +228,16 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             errs = ship_frame_errors(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"][:, :2],
                                      tru["heading_ned_rad"], [end - dt for dt in WHY_TIMES_S] + [end])
             cells += [f"{b:+.1f}, {p:+.1f}" if math.isfinite(b) else "-" for b, p in errs]
+            along, across = line_of_sight_error(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"],
+                                                log.table(topics.UAV_STATE)["t_s"],
+                                                log.table(topics.UAV_STATE)["pos_enu_m"])
+            cells.append(f"{along:+.1f}, {across:+.1f}" if math.isfinite(along) else "-")
             fu = log.table(topics.FSW_DETECTION_FUSION)
             share, top = last_detections(fu["t_s"], fu["reason"], end)
             cells += [f"{100 * share:.0f} %" if math.isfinite(share) else "-", top or "-"]
             cells.append(_aim_line_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 3)
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 4)
         table.append(cells)
     return table
 
@@ -251,6 +290,7 @@ def main(argv=None) -> int:
                 "longest hidden after lock, s"] + [
             f"estimate error (bow, port) {dt:g} s before the end, m" for dt in WHY_TIMES_S] + [
             "estimate error (bow, port) at the end, m",
+            f"estimate error (along, across the line of sight) {LOS_RANGE_M:g} m out, m",
             f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest",
             f"the line to the steered-to point passes the aim point by, {AIM_LINE_RANGES_M[1]:g}-"
             f"{AIM_LINE_RANGES_M[0]:g} m out, m"]
