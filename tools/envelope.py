@@ -223,14 +223,13 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
                  f"{hidden:.1f}" if isinstance(hidden, (int, float)) and math.isfinite(hidden) else "-"]
         try:
             log = read_log(out_dir / r["log"])
-            est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
-            end = float(log.table(topics.UAV_STATE)["t_s"][-1])
+            est, tru, uav = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE), log.table(topics.UAV_STATE)
+            end = float(uav["t_s"][-1])
             errs = ship_frame_errors(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"][:, :2],
                                      tru["heading_ned_rad"], [end - dt for dt in WHY_TIMES_S] + [end])
             cells += [f"{b:+.1f}, {p:+.1f}" if math.isfinite(b) else "-" for b, p in errs]
             along, across = line_of_sight_error(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"],
-                                                log.table(topics.UAV_STATE)["t_s"],
-                                                log.table(topics.UAV_STATE)["pos_enu_m"])
+                                                uav["t_s"], uav["pos_enu_m"])
             cells.append(f"{along:+.1f}, {across:+.1f}" if math.isfinite(along) else "-")
             fu = log.table(topics.FSW_DETECTION_FUSION)
             share, top = last_detections(fu["t_s"], fu["reason"], end)
