@@ -78,26 +78,36 @@ def verdict(rows: list[dict], by: str) -> list[tuple[str, int, list[float], floa
     return out
 
 
+def _latest_errors(t_s, est_xy, truth_t_s, truth_xy, at_s) -> list[tuple[np.ndarray, float] | None]:
+    """For each time of ``at_s``: (the latest finite estimate at or before it minus the truth interpolated to
+    that estimate's time (east, north), that estimate's time), or None when no estimate came before."""
+    from fwsim.log.truth import interp_at
+    t = np.asarray(t_s, dtype=float)
+    est = np.asarray(est_xy, dtype=float)
+    ok = np.isfinite(est).all(axis=1)
+    t, est = t[ok], est[ok]
+    truth = np.asarray(truth_xy, dtype=float)
+    out = []
+    for a in at_s:
+        k = int(np.searchsorted(t, a, side="right")) - 1
+        out.append(None if k < 0 else (est[k] - interp_at(t[k:k + 1], truth_t_s, truth)[0], float(t[k])))
+    return out
+
+
 def ship_frame_errors(t_s, est_xy, truth_t_s, truth_xy, truth_heading_ned_rad, at_s) -> list[tuple[float, float]]:
     """The estimate's horizontal error (estimate - truth) at each time of ``at_s``, in the ship's frame:
     (towards the bow, to port), m. ``est_xy`` / ``truth_xy``: east, north; the ship's heading from north,
     clockwise (its bow along (sin, cos) in east, north; port along (-cos, sin)). The latest estimate at or
     before each time (NaN when there is none); the truth interpolated to that estimate's time."""
-    from fwsim.metrics import interp_at
-    t = np.asarray(t_s, dtype=float)
-    est = np.asarray(est_xy, dtype=float)
-    ok = np.isfinite(est).all(axis=1)
-    t, est = t[ok], est[ok]
     tt = np.asarray(truth_t_s, dtype=float)
     out = []
-    for a in at_s:
-        k = int(np.searchsorted(t, a, side="right")) - 1
-        if k < 0:
+    for got in _latest_errors(t_s, est_xy, tt, truth_xy, at_s):
+        if got is None:
             out.append((math.nan, math.nan))
             continue
-        e = est[k] - interp_at(t[k:k + 1], tt, np.asarray(truth_xy, dtype=float))[0]
+        e, tk = got
         # the heading interpolated through its unwrapped angle (a ship turning through north)
-        yaw = float(np.interp(t[k], tt, np.unwrap(np.asarray(truth_heading_ned_rad, dtype=float))))
+        yaw = float(np.interp(tk, tt, np.unwrap(np.asarray(truth_heading_ned_rad, dtype=float))))
         bow, port = (math.sin(yaw), math.cos(yaw)), (-math.cos(yaw), math.sin(yaw))
         out.append((float(e[0] * bow[0] + e[1] * bow[1]), float(e[0] * port[0] + e[1] * port[1])))
     return out
@@ -114,22 +124,18 @@ def line_of_sight_error(t_s, est_xy, truth_t_s, truth_pos_enu_m, uav_t_s, uav_po
     from fwsim.log.truth import interp_at
     ut = np.asarray(uav_t_s, dtype=float)
     up = np.asarray(uav_pos_enu_m, dtype=float)
-    ship = interp_at(ut, truth_t_s, truth_pos_enu_m)
+    truth = np.asarray(truth_pos_enu_m, dtype=float)
+    ship = interp_at(ut, truth_t_s, truth)
     far = np.flatnonzero(np.linalg.norm(ship - up, axis=1) >= range_m)
     if not far.size:
         return math.nan, math.nan
     i = int(far[-1])
     los = ship[i, :2] - up[i, :2]
     n = float(np.hypot(los[0], los[1]))
-    t = np.asarray(t_s, dtype=float)
-    est = np.asarray(est_xy, dtype=float)
-    ok = np.isfinite(est).all(axis=1)
-    t, est = t[ok], est[ok]
-    k = int(np.searchsorted(t, ut[i], side="right")) - 1
-    if k < 0 or not n > 1e-9:
+    got = _latest_errors(t_s, est_xy, truth_t_s, truth[:, :2], [ut[i]])[0]
+    if got is None or not n > 1e-9:
         return math.nan, math.nan
-    e = est[k] - interp_at(t[k:k + 1], truth_t_s, np.asarray(truth_pos_enu_m, dtype=float)[:, :2])[0]
-    u = los / n
+    e, u = got[0], los / n
     return float(e @ u), float(-e[0] * u[1] + e[1] * u[0])
 
 
