@@ -290,6 +290,15 @@ class ShapeHeadingConfig(StrictModel):
                     "at the heading it has had lately, not at all it had. 120 s: at 30 s a still ship's bow "
                     "and stern, which the box shapes tell only weakly, came and went with the last boxes "
                     "(README, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
+    turn_rate_switch_s: float | None = Field(
+        None, gt=0, le=100000,
+        description="while the course is not followed, the ship's turn rate may change (a zigzag's turn reverses, "
+                    "a turn starts or ends): between boxes each rate hypothesis hands the share 1 - exp(-dt / "
+                    "this) of its evidence over to the rates' prior mixture (a Markov chain on the rates, as an "
+                    "interacting multiple model's), so that the heading follows a turn that no one rate fits "
+                    "from the first box on, and the boxes' evidence for the bow stays with the heading as it "
+                    "turns. Seconds a rate is expected to hold; None: each rate holds for good (as before "
+                    "2026-11-27)")
 
     @field_validator("turn_rates_deg_s")
     @classmethod

@@ -427,6 +427,8 @@ class ShapeHeading:
                 for lb in self._loglik_bias:
                     lb *= f
                 self._count *= f
+            if c.turn_rate_switch_s is not None and len(self._rot) > 1:
+                self._switch_rates(1.0 - math.exp(-dt / c.turn_rate_switch_s))
         size_det = np.array([b[2] - b[0], b[3] - b[1]])
         size_now = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
         for j, (lb, shift) in enumerate(zip(self._loglik_bias, self._shifts())):
@@ -447,6 +449,25 @@ class ShapeHeading:
         self._weights = self._axis = None
         self._last_t = t_s
         return True
+
+    def _switch_rates(self, p: float) -> None:
+        """The rates' Markov step (``turn_rate_switch_s``): each rate keeps ``1 - p`` of its own evidence and
+        takes ``p`` of the rates' prior mixture, heading by heading now, for each size bias and box side
+        (the sides' bias grids are kept apart as in the likelihood; mixing them apart is the approximation).
+        Every rate's evidence is then at the headings now, bar each rate's turn of less than a grid step, which
+        is kept for the next step."""
+        step = 2.0 * math.pi / self.cfg.headings
+        shifts = self._shifts()
+        a = np.stack([lb if not s else np.roll(lb, s, axis=1) for lb, s in zip(self._loglik_bias, shifts)])
+        top = a.max(axis=0)
+        prob = np.exp(a - top)  # (rates, biases, headings, 2), each element's largest 1
+        prior = np.exp(self._log_rate_prior)
+        mixture = np.tensordot(prior / prior.sum(), prob, axes=1)
+        a = np.log((1.0 - p) * prob + p * mixture) + top
+        self._loglik_bias = list(a)
+        self._rot -= np.asarray(shifts, dtype=float) * step
+        for j, lb in enumerate(self._loglik_bias):
+            self._loglik_rate[j] = np.sum(_logsumexp_rows(lb), axis=1)
 
     def _add_centres(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box: np.ndarray,
                      pred: np.ndarray) -> None:

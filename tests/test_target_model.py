@@ -465,6 +465,59 @@ def test_turn_rate_hypotheses_leave_a_still_ship_where_it_is():
     assert _RATES[int(np.argmax(sh.rate_weights()))] == 0.0
 
 
+def zigzagging_slow_ship_views(h0_deg: float, amplitude_deg: float = 30.0, period_s: float = 90.0,
+                               lap_s: float = 150.0, span_s: float = 240.0, hz: float = 3.0):
+    """The class's ship zigzagging (its heading h0 + amplitude sin(2 pi t / period)) too slowly for its course
+    to be known, seen from the loiter ring: (t, cam_pos, R_enu_cam, box, its heading, deg)."""
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), Ship(TargetConfig()).mesh)
+    for k in range(int(span_s * hz)):
+        t = k / hz
+        heading = (h0_deg + amplitude_deg * math.sin(2.0 * math.pi * t / period_s)) % 360.0
+        pos_ship, R_ship = Ship(TargetConfig(heading_deg=heading)).pose(0.0)
+        cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), 707.0, 45.0, 360.0 * t / lap_s)
+        yield t, cp, Rc, frame.bbox_px, heading
+
+
+@pytest.mark.parametrize("h0_deg", [30.0, 200.0])
+def test_switching_turn_rates_follow_a_slow_zigzag_bow_first(h0_deg):
+    """A slow ship zigzagging +-30 deg over 90 s turns at no one rate for long. With the rates held for good,
+    its boxes add up at headings it does not have, and the posterior's best heading wanders tens of degrees off
+    and, part of the time, to the stern; with the rates switching (a Markov chain, 20 s a rate) it keeps within
+    15 deg of the heading (p90 after the first minute) and the bow forward."""
+    views_ = list(zigzagging_slow_ship_views(h0_deg))
+    stats = {}
+    for switch in (None, 20.0):
+        sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, memory_s=120.0, turn_rate_switch_s=switch),
+                          ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+        off = []
+        for t, cp, Rc, box, heading in views_:
+            assert sh.update(t, cp, Rc, np.zeros(3), box, None)
+            if t >= 60.0:
+                off.append(_deg_off(90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))])),
+                                    heading))
+        off = np.array(off)
+        stats[switch] = (float(np.percentile(np.minimum(off, 180.0 - off), 90)), float(np.mean(off > 90.0)))
+    assert stats[20.0][0] <= 15.0 and stats[20.0][1] <= 0.05, stats
+    assert stats[None][0] > 25.0, stats
+
+
+def test_switching_turn_rates_leave_a_still_ship_and_a_followed_course_alone():
+    """The switch is the rates' Markov step: a still ship's heading stays to a bin with it, and with the course
+    followed (no rates weighed) the posterior is the same as without it."""
+    sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, turn_rate_switch_s=20.0),
+                      ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+    for t, cp, Rc, box, heading in slow_turning_ship_views(0.0, h0_deg=37.0):
+        sh.update(t, cp, Rc, np.zeros(3), box, None)
+    assert _deg_off(90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))])), 37.0) <= 5.0
+    views_ = list(turning_ship_views(1.5))
+    one, switching = (ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, turn_rate_switch_s=s),
+                                   ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+                      for s in (None, 20.0))
+    for t, cp, Rc, box, course in views_:
+        assert one.update(t, cp, Rc, np.zeros(3), box, course) and switching.update(t, cp, Rc, np.zeros(3), box, course)
+    np.testing.assert_array_equal(switching.weights(), one.weights())
+
+
 def test_turn_rates_must_be_distinct_and_bounded():
     from pydantic import ValidationError
     for bad in ((0.0, 0.0), (0.0, 45.0), ()):
