@@ -331,8 +331,11 @@ class ShapeHeading:
     would have turned the ship to since the first (to the grid's step); the posterior over the heading now
     sums them, weighted by their likelihoods and a prior (``turn_rate_prior_zero`` on rate 0). ``memory_s``
     fades the evidence meanwhile, so that a turn no one rate fits (a zigzag) is weighed at the headings of
-    late. Once the course is followed again, the likeliest rate's evidence is kept alone (the course turns
-    the posterior from then on).
+    late. With ``turn_rate_switch_s`` the rates form a Markov chain (an interacting multiple model's mixing,
+    :meth:`_switch_rates`): between boxes each rate hands a share of its evidence to the rates' prior mixture,
+    so a zigzag, whose rate swings through the grid, is followed rate by rate, and the evidence for where its
+    bow is turns with it. Once the course is followed again, the likeliest rate's evidence is kept alone (the
+    course turns the posterior from then on).
 
     The sizes barely tell a still ship's bow from its stern (a box is much the same either way round). Where
     its centre falls does (``centre_fit``, off by default): each heading's predicted box centre, at the
