@@ -291,15 +291,16 @@ class ShapeHeadingConfig(StrictModel):
                     "and stern, which the box shapes tell only weakly, came and went with the last boxes "
                     "(README, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
     turn_rate_switch_s: float | None = Field(
-        20.0, gt=0, le=100000,
+        None, gt=0, le=100000,
         description="while the course is not followed, the ship's turn rate may change (a zigzag's turn reverses, "
                     "a turn starts or ends): between boxes each rate hypothesis hands the share 1 - exp(-dt / "
                     "this) of its evidence over to the rates' prior mixture (a Markov chain on the rates, as an "
                     "interacting multiple model's), so that the heading follows a turn that no one rate fits "
                     "from the first box on, and the boxes' evidence for the bow stays with the heading as it "
                     "turns. Seconds a rate is expected to hold (20: offline, a +-30 deg / 90 s zigzag's heading "
-                    "to 11 deg at p90, not 38, and no longer toward the stern; 60 did about as well); None: "
-                    "each rate holds for good (as before 2026-11-27). Nothing to switch with one rate")
+                    "to 11 deg at p90, not 38, and no longer toward the stern; 60 did about as well; in flight "
+                    "not better at the bars, so off by default: README, 'Switching turn rates for a slow ship's "
+                    "heading'); None: each rate holds for good. Nothing to switch with one rate")
 
     @field_validator("turn_rates_deg_s")
     @classmethod
