@@ -458,7 +458,8 @@ class ShapeHeading:
         takes ``p`` of the rates' prior mixture, heading by heading now, for each size bias and box side
         (the sides' bias grids are kept apart as in the likelihood; mixing them apart is the approximation).
         Every rate's evidence is then at the headings now, bar each rate's turn of less than a grid step, which
-        is kept for the next step."""
+        is kept for the next step. The rates' marginals (``_loglik_rate``) are left to :meth:`update`, which
+        works them out again once the box is in."""
         step = 2.0 * math.pi / self.cfg.headings
         shifts = self._shifts()
         a = np.stack([lb if not s else np.roll(lb, s, axis=1) for lb, s in zip(self._loglik_bias, shifts)])
@@ -469,8 +470,6 @@ class ShapeHeading:
         a = np.log((1.0 - p) * prob + p * mixture) + top
         self._loglik_bias = list(a)
         self._rot -= np.asarray(shifts, dtype=float) * step
-        for j, lb in enumerate(self._loglik_bias):
-            self._loglik_rate[j] = np.sum(_logsumexp_rows(lb), axis=1)
 
     def _add_centres(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box: np.ndarray,
                      pred: np.ndarray) -> None:

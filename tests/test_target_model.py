@@ -392,14 +392,15 @@ def test_the_shape_heading_follows_a_turning_ships_course(rate_deg_s):
 
 
 def slow_turning_ship_views(rate_deg_s: float, h0_deg: float = 200.0, lap_s: float = 150.0, span_s: float = 180.0,
-                            hz: float = 3.0):
-    """A ship turning at ``rate_deg_s`` too slowly for its course to be known, seen from the loiter ring (a lap
-    in ``lap_s``) for ``span_s``: (t, cam_pos, R_enu_cam, box, its heading, deg)."""
+                            hz: float = 3.0, heading_deg_at=None):
+    """A ship turning at ``rate_deg_s`` (or with the heading ``heading_deg_at(t)``, deg) too slowly for its
+    course to be known, seen from the loiter ring (a lap in ``lap_s``) for ``span_s``: (t, cam_pos, R_enu_cam,
+    box, its heading, deg)."""
     ship = Ship(TargetConfig())
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     for k in range(int(span_s * hz)):
         t = k / hz
-        heading = (h0_deg + rate_deg_s * t) % 360.0
+        heading = (h0_deg + rate_deg_s * t if heading_deg_at is None else heading_deg_at(t)) % 360.0
         pos_ship, R_ship = Ship(TargetConfig(heading_deg=heading)).pose(0.0)
         cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), 707.0, 45.0, 360.0 * t / lap_s)
         yield t, cp, Rc, frame.bbox_px, heading
@@ -465,17 +466,11 @@ def test_turn_rate_hypotheses_leave_a_still_ship_where_it_is():
     assert _RATES[int(np.argmax(sh.rate_weights()))] == 0.0
 
 
-def zigzagging_slow_ship_views(h0_deg: float, amplitude_deg: float = 30.0, period_s: float = 90.0,
-                               lap_s: float = 150.0, span_s: float = 240.0, hz: float = 3.0):
+def zigzagging_slow_ship_views(h0_deg: float, amplitude_deg: float = 30.0, period_s: float = 90.0):
     """The class's ship zigzagging (its heading h0 + amplitude sin(2 pi t / period)) too slowly for its course
-    to be known, seen from the loiter ring: (t, cam_pos, R_enu_cam, box, its heading, deg)."""
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), Ship(TargetConfig()).mesh)
-    for k in range(int(span_s * hz)):
-        t = k / hz
-        heading = (h0_deg + amplitude_deg * math.sin(2.0 * math.pi * t / period_s)) % 360.0
-        pos_ship, R_ship = Ship(TargetConfig(heading_deg=heading)).pose(0.0)
-        cp, Rc, frame = _look_from(cam, Pose(R_ship, pos_ship), 707.0, 45.0, 360.0 * t / lap_s)
-        yield t, cp, Rc, frame.bbox_px, heading
+    to be known, seen from the loiter ring for 240 s (:func:`slow_turning_ship_views`)."""
+    return slow_turning_ship_views(0.0, span_s=240.0, heading_deg_at=lambda t: h0_deg + amplitude_deg * math.sin(
+        2.0 * math.pi * t / period_s))
 
 
 @pytest.mark.parametrize("h0_deg", [30.0, 200.0])
