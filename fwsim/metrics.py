@@ -56,6 +56,14 @@ MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss d
 PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
 
 
+def convergence_index(std_m) -> int:
+    """The index of the first estimate after which the reported std (``std_m``, one per estimate: the larger
+    horizontal axis's) stays below ``CONVERGED_STD_M``: convergence; ``len(std_m)`` when the last one is not
+    below it (never converged)."""
+    above = np.flatnonzero(np.asarray(std_m, dtype=float) >= CONVERGED_STD_M)
+    return 0 if above.size == 0 else int(above[-1]) + 1
+
+
 def lock_time_s(log: RunLog) -> float:
     """The time of the first ``/fsw/status`` tick with the target locked; NaN if it never locked."""
     if topics.FSW_STATUS in log.topics:
@@ -353,8 +361,7 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         m["ukf_pos_rmse_m"] = _rms(pe)
         m["ukf_vel_rmse_m_s"] = _rms(ve)
         m["ukf_pos_err_within_2std_fraction"] = share_within(pe, std, 2.0)
-        above = np.flatnonzero(std >= CONVERGED_STD_M)
-        k = 0 if above.size == 0 else above[-1] + 1
+        k = convergence_index(std)
         if k < len(t):
             m["ukf_convergence_time_s"] = float(t[k] - lock_t)
             m["ukf_pos_err_max_after_convergence_m"] = float(np.max(pe[k:]))

@@ -204,6 +204,32 @@ def test_the_envelope_line_of_sight_error_by_hand():
     assert all(math.isnan(v) for v in tool.line_of_sight_error(est_t, est, truth_t, ship, uav_t, near))
 
 
+def test_the_envelope_why_estimate_by_hand():
+    """--why-estimate's verdict on a run's estimate, by hand (one estimate a second, the truth at the origin):
+    a std under 5 m from t = 3 s and one error of 9 m at t = 5 s: over 8 m 2 s after convergence, in the
+    loiter (the dive starts at 8 s), for one estimate's spacing; the same run with the std over 5 m again from
+    t = 8 s never converged, its std last under 5 m 3 s before the end, its largest error from the dive's start
+    2 m; an error of 8 m at most: it meets the bar."""
+    import numpy as np
+    tool = _envelope_tool()
+    t = np.arange(0.0, 11.0)
+    err = np.full(11, 2.0)
+    err[5] = 9.0
+    est = np.column_stack([err, np.zeros(11)])
+    std = np.where(t < 3.0, 6.0, 3.0)
+    stds = np.column_stack([std, std / 2.0])  # the larger axis counts
+    truth_t, truth = [0.0, 20.0], np.zeros((2, 2))
+    f = tool.estimate_failure(t, est, stds, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0)
+    assert f["kind"] == "over 8 m" and f["converged_s"] == 3.0 and f["err_max_m"] == pytest.approx(9.0)
+    assert f["err_max_after_s"] == 2.0 and f["phase"] == "loiter" and f["std_then_m"] == 3.0 and f["over_s"] == 1.0
+    std_late = np.column_stack([np.where(t >= 8.0, 6.0, std), std / 2.0])
+    g = tool.estimate_failure(t, est, std_late, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0)
+    assert g["kind"] == "never converged" and math.isnan(g["converged_s"]) and g["std_end_m"] == 6.0
+    assert g["under_last_s_before_end"] == 3.0 and g["err_max_dive_m"] == pytest.approx(2.0)
+    est[5, 0] = 8.0
+    assert tool.estimate_failure(t, est, stds, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0) is None
+
+
 def test_the_envelope_aim_line_offset_by_hand():
     """--why's aim line: a UAV at the origin steering to (60, 0, 0) (range 60 m, in the band) passes a true
     aim point at (30, 4, 3) by 5 m (the along-line error costs nothing); ticks out of the 50-80 m band are

@@ -7,6 +7,7 @@
     fwsim batch scenarios/batches/envelope.yaml --workers 2 --hold world --out runs/no_wind  # a factor held
     python tools/envelope.py runs/envelope runs/no_wind --by folder  # one row per folder: what wind costs
     python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
+    python tools/envelope.py runs/envelope --why-estimate   # and each run failing the estimate bar: why
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock (seen:
@@ -19,6 +20,12 @@ whose estimate never converges counts against this bar). A last
 column says whether that std is honest: the median run's share of estimates whose error is within twice
 it (about 86 % or more for a consistent filter). The statistics are fwsim report's (fwsim.report.summarise).
 Exit code 0 when every group meets every bar.
+
+``--why-estimate`` adds, for each run failing the estimate bar, whether it never converged (its std at the
+end, and the largest error from the dive's start: what the bar would have counted had the std fallen under
+5 m there) or went over 8 m after converging (how long after, in the loiter or the dive, the std then, and
+for how long), with a tally: an excursion within 5 s of convergence came as the std crossed 5 m with the
+error near twice it.
 
 ``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
 angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
@@ -51,6 +58,10 @@ AIM_LINE_RANGES_M = (50.0, 80.0)
 #: --why: the estimate's error along and across the line of sight when the UAV was last this far (m) from the
 #: ship (before the planned coast of the last 80-120 m)
 LOS_RANGE_M = 150.0
+ESTIMATE_BAR_M = 8.0  # the estimate bar: the horizontal error after convergence within this (m)
+#: --why-estimate's tally: an excursion over the bar this soon after convergence (s) came as the std crossed
+#: the threshold (the error then about twice the std, not a lapse of the converged filter)
+NEAR_CONVERGENCE_S = 5.0
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
         ("estimate <= 8 m", 0.90))
@@ -183,6 +194,92 @@ def aim_line_offset(t_s, aim_enu_m, range_m, uav_t_s, uav_pos_enu_m, truth_aim_a
     return float(np.median(np.linalg.norm(w - np.einsum("ij,ij->i", w, u)[:, None] * u, axis=1)))
 
 
+def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, switch_t_s: float,
+                     bar_m: float = ESTIMATE_BAR_M) -> dict | None:
+    """Why a run's estimate fails the estimate bar (fwsim.metrics' definitions: the horizontal error, the
+    larger horizontal std, convergence from :func:`fwsim.metrics.convergence_index`), or None when it meets
+    it. ``est_xy`` / ``std_xy``: the estimate's east, north and their stds; the truth interpolated to the
+    estimates' times; ``switch_t_s``: the last dive's start (NaN: none). Returns
+    ``kind``: "never converged" (the last std at or over CONVERGED_STD_M) or "over 8 m" (after convergence);
+    ``converged_s``: convergence after the lock (NaN when never); the largest error after convergence
+    (``err_max_m``), how long after convergence it came (``err_max_after_s``), in which phase ("loiter" or
+    "dive", from ``switch_t_s``) and the std then (``std_then_m``), and the time spent over ``bar_m`` after
+    convergence (``over_s``: the estimates' spacing summed); for a run that never converged, the std at the end
+    (``std_end_m``), the last time it was under CONVERGED_STD_M before the end (``under_last_s_before_end``,
+    NaN: never after the lock), and the largest error from the dive's start (``err_max_dive_m``): what the bar
+    would have counted had the std been under the threshold in the dive."""
+    from fwsim.log.truth import interp_at
+    from fwsim.metrics import CONVERGED_STD_M, convergence_index
+    t = np.asarray(t_s, dtype=float)
+    est = np.asarray(est_xy, dtype=float)
+    ok = np.isfinite(est).all(axis=1)
+    if not ok.any():
+        return None
+    t, est = t[ok], est[ok]
+    std = np.max(np.asarray(std_xy, dtype=float)[ok], axis=1)
+    err = np.linalg.norm(est - interp_at(t, truth_t_s, np.asarray(truth_xy, dtype=float)), axis=1)
+    k = convergence_index(std)
+    dive = t >= switch_t_s if math.isfinite(switch_t_s) else np.zeros(t.size, dtype=bool)
+    dt = np.diff(t, append=t[-1])
+    if k >= t.size:
+        under = np.flatnonzero((std < CONVERGED_STD_M) & (t >= lock_t_s))
+        return {"kind": "never converged", "converged_s": math.nan, "std_end_m": float(std[-1]),
+                "under_last_s_before_end": float(t[-1] - t[under[-1]]) if under.size else math.nan,
+                "err_max_dive_m": float(np.max(err[dive])) if dive.any() else math.nan}
+    after = err[k:]
+    i = k + int(np.argmax(after))
+    if not err[i] > bar_m:
+        return None
+    return {"kind": f"over {bar_m:g} m", "converged_s": float(t[k] - lock_t_s), "err_max_m": float(err[i]),
+            "err_max_after_s": float(t[i] - t[k]), "phase": "dive" if dive[i] else "loiter",
+            "std_then_m": float(std[i]), "over_s": float(np.sum(dt[k:][after > bar_m]))}
+
+
+def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict]:
+    """--why-estimate's table rows (strings), each run failing the estimate bar, from its log; and a tally:
+    runs that never converged (and how many of them kept the error within the bar from the dive's start), and
+    runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
+    from fwsim import topics
+    from fwsim.log.reader import read_log
+    from fwsim.metrics import lock_time_s
+    table, tally = [], defaultdict(int)
+    for r in rows:
+        if r.get("status") == "failed":
+            continue
+        try:
+            log = read_log(out_dir / r["log"])
+            est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
+            sw = r.get("switch_time_s")
+            f = estimate_failure(est["t_s"], est["pos_enu_m"][:, :2], est["pos_std_m"][:, :2], tru["t_s"],
+                                 tru["pos_enu_m"][:, :2], lock_time_s(log),
+                                 float(sw) if isinstance(sw, (int, float)) else math.nan)
+        except (OSError, KeyError, ValueError, IndexError) as exc:
+            table.append([str(r.get("id", "?")), f"(log: {type(exc).__name__})"] + ["-"] * 9)
+            continue
+        if f is None:
+            continue
+        speed, fpa = r.get("set.target.speed_m_s"), r.get("set.controllers.bpng.impact_flight_path_deg")
+        cells = [str(r.get("id", "?")), f["kind"], str(r.get("set.target.type", "-")),
+                 f"{speed:.1f}" if isinstance(speed, (int, float)) else "-",
+                 f"{fpa:.0f}" if isinstance(fpa, (int, float)) else "-"]
+        if f["kind"] == "never converged":
+            tally["never converged"] += 1
+            tally["never converged, within the bar from the dive's start"] += f["err_max_dive_m"] <= ESTIMATE_BAR_M
+            cells += ["-", "-", "-", f"{f['std_end_m']:.1f}",
+                      f"{f['under_last_s_before_end']:.0f}" if math.isfinite(f["under_last_s_before_end"]) else "-",
+                      f"{f['err_max_dive_m']:.1f}" if math.isfinite(f["err_max_dive_m"]) else "-"]
+        else:
+            tally["over the bar"] += 1
+            near = f["err_max_after_s"] <= NEAR_CONVERGENCE_S
+            tally[f"over the bar, within {NEAR_CONVERGENCE_S:g} s of convergence"] += near
+            tally["over the bar, in the dive"] += f["phase"] == "dive"
+            cells += [f"{f['converged_s']:.0f}",
+                      f"{f['err_max_m']:.1f} ({f['err_max_after_s']:.0f} s after, {f['phase']}, std "
+                      f"{f['std_then_m']:.1f})", f"{f['over_s']:.1f}", "-", "-", "-"]
+        table.append(cells)
+    return table, dict(tally)
+
+
 def _failed_bar(row: dict) -> str:
     """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
     if row.get("hit") != 1.0:
@@ -257,6 +354,10 @@ def main(argv=None) -> int:
     ap.add_argument("--why", action="store_true",
                     help="also list each run outside 3 m / 3 deg with its estimate's error and its last "
                          "detections (reads the logs)")
+    ap.add_argument("--why-estimate", action="store_true",
+                    help="also list each run failing the estimate bar: never converged (the std at the end, "
+                         "the largest error from the dive's start) or over 8 m after convergence (when, in "
+                         "which phase, the std then, for how long) (reads the logs)")
     args = ap.parse_args(argv)
     rows, per_dir = [], []
     for out_dir in args.out_dirs:
@@ -305,6 +406,19 @@ def main(argv=None) -> int:
             print("|" + "---|" * len(head))
             for cells in why(out_dir, these):
                 print("| " + " | ".join(cells) + " |")
+    if args.why_estimate:
+        head = ["run", "fails by", "ship", "speed, m/s", "theta_f, deg", "converged, s after lock",
+                "largest error after it, m (when, phase, the std then)", f"time over {ESTIMATE_BAR_M:g} m, s",
+                "std at the end, m", "std last under 5 m, s before the end",
+                "largest error from the dive's start, m"]
+        for out_dir, these in per_dir:
+            table, tally = why_estimate(out_dir, these)
+            print(f"\nRuns failing the estimate bar in {out_dir}:\n")
+            print("| " + " | ".join(head) + " |")
+            print("|" + "---|" * len(head))
+            for cells in table:
+                print("| " + " | ".join(cells) + " |")
+            print("\n" + "; ".join(f"{k}: {v}" for k, v in tally.items()) if tally else "\nnone")
     return 0 if ok else 1
 
 
