@@ -184,6 +184,15 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     assert math.isfinite(along) and math.isfinite(across) and math.hypot(along, across) < 8.0, cells
     assert cells[12].endswith("%") and 0.0 < float(cells[12].rstrip(" %")) <= 100.0, cells
     assert 0.0 <= float(cells[14]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
+    # --why-estimate on the same log: its section, and a row for the run only if its estimate fails the bar
+    row["switch_time_s"] = 0.0
+    (tmp_path / "summary.json").write_text(json.dumps({"rows": [row]}))
+    _envelope_tool().main([str(tmp_path), "--why-estimate"])
+    out = capsys.readouterr().out
+    assert "Runs failing the estimate bar in" in out
+    rows = [x for x in out.splitlines() if x.startswith("| t |")]
+    assert rows == [] and out.rstrip().endswith("none") or \
+        len(rows) == 1 and rows[0].split("|")[2].strip() in ("never converged", "over 8 m"), out
 
 
 def test_the_envelope_line_of_sight_error_by_hand():

@@ -24,8 +24,8 @@ Exit code 0 when every group meets every bar.
 ``--why-estimate`` adds, for each run failing the estimate bar, whether it never converged (its std at the
 end, and the largest error from the dive's start: what the bar would have counted had the std fallen under
 5 m there) or went over 8 m after converging (how long after, in the loiter or the dive, the std then, and
-for how long), with a tally: an excursion within 5 s of convergence came as the std crossed 5 m with the
-error near twice it.
+for how long), with a tally: an excursion within 5 s of convergence came as the std crossed 5 m, the error
+then near twice it or more.
 
 ``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
 angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
@@ -60,7 +60,7 @@ AIM_LINE_RANGES_M = (50.0, 80.0)
 LOS_RANGE_M = 150.0
 ESTIMATE_BAR_M = 8.0  # the estimate bar: the horizontal error after convergence within this (m)
 #: --why-estimate's tally: an excursion over the bar this soon after convergence (s) came as the std crossed
-#: the threshold (the error then about twice the std, not a lapse of the converged filter)
+#: the threshold (the error then near twice the std or more), not later in a converged filter
 NEAR_CONVERGENCE_S = 5.0
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
