@@ -64,6 +64,17 @@ def convergence_index(std_m) -> int:
     return 0 if above.size == 0 else int(above[-1]) + 1
 
 
+def estimate_errors_m(t_s, est_xy, std_xy, truth_t_s, truth_xy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the estimates with a finite horizontal position, as a mask; their horizontal error against the truth
+    interpolated to their times, m; the larger of their horizontal stds, m). ``est_xy`` / ``std_xy`` /
+    ``truth_xy``: east, north (more columns are ignored)."""
+    est = np.asarray(est_xy, dtype=float)[:, :2]
+    valid = np.all(np.isfinite(est), axis=1)
+    t = np.asarray(t_s, dtype=float)[valid]
+    err = np.linalg.norm(est[valid] - interp_at(t, truth_t_s, np.asarray(truth_xy, dtype=float)[:, :2]), axis=1)
+    return valid, err, np.max(np.asarray(std_xy, dtype=float)[valid, :2], axis=1)
+
+
 def lock_time_s(log: RunLog) -> float:
     """The time of the first ``/fsw/status`` tick with the target locked; NaN if it never locked."""
     if topics.FSW_STATUS in log.topics:
@@ -348,15 +359,12 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
     if topics.FSW_ESTIMATE in log.topics and topics.TARGET_STATE in log.topics:
         est = log.table(topics.FSW_ESTIMATE)
         tru = log.table(topics.TARGET_STATE)
-        t = est["t_s"]
-        valid = np.all(np.isfinite(est["pos_enu_m"][:, :2]), axis=1)
+        valid, pe, std = estimate_errors_m(est["t_s"], est["pos_enu_m"], est["pos_std_m"], tru["t_s"],
+                                           tru["pos_enu_m"])
         if not valid.any():
             return
-        t, pos, vel = t[valid], est["pos_enu_m"][valid, :2], est["vel_enu_m_s"][valid, :2]
-        std = np.max(est["pos_std_m"][valid, :2], axis=1)
-        tp = interp_at(t, tru["t_s"], tru["pos_enu_m"][:, :2])
+        t, vel = est["t_s"][valid], est["vel_enu_m_s"][valid, :2]
         tv = interp_at(t, tru["t_s"], tru["vel_enu_m_s"][:, :2])
-        pe = np.linalg.norm(pos - tp, axis=1)
         ve = np.linalg.norm(vel - tv, axis=1)
         m["ukf_pos_rmse_m"] = _rms(pe)
         m["ukf_vel_rmse_m_s"] = _rms(ve)

@@ -208,16 +208,11 @@ def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, 
     (``std_end_m``), the last time it was under CONVERGED_STD_M before the end (``under_last_s_before_end``,
     NaN: never after the lock), and the largest error from the dive's start (``err_max_dive_m``): what the bar
     would have counted had the std been under the threshold in the dive."""
-    from fwsim.log.truth import interp_at
-    from fwsim.metrics import CONVERGED_STD_M, convergence_index
-    t = np.asarray(t_s, dtype=float)
-    est = np.asarray(est_xy, dtype=float)
-    ok = np.isfinite(est).all(axis=1)
+    from fwsim.metrics import CONVERGED_STD_M, convergence_index, estimate_errors_m
+    ok, err, std = estimate_errors_m(t_s, est_xy, std_xy, truth_t_s, truth_xy)
     if not ok.any():
         return None
-    t, est = t[ok], est[ok]
-    std = np.max(np.asarray(std_xy, dtype=float)[ok], axis=1)
-    err = np.linalg.norm(est - interp_at(t, truth_t_s, np.asarray(truth_xy, dtype=float)), axis=1)
+    t = np.asarray(t_s, dtype=float)[ok]
     k = convergence_index(std)
     dive = t >= switch_t_s if math.isfinite(switch_t_s) else np.zeros(t.size, dtype=bool)
     dt = np.diff(t, append=t[-1])
