@@ -325,6 +325,8 @@ def _entry_jobs(path: Path, i: int, entry: Any, logs: Path, batch_seed: int = 0)
             try:
                 scenario, _ = _load(scenario_file, generator, case, ov)
             except ScenarioError as exc:
+                if _fails_alone(scenario_file, generator, case, fixed):  # a bad 'set' (or --set): name it alone,
+                    raise BatchSpecError(f"{where}.set: {exc}") from None  # not with the draw it spoiled first
                 raise BatchSpecError(f"{where} ({_canonical({**case, **ov})}): {exc}") from None
             except Exception as exc:  # noqa: BLE001 - a generator that raises on these arguments
                 raise BatchSpecError(f"{where} ({_canonical(case)}): {generator}: {type(exc).__name__}: "
@@ -341,6 +343,19 @@ def _scenario_seed(scenario_file: str, generator: str, case: dict) -> int:
         return _load(scenario_file, generator, case, {})[0].seed
     except Exception as exc:  # noqa: BLE001 - reported in one line like any other entry problem
         raise BatchSpecError(f"{scenario_file or generator}: {type(exc).__name__}: {exc}") from None
+
+
+def _fails_alone(scenario_file: str, generator: str, case: dict, fixed: dict) -> bool:
+    """The entry's fixed overrides (``set``, with ``--set``) are refused on their own, without a draw."""
+    if not fixed:
+        return False
+    try:
+        _load(scenario_file, generator, case, fixed)
+    except ScenarioError:
+        return True
+    except Exception:  # noqa: BLE001 - a generator's own failure is reported with its arguments instead
+        return False
+    return False
 
 
 def _load(scenario_file: str, generator: str, case: dict, overrides: dict):

@@ -200,6 +200,8 @@ def cmd_batch(args) -> int:
     from rich.progress import TimeRemainingColumn
 
     from fwsim.batch import SpecChanges, run_batch
+    if args.workers is not None and args.workers < 1:
+        raise ScenarioError(f"--workers: expected the number of parallel runs, 1 or more (got {args.workers})")
     if args.seed is not None and args.seed < 0:
         raise ScenarioError(f"--seed: expected an integer >= 0 for the dispersions' draws (got {args.seed})")
     bad = [h for h in args.hold if not h.strip() or any(not p for p in h.strip().split("."))]

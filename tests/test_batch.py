@@ -197,10 +197,16 @@ def test_cli_batch(tmp_path):
     assert info["changes"] == {"seed": 5, "set": {"duration_s": 1}, "hold": ["world"]}
     assert "world.wind_enu_m_s" not in info["dispersed"]
     for args, message in ((["--hold", "nothing.here"], "--hold nothing.here: no entry"),
-                          (["--set", "duration_s"], "expected PATH=VALUE"), (["--seed", "-1"], "--seed: expected")):
+                          (["--set", "duration_s"], "expected PATH=VALUE"), (["--seed", "-1"], "--seed: expected"),
+                          (["--workers", "0"], "--workers: expected"),
+                          # a bad --set value named on its own, not with the first draw it spoiled
+                          (["--set", "camera.detector.miss_probability=abc"],
+                           "runs.0.set: ")):
         proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(disp), "--out", str(tmp_path / "o4"),
                                *args], capture_output=True, text=True, timeout=300)
         assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+        assert args[-1].split("=")[0] in proc.stderr and "initial.heading_deg" not in proc.stderr, proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr  # one line, no draw dumped
     bad = write_spec(tmp_path, "runs: [{scenario: nope.yaml}]", "bad.yaml")
     proc = subprocess.run([sys.executable, "-m", "fwsim.cli", "batch", str(bad), "--out", str(tmp_path / "o2")],
                           capture_output=True, text=True, timeout=300)

@@ -276,3 +276,5 @@ def test_the_envelope_verdict_by_folder(tmp_path, capsys):
     _envelope_tool().main([str(tmp_path / "held"), str(tmp_path / "full"), "--by", "folder"])
     lines = [ln.split(" | ")[0:2] for ln in capsys.readouterr().out.splitlines() if str(tmp_path) in ln]
     assert lines == [[f"| {tmp_path / 'held'}", "4"], [f"| {tmp_path / 'full'}", str(len(rows))]]
+    assert _envelope_tool().main([str(tmp_path / "full"), str(tmp_path)]) == 2  # not a batch's output folder
+    assert capsys.readouterr().err.strip() == f"error: {tmp_path}: no summary.json (the output folder of `fwsim batch`)"

@@ -356,6 +356,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows, per_dir = [], []
     for out_dir in args.out_dirs:
+        if not (out_dir / "summary.json").is_file():
+            print(f"error: {out_dir}: no summary.json (the output folder of `fwsim batch`)", file=sys.stderr)
+            return 2
         try:
             these = json.loads((out_dir / "summary.json").read_text())["rows"]
             rows += [{**r, "folder": str(out_dir)} for r in these] if args.by == "folder" else these
