@@ -234,7 +234,8 @@ def _format_errors(source: str, exc: ValidationError) -> str:
         msg = short(err["msg"].removeprefix("Value error, "), 200)
         got = ""
         if err["type"] not in ("missing", "extra_forbidden") and "input" in err and not isinstance(err["input"], dict):
-            got = f" (got {short(repr(err['input']), 60)})"
+            shown = short(repr(err['input']), 60)
+            got = "" if f"got {shown}" in msg else f" (got {shown})"  # (a validator's own message may say it)
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         lines.append(f"{source}: {loc}: {msg}{got}" if loc else f"{source}: {msg}{got}")
