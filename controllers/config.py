@@ -242,12 +242,6 @@ class ShapeHeadingConfig(StrictModel):
                           "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
     fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
                                                                          "least this, deg")
-    fuse_min_vel_std_m_s: float = Field(
-        0.0, ge=0, le=10,
-        description="the velocity's std behind the fused course (its std is this over the speed) is at least "
-                    "this, m/s: the boxes' error repeats from frame to frame (a ship unlike the class), which the "
-                    "estimator's std does not carry, so in the last approach its velocity is often 0.3-0.5 m/s off "
-                    "while its std says 0.1; 0: the estimator's std alone")
     follow_course: bool = Field(
         True, description="between detections the posterior turns with the ship's estimated course (a ship's "
                           "heading turns with its course): the boxes of a turning or zigzagging ship, seen over "

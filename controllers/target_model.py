@@ -1192,9 +1192,8 @@ class ShipModel:
         its estimated velocity (std ``vel_std_m_s``) and the box shapes:
 
         * course known (:meth:`course`) and shapes ready: the shapes' posterior times the course's
-          likelihood (a ship's bow points along its course; the course's std is the velocity's, at least
-          ``fuse_min_vel_std_m_s``, over the speed, and at least ``fuse_min_course_std_deg``), so each sharpens
-          the other;
+          likelihood (a ship's bow points along its course; the course's std is the velocity's over the
+          speed, at least ``fuse_min_course_std_deg``), so each sharpens the other;
         * course known, shapes not ready: the course alone;
         * course unknown: the headings the shapes allow, else ``headings_when_unknown`` equal ones.
         """
@@ -1204,7 +1203,7 @@ class ShipModel:
             if not (self.shape.ready and sh.fuse_with_course):
                 return np.array([course]), np.ones(1), course
             speed = max(math.hypot(float(vel_enu[0]), float(vel_enu[1])), 1e-6)  # min_speed_for_course may be 0
-            sig = max(max(vel_std_m_s, sh.fuse_min_vel_std_m_s) / speed, math.radians(sh.fuse_min_course_std_deg))
+            sig = max(vel_std_m_s / speed, math.radians(sh.fuse_min_course_std_deg))
             w = self.shape.weights() * _course_likelihood(self.shape.courses_enu_rad, course, sig)
             if not w.sum() > 0.0:
                 return np.array([course]), np.ones(1), course

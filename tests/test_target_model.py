@@ -680,28 +680,6 @@ def test_a_known_course_and_the_shapes_sharpen_each_other():
     assert len(courses) == 1 and math.isclose(float(courses[0]), off)
 
 
-def test_the_velocity_std_floor_widens_a_too_sure_course():
-    """The estimator's velocity std can be too small (the boxes' error repeats from frame to frame, which it
-    does not carry): with fuse_min_vel_std_m_s the course's std is at least that over the speed. A course said
-    to be sure (0.05 m/s at 5 m/s) 15 deg off the shapes' heading pulls the result to itself on its own std;
-    floored at 0.9 m/s it weighs as the unsure course does, and the shapes keep the heading. At a speed where
-    the floor is under fuse_min_course_std_deg it changes nothing."""
-    def mean_deg(ship, vel, std):
-        courses, weights = ship.headings(vel, std)
-        return math.degrees(float(np.angle(np.sum(weights * np.exp(1j * courses)))))
-
-    off = math.radians(75.0)
-    vel = 5.0 * np.array([math.cos(off), math.sin(off), 0.0])
-    plain = _ship_with_shape(30.0)
-    floored = _ship_with_shape(30.0, cfg=ShipModelConfig(
-        heading_from_shape=ShapeHeadingConfig(fuse_min_vel_std_m_s=0.9)))
-    assert mean_deg(plain, vel, 0.05) > 62.0  # pulled toward 75
-    assert math.isclose(mean_deg(floored, vel, 0.05), mean_deg(plain, vel, 0.9), abs_tol=1e-9)
-    assert abs(mean_deg(floored, vel, 0.05) - 60.0) < 5.0
-    fast = 40.0 * np.array([math.cos(off), math.sin(off), 0.0])  # 0.9 / 40 rad = 1.3 deg < 3 deg
-    assert math.isclose(mean_deg(floored, fast, 0.05), mean_deg(plain, fast, 0.05), abs_tol=1e-9)
-
-
 def test_size_bias_range_must_be_ordered_and_keep_boxes_positive():
     from pydantic import ValidationError
     for bad in ((0.1, -0.1), (-1.0, 0.0)):
