@@ -40,7 +40,6 @@ lock (out of view or behind the airframe).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections import defaultdict
@@ -354,18 +353,16 @@ def main(argv=None) -> int:
                          "the largest error from the dive's start) or over 8 m after convergence (when, in "
                          "which phase, the std then, for how long) (reads the logs)")
     args = ap.parse_args(argv)
+    from fwsim.report import ReportError, load_summary
     rows, per_dir = [], []
     for out_dir in args.out_dirs:
-        if not (out_dir / "summary.json").is_file():
-            print(f"error: {out_dir}: no summary.json (the output folder of `fwsim batch`)", file=sys.stderr)
-            return 2
         try:
-            these = json.loads((out_dir / "summary.json").read_text())["rows"]
-            rows += [{**r, "folder": str(out_dir)} for r in these] if args.by == "folder" else these
-            per_dir.append((out_dir, these))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            print(f"error: {out_dir}/summary.json: {type(exc).__name__}: {exc}", file=sys.stderr)
+            these = load_summary(out_dir)[1]
+        except (ReportError, OSError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
             return 2
+        rows += [{**r, "folder": str(out_dir)} for r in these] if args.by == "folder" else these
+        per_dir.append((out_dir, these))
     table = verdict(rows, args.by)
     print(f"| {args.by} | runs | " + " | ".join(f"{name} (bar {100 * bar:.0f} %)" for name, bar in BARS)
           + " | in the field of view >= 99 % (the airframe's shadow not counted)"
