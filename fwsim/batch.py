@@ -646,7 +646,10 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
     """
     out_dir = Path(out_dir)
     name, jobs = load_spec(spec_path, out_dir, changes)
-    (out_dir / "logs").mkdir(parents=True, exist_ok=True)
+    try:  # the spec is sound: now the folder its output goes to
+        (out_dir / "logs").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BatchSpecError(f"{out_dir}: cannot write the batch's output there ({exc.strerror or exc})") from None
     workers = workers or os.cpu_count() or 1
     rows: dict[str, dict[str, Any]] = {}
     todo = jobs

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -63,6 +64,52 @@ def _flight_log(path: Path):
         return None
 
 
+def writable_dir(path: Path, option: str) -> Path:
+    """The folder ``path`` for a command's output, made if missing; a ScenarioError (exit code 2, one line
+    naming ``option``) when it cannot be made or written in, so nothing is flown or computed first for
+    output that has nowhere to go."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ScenarioError(f"{option} {path}: is a file, expected a folder to write in")
+    _no_file_above(path, option)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".fwsim-write-check-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        raise ScenarioError(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+    return path
+
+
+def _no_file_above(path: Path, option: str) -> None:
+    """A ScenarioError when the nearest existing folder above ``path`` is a file (nothing can be made in it)."""
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ScenarioError(f"{option} {path}: {parent} is a file, not a folder")
+            return
+
+
+def writable_file(path: Path, option: str) -> Path:
+    """:func:`writable_dir` for an output file: its folder made, the file opened for appending (and removed
+    again if it was not there); an existing folder at ``path`` itself is refused."""
+    path = Path(path)
+    if path.is_dir():
+        raise ScenarioError(f"{option} {path}: is a folder, expected a file to write")
+    existed = path.exists()
+    _no_file_above(path, option)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        raise ScenarioError(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+    if not existed:
+        path.unlink()
+    return path
+
+
 def _print_table(title: str, rows: dict) -> None:
     table = Table(title=title)
     table.add_column("name")
@@ -84,6 +131,10 @@ def cmd_run(args) -> int:
             return 2
     scenario, text = load_scenario(args.scenario, parse_sets(args.set))
     log_path = Path(args.log) if args.log else default_log_path(scenario, Path(args.out))
+    if args.log:
+        writable_file(log_path, "--log")
+    else:
+        writable_dir(Path(args.out), "--out")
     if target is None:
         return _fly(args, scenario, text, log_path, None)
     try:  # spawn the viewer, check the one to connect to, or open the file
@@ -280,6 +331,7 @@ def cmd_plot(args) -> int:
     if log is None:
         return 2
     out = Path(args.out) if args.out else path.with_name(f"{path.stem}_plots")
+    writable_dir(out, "--out")
     try:
         res = plot_log(log, out, only=args.only.split(",") if args.only else None)
     except ValueError as exc:
@@ -313,6 +365,7 @@ def cmd_replay(args) -> int:
     if log is None:
         return 2
     rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
+    writable_file(rrd, "--rrd")
     from google.protobuf.message import DecodeError
     try:
         res = export_rrd(log, rrd, ReplayOptions(marker_scale=args.marker_scale))

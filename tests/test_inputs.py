@@ -161,3 +161,30 @@ def test_lz4_chunks_without_lz4_say_what_is_missing(tmp_path, monkeypatch):
     with pytest.raises(LogError, match="lz4-compressed, which needs the lz4 package"):
         read_log(path)
     assert main(["metrics", str(path)]) == 2
+
+
+def _output_cases(tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    a_folder = tmp_path / "a_folder"
+    a_folder.mkdir()
+    batch = tmp_path / "b.yaml"
+    batch.write_text(f"runs:\n  - scenario: {PAPER}\n    set: {{duration_s: 1}}\n")
+    return {
+        "run --log into a file": (["run", str(PAPER), "--log", str(a_file / "x.mcap")], "is a file, not a folder"),
+        "run --log a folder": (["run", str(PAPER), "--log", str(a_folder)], "is a folder"),
+        "run --out a file": (["run", str(PAPER), "--out", str(a_file)], "is a file, expected a folder"),
+        "batch --out a file": (["batch", str(batch), "--out", str(a_file)], "cannot write the batch's output"),
+    }
+
+
+@pytest.mark.parametrize("case", ["run --log into a file", "run --log a folder", "run --out a file",
+                                  "batch --out a file"])
+def test_output_that_cannot_be_written_is_refused_before_anything_flies(tmp_path, capsys, case):
+    argv, words = _output_cases(tmp_path)[case]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and err.count("\n") == 0 and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "a_folder", "b.yaml"]  # nothing written
+    assert not any((tmp_path / "a_folder").iterdir())
+

@@ -133,3 +133,14 @@ def test_the_ship_visibility_figure_states_the_runs_seen_share(mission_log, tmp_
     assert f"seen in {100 * m['target_visible_fraction_after_lock']:.1f} % of the frames" in title, title
     assert f"longest stretch unseen {m['target_hidden_longest_s_after_lock']:.1f} s" in title, title
     assert len(fig.axes) == 3  # the share seen; the angle below the wing plane and, twinned, the azimuth
+
+
+def test_an_output_folder_that_cannot_be_made_is_refused(mission_log, tmp_path, capsys):
+    from fwsim.cli import main
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    assert main(["plot", str(mission_log), "--out", str(a_file)]) == 2
+    assert capsys.readouterr().err.strip() == f"error: --out {a_file}: is a file, expected a folder to write in"
+    assert main(["plot", str(mission_log), "--out", str(a_file / "figs")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    assert a_file.read_text() == "x"

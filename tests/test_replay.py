@@ -95,3 +95,15 @@ def test_cli_replay(mission_log, tmp_path, capsys):
     assert code == 0, err
     assert out.strip() == str(rrd) and f"rerun {rrd}" in err
     assert "/world/uav" in entities(rrd)
+
+
+def test_an_rrd_path_that_cannot_be_written_is_refused(mission_log, tmp_path, capsys):
+    from fwsim.cli import main
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    assert main(["replay", str(mission_log), "--rrd", str(a_file / "x.rrd")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: --rrd {a_file / 'x.rrd'}: {a_file} is a file, not a folder"
+    assert main(["replay", str(mission_log), "--rrd", str(tmp_path)]) == 2
+    assert "is a folder, expected a file" in capsys.readouterr().err
+    assert a_file.read_text() == "x"
