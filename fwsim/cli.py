@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -80,6 +81,17 @@ def writable_dir(path: Path, option: str) -> Path:
     except OSError as exc:
         raise ScenarioError(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
     return path
+
+
+def _positive_number(text: str) -> float:
+    """An option's value that must be a finite number above zero (argparse reports the ValueError's text)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})")
+    return value
 
 
 def _no_file_above(path: Path, option: str) -> None:
@@ -449,7 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("replay", help="turn a log into a Rerun recording (.rrd)")
     rp.add_argument("log", help="MCAP log of a run")
     rp.add_argument("--rrd", help="output .rrd (default: the log's path with .rrd)")
-    rp.add_argument("--marker-scale", type=float, default=10.0,
+    rp.add_argument("--marker-scale", type=_positive_number, default=10.0,
                     help="draw the UAV this many times life size (default 10)")
     rp.set_defaults(func=cmd_replay)
     return p

@@ -317,6 +317,8 @@ def _clean(metrics: dict[str, Any], source: str) -> dict[str, Any]:
 def load_metrics(path: str | Path) -> MetricsSource:
     """Metrics (and, for a baseline, its tolerances) from a .mcap, .json or .yaml file."""
     path = Path(path)
+    if path.is_dir():
+        raise CompareError(f"{path}: is a folder, expected a .mcap log or a .json / .yaml metrics file")
     if not path.is_file():
         raise CompareError(f"{path}: no such file")
     suffix = path.suffix.lower()

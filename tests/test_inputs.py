@@ -188,3 +188,17 @@ def test_output_that_cannot_be_written_is_refused_before_anything_flies(tmp_path
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "a_folder", "b.yaml"]  # nothing written
     assert not any((tmp_path / "a_folder").iterdir())
 
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf", "abc"])
+def test_replay_marker_scale_must_be_a_number_above_zero(value, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["replay", str(tmp_path / "x.mcap"), f"--marker-scale={value}"])
+    assert exc.value.code == 2
+    assert f"--marker-scale: expected a number above zero (got '{value}')" in capsys.readouterr().err
+
+
+def test_compare_names_a_folder_given_for_a_file(tmp_path, capsys):
+    assert main(["compare", str(tmp_path), str(tmp_path / "x.mcap")]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: {tmp_path}: is a folder, expected a .mcap log or a "
+                                               ".json / .yaml metrics file")
