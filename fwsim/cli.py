@@ -65,7 +65,7 @@ def _flight_log(path: Path):
         return None
 
 
-def writable_dir(path: Path, option: str) -> Path:
+def _writable_dir(path: Path, option: str) -> Path:
     """The folder ``path`` for a command's output, made if missing; a ScenarioError (exit code 2, one line
     naming ``option``) when it cannot be made or written in, so nothing is flown or computed first for
     output that has nowhere to go."""
@@ -83,17 +83,6 @@ def writable_dir(path: Path, option: str) -> Path:
     return path
 
 
-def _positive_number(text: str) -> float:
-    """An option's value that must be a finite number above zero (argparse reports the ValueError's text)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})")
-    return value
-
-
 def _no_file_above(path: Path, option: str) -> None:
     """A ScenarioError when the nearest existing folder above ``path`` is a file (nothing can be made in it)."""
     for parent in path.parents:
@@ -103,8 +92,8 @@ def _no_file_above(path: Path, option: str) -> None:
             return
 
 
-def writable_file(path: Path, option: str) -> Path:
-    """:func:`writable_dir` for an output file: its folder made, the file opened for appending (and removed
+def _writable_file(path: Path, option: str) -> Path:
+    """:func:`_writable_dir` for an output file: its folder made, the file opened for appending (and removed
     again if it was not there); an existing folder at ``path`` itself is refused."""
     path = Path(path)
     if path.is_dir():
@@ -120,6 +109,18 @@ def writable_file(path: Path, option: str) -> Path:
     if not existed:
         path.unlink()
     return path
+
+
+def _positive_number(text: str) -> float:
+    """An option's value that must be a finite number above zero (argparse prints the ArgumentTypeError's text
+    in its one-line error, exit code 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"expected a number above zero (got {short(text, 40)!r})")
+    return value
 
 
 def _print_table(title: str, rows: dict) -> None:
@@ -144,9 +145,9 @@ def cmd_run(args) -> int:
     scenario, text = load_scenario(args.scenario, parse_sets(args.set))
     log_path = Path(args.log) if args.log else default_log_path(scenario, Path(args.out))
     if args.log:
-        writable_file(log_path, "--log")
+        _writable_file(log_path, "--log")
     else:
-        writable_dir(Path(args.out), "--out")
+        _writable_dir(Path(args.out), "--out")
     if target is None:
         return _fly(args, scenario, text, log_path, None)
     try:  # spawn the viewer, check the one to connect to, or open the file
@@ -343,7 +344,7 @@ def cmd_plot(args) -> int:
     if log is None:
         return 2
     out = Path(args.out) if args.out else path.with_name(f"{path.stem}_plots")
-    writable_dir(out, "--out")
+    _writable_dir(out, "--out")
     try:
         res = plot_log(log, out, only=args.only.split(",") if args.only else None)
     except ValueError as exc:
@@ -377,7 +378,7 @@ def cmd_replay(args) -> int:
     if log is None:
         return 2
     rrd = Path(args.rrd) if args.rrd else path.with_suffix(".rrd")
-    writable_file(rrd, "--rrd")
+    _writable_file(rrd, "--rrd")
     from google.protobuf.message import DecodeError
     try:
         res = export_rrd(log, rrd, ReplayOptions(marker_scale=args.marker_scale))
