@@ -48,7 +48,8 @@ def _log_exists(path: Path) -> bool:
     """True if the log file exists; otherwise says so on stderr."""
     if path.is_file():
         return True
-    console.print(f"[red]{path}: no such log file[/]")
+    console.print(f"[red]{path}: is a folder, expected an MCAP log[/]" if path.is_dir()
+                  else f"[red]{path}: no such log file[/]")
     return False
 
 

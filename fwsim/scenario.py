@@ -315,6 +315,8 @@ def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, A
 def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> tuple[Scenario, str]:
     """Read and validate a scenario file; returns the config and its text (for the log)."""
     path = Path(path)
+    if path.is_dir():
+        raise ScenarioError(f"{path}: is a folder, expected a scenario file (YAML)")
     if not path.is_file():
         raise ScenarioError(f"{path}: no such scenario file")
     text = read_text(path, "scenario file", ScenarioError)

@@ -202,3 +202,13 @@ def test_compare_names_a_folder_given_for_a_file(tmp_path, capsys):
     assert main(["compare", str(tmp_path), str(tmp_path / "x.mcap")]) == 2
     assert capsys.readouterr().err.strip() == (f"error: {tmp_path}: is a folder, expected a .mcap log or a "
                                                ".json / .yaml metrics file")
+
+
+def test_a_folder_given_for_a_scenario_or_a_log_is_named_as_one(tmp_path, capsys):
+    with pytest.raises(ScenarioError, match="is a folder, expected a scenario file"):
+        load_scenario(tmp_path)
+    assert main(["run", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {tmp_path}: is a folder, expected a scenario file (YAML)"
+    assert main(["metrics", str(tmp_path)]) == 2
+    out = capsys.readouterr()
+    assert "is a folder, expected an MCAP log" in out.out + out.err
