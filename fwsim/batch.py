@@ -294,6 +294,8 @@ def _entry_jobs(path: Path, i: int, entry: Any, logs: Path, batch_seed: int = 0)
         _generator(generator)
     else:
         scenario_file = str((path.parent / str(entry["scenario"])).resolve())
+        if Path(scenario_file).is_dir():
+            raise BatchSpecError(f"{where}.scenario: {scenario_file} is a folder, expected a scenario file (YAML)")
         if not Path(scenario_file).is_file():
             raise BatchSpecError(f"{where}.scenario: no such scenario file {scenario_file}")
     fixed = entry.get("set") or {}

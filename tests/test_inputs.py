@@ -212,3 +212,12 @@ def test_a_folder_given_for_a_scenario_or_a_log_is_named_as_one(tmp_path, capsys
     assert main(["metrics", str(tmp_path)]) == 2
     out = capsys.readouterr()
     assert "is a folder, expected an MCAP log" in out.out + out.err
+
+
+def test_a_batch_entry_naming_a_folder_for_its_scenario_says_so(tmp_path, capsys):
+    (tmp_path / "d").mkdir()
+    spec = tmp_path / "b.yaml"
+    spec.write_text("runs:\n  - scenario: d\n")
+    assert main(["batch", str(spec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: ") and "is a folder, expected a scenario file" in err and "runs.0" in err
