@@ -278,3 +278,46 @@ def test_the_envelope_verdict_by_folder(tmp_path, capsys):
     assert lines == [[f"| {tmp_path / 'held'}", "4"], [f"| {tmp_path / 'full'}", str(len(rows))]]
     assert _envelope_tool().main([str(tmp_path / "full"), str(tmp_path)]) == 2  # not a batch's output folder
     assert capsys.readouterr().err.strip() == f"error: {tmp_path}: no summary.json (the output folder of `fwsim batch`)"
+
+
+def test_the_envelope_paired_comparison_by_hand(tmp_path, capsys):
+    """--paired: two folders of the same draws, matched by scenario and seed. The second's r0 misses by 5 m
+    (within 3 m / 3 deg lost, worse by over 1 m), its r3 by 1.5 m (within gained, better), its r1 by 1.4 m
+    instead of 1 m (neither); r5 flew in the first only; the changed estimator is named."""
+    tool = _envelope_tool()
+    first = [dict(r, scenario="e", seed=i) for i, r in enumerate(_rows())]
+    second = [dict(r, **{"set.controllers.estimator": "ct_ukf"}) for r in first[:5]]
+    second[0]["miss_distance_m"] = 5.0
+    second[3]["miss_distance_m"] = 1.5
+    second[1]["miss_distance_m"] = 1.4
+    second[2]["ukf_pos_err_max_after_convergence_m"] = math.nan  # never converged: the estimate bar not met
+    second[2]["ukf_pos_rmse_m"] = 6.0
+    p = tool.paired(first, second)
+    assert len(p["pairs"]) == 5 and p["unmatched"] == (1, 0)
+    within_bar = [name for name, _ in tool.BARS].index("within 3 m / 3 deg")
+    assert [ra["id"] for ra, _ in p["lost"][within_bar]] == ["r0"]
+    assert [ra["id"] for ra, _ in p["gained"][within_bar]] == ["r3"]
+    assert [ra["id"] for ra, _ in p["worse"]] == ["r0"] and [ra["id"] for ra, _ in p["better"]] == ["r3"]
+    assert [ra["id"] for ra, _ in p["lost"][3]] == [] and [ra["id"] for ra, _ in p["gained"][3]] == []  # r2: 9 m
+    assert p["differ"] == {"set.controllers.estimator": (None, "ct_ukf")}
+    assert tool.run_bars(first[4]) == (False, False, False, None)  # no hit, no estimate: not counted
+    assert tool.run_bars(first[5])[2] is None  # a failed run has no view share
+    # the command line: two folders written as fwsim batch writes them
+    for name, rows in (("a", first), ("b", second)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "summary.json").write_text(json.dumps({"rows": rows}))
+    assert tool.main([str(tmp_path / "a"), str(tmp_path / "b"), "--paired"]) == 1  # bars not met
+    out = capsys.readouterr().out
+    assert "5 runs of the same scenario and seed in both (1 of the first and 0 of the second" in out
+    assert "better by over 1 m in 1 runs, worse by over 1 m in 1, within 1 m of each other in 3" in out
+    row = [x for x in out.splitlines() if x.startswith("| r0 |")]
+    assert len(row) == 1 and "| 0.50 | 5.00 | ++++ | +-++ |" in row[0], out
+    # one folder, or two without a common draw: a one-line error, exit code 2
+    assert tool.main([str(tmp_path / "a"), "--paired"]) == 2
+    other = [dict(r, seed=100 + i) for i, r in enumerate(first)]
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "summary.json").write_text(json.dumps({"rows": other}))
+    capsys.readouterr()
+    assert tool.main([str(tmp_path / "a"), str(tmp_path / "c"), "--paired"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --paired: no run of") and err.count("\n") == 1

@@ -8,6 +8,7 @@
     python tools/envelope.py runs/envelope runs/no_wind --by folder  # one row per folder: what wind costs
     python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
     python tools/envelope.py runs/envelope --why-estimate   # and each run failing the estimate bar: why
+    python tools/envelope.py runs/envelope runs/envelope_ct_ukf --paired   # and run by run: what moved
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock (seen:
@@ -26,6 +27,11 @@ end, and the largest error from the dive's start: what the bar would have counte
 5 m there) or went over 8 m after converging (how long after, in the loiter or the dive, the std then, and
 for how long), with a tally: an excursion within 5 s of convergence came as the std crossed 5 m, the error
 then near twice it or more.
+
+``--paired`` (two folders of the same draws: the same spec and ``--seed``, another estimator, a ``--set`` or
+``--hold``, or the code before and after a change) adds the comparison run by run: for each bar the runs that
+met it in one folder only, how many miss distances went down or up by over 1 m, and a row for each run that
+moved (its miss distance and its four bars in each). Runs are matched by their scenario and seed.
 
 ``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
 angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
@@ -61,6 +67,8 @@ ESTIMATE_BAR_M = 8.0  # the estimate bar: the horizontal error after convergence
 #: --why-estimate's tally: an excursion over the bar this soon after convergence (s) came as the std crossed
 #: the threshold (the error then near twice the std or more), not later in a converged filter
 NEAR_CONVERGENCE_S = 5.0
+#: --paired: a run's miss distance changed by more than this (m) counts as better or worse
+PAIR_MARGIN_M = 1.0
 
 BARS = (("hits", 1.0), ("within 3 m / 3 deg", 0.95), ("seen >= 99 % (in view, not behind the airframe)", 0.95),
         ("estimate <= 8 m", 0.90))
@@ -274,6 +282,122 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
     return table, dict(tally)
 
 
+def run_bars(row: dict) -> tuple[bool | None, ...]:
+    """One run against each of :data:`BARS` (None: the bar does not count it, as fwsim report's statistics
+    do not: a failed run has no view share; a run without an estimate is not in the estimate bar's count)."""
+    def finite(key: str) -> float | None:
+        v = row.get(key)
+        return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else None
+    seen = finite("target_visible_fraction_after_lock")
+    est = finite("ukf_pos_err_max_after_convergence_m")
+    estimated = est is not None or finite("ukf_pos_rmse_m") is not None
+    return (row.get("hit") == 1.0, within(row, 3.0, 3.0), None if seen is None else seen >= 0.99,
+            None if not estimated else est is not None and est <= ESTIMATE_BAR_M)
+
+
+def _pair_key(rows: list[dict]) -> dict[tuple, dict]:
+    """Each row by (scenario, seed, its place among the rows of that scenario and seed): the same draw of
+    the same spec in two folders (``fwsim batch`` names a draw by its scenario and seed; its id's hash also
+    takes in the overrides, which --set and the estimator change)."""
+    seen: dict[tuple, int] = defaultdict(int)
+    out = {}
+    for r in rows:
+        k = (str(r.get("scenario", "")), r.get("seed"))
+        out[k + (seen[k],)] = r
+        seen[k] += 1
+    return out
+
+
+def paired(rows_a: list[dict], rows_b: list[dict], margin_m: float = PAIR_MARGIN_M) -> dict:
+    """Two batches of the same draws, run by run (``--paired``): ``pairs`` (a, b) matched by
+    :func:`_pair_key`; ``unmatched`` (runs of A without a counterpart in B, and of B in A); per bar of
+    :data:`BARS` the runs that met it in A and not in B (``lost``) and the other way (``gained``); the runs
+    whose miss distance went down (``better``) or up (``worse``) by more than ``margin_m`` (a run without a
+    miss distance on one side counts as worse or better when the other has one), and the rest (``same``);
+    ``differ``: the dispersed or --set columns (``set.*``) whose values differ in some pair, with an example
+    (what was changed between the two, when the draws are the same)."""
+    a, b = _pair_key(rows_a), _pair_key(rows_b)
+    pairs = [(a[k], b[k]) for k in a if k in b]
+    out = {"pairs": pairs, "unmatched": (sum(k not in b for k in a), sum(k not in a for k in b)),
+           "lost": [[] for _ in BARS], "gained": [[] for _ in BARS], "better": [], "worse": [], "same": [],
+           "differ": {}}
+    for ra, rb in pairs:
+        for i, (x, y) in enumerate(zip(run_bars(ra), run_bars(rb))):
+            if x and y is False:
+                out["lost"][i].append((ra, rb))
+            elif x is False and y:
+                out["gained"][i].append((ra, rb))
+        ma, mb = (r.get("miss_distance_m") for r in (ra, rb))
+        ma = float(ma) if isinstance(ma, (int, float)) and math.isfinite(ma) else math.nan
+        mb = float(mb) if isinstance(mb, (int, float)) and math.isfinite(mb) else math.nan
+        if math.isnan(ma) and math.isnan(mb) or abs(mb - ma) <= margin_m:
+            out["same"].append((ra, rb))
+        else:
+            worse = math.isnan(mb) or (math.isfinite(ma) and mb > ma)
+            out["worse" if worse else "better"].append((ra, rb))
+        for col in sorted(set(ra) | set(rb)):
+            if col.startswith("set.") and col not in out["differ"] and ra.get(col) != rb.get(col):
+                out["differ"][col] = (ra.get(col), rb.get(col))
+    return out
+
+
+def _miss_cell(r: dict) -> str:
+    m = r.get("miss_distance_m")
+    return f"{m:.2f}" if isinstance(m, (int, float)) and math.isfinite(m) else "-"
+
+
+def _bars_cell(r: dict) -> str:
+    """A run's bars as four marks, in BARS' order: + met, - not, . not counted."""
+    return "".join("." if x is None else "+" if x else "-" for x in run_bars(r))
+
+
+def print_paired(dir_a: Path, rows_a: list[dict], dir_b: Path, rows_b: list[dict]) -> bool:
+    """--paired's report; False when no run of one folder has a counterpart in the other."""
+    p = paired(rows_a, rows_b)
+    if not p["pairs"]:
+        return False
+    n = len(p["pairs"])
+    print(f"\nRun by run, {dir_a} -> {dir_b}: {n} runs of the same scenario and seed in both"
+          + (f" ({p['unmatched'][0]} of the first and {p['unmatched'][1]} of the second without a counterpart)"
+             if any(p["unmatched"]) else "") + "\n")
+    if p["differ"]:
+        print("The set. columns that differ (one pair's values): "
+              + "; ".join(f"{k}: {_label(x)} -> {_label(y)}" for k, (x, y) in p["differ"].items()) + "\n")
+    print("| bar | met in the first | met in the second | lost (met in the first only) | "
+          "gained (met in the second only) |")
+    print("|---|---|---|---|---|")
+    for i, (name, _) in enumerate(BARS):
+        met = [sum(1 for pair in p["pairs"] if run_bars(pair[j])[i]) for j in (0, 1)]
+        lost, gained = (", ".join(str(ra.get("id", "?")) for ra, _ in p[k][i]) for k in ("lost", "gained"))
+        print(f"| {name} | {met[0]} | {met[1]} | {len(p['lost'][i])}{': ' + lost if lost else ''} | "
+              f"{len(p['gained'][i])}{': ' + gained if gained else ''} |")
+    print(f"\nMiss distance: better by over {PAIR_MARGIN_M:g} m in {len(p['better'])} runs, worse by over "
+          f"{PAIR_MARGIN_M:g} m in {len(p['worse'])}, within {PAIR_MARGIN_M:g} m of each other in "
+          f"{len(p['same'])}.\n")
+    changed = p["better"] + p["worse"] + [pair for i in range(len(BARS)) for pair in p["lost"][i] + p["gained"][i]]
+    if changed:
+        print("| run (the first's id) | miss, m, first | miss, m, second | bars, first | bars, second | ship | "
+              "motion | speed, m/s |")
+        print("|---|---|---|---|---|---|---|---|")
+        done = set()
+
+        def change(pair) -> float:
+            ma, mb = (r.get("miss_distance_m") for r in pair)
+            ok = all(isinstance(m, (int, float)) and math.isfinite(m) for m in (ma, mb))
+            return float(mb) - float(ma) if ok else (math.inf if isinstance(ma, (int, float)) else -math.inf)
+        for ra, rb in sorted(changed, key=change):
+            if id(ra) in done:
+                continue
+            done.add(id(ra))
+            speed = ra.get("set.target.speed_m_s")
+            print(f"| {ra.get('id', '?')} | {_miss_cell(ra)} | {_miss_cell(rb)} | {_bars_cell(ra)} | "
+                  f"{_bars_cell(rb)} | {ra.get('set.target.type', '-')} | "
+                  f"{_label(ra.get('set.target.motion')) if ra.get('set.target.motion') is not None else '-'} | "
+                  + (f"{speed:.1f}" if isinstance(speed, (int, float)) else "-") + " |")
+        print("\n(bars: hits, within 3 m / 3 deg, seen >= 99 %, estimate <= 8 m; + met, - not, . not counted)")
+    return True
+
+
 def _failed_bar(row: dict) -> str:
     """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
     if row.get("hit") != 1.0:
@@ -352,7 +476,14 @@ def main(argv=None) -> int:
                     help="also list each run failing the estimate bar: never converged (the std at the end, "
                          "the largest error from the dive's start) or over 8 m after convergence (when, in "
                          "which phase, the std then, for how long) (reads the logs)")
+    ap.add_argument("--paired", action="store_true",
+                    help="two folders of the same draws (the same spec and --seed; another estimator, a --set "
+                         "or --hold, or the code before and after a change): also compare them run by run, "
+                         "each bar's runs lost and gained and the miss distances that moved")
     args = ap.parse_args(argv)
+    if args.paired and len(args.out_dirs) != 2:
+        print(f"error: --paired compares two folders, got {len(args.out_dirs)}", file=sys.stderr)
+        return 2
     from fwsim.report import ReportError, load_summary
     rows, per_dir = [], []
     for out_dir in args.out_dirs:
@@ -386,6 +517,10 @@ def main(argv=None) -> int:
         print("\nnote: a bar is not scored: its rows predate the metric it needs (the ship seen: "
               "target_visible_fraction_after_lock); `fwsim batch SPEC --out DIR --resume` scores the logs again "
               "without flying them", file=sys.stderr)
+    if args.paired and not print_paired(per_dir[0][0], per_dir[0][1], per_dir[1][0], per_dir[1][1]):
+        print(f"error: --paired: no run of {per_dir[0][0]} has the scenario and seed of one of {per_dir[1][0]} "
+              "(not the same spec and --seed?)", file=sys.stderr)
+        return 2
     if args.why:
         head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s",
                 "longest hidden after lock, s"] + [
