@@ -4,7 +4,7 @@ Four parts of the flight software are chosen in the scenario's ``controllers``
 section, each by a built-in name or by the import path of a user's class::
 
     controllers:
-      estimator: ukf                    # the target estimator: ukf | ct_ukf (Protocol TargetEstimator)
+      estimator: ukf                    # the target estimator: ukf | ct_ukf | imm (Protocol TargetEstimator)
       after_lock: nmpc                  # Phase 2 guidance: path | orbit | nmpc (Protocol LoiterGuidance)
       terminal: bpng                    # Phase 3 guidance (Protocol TerminalGuidance)
       pointing: ibvs                    # the gimbal's tracking law (Protocol PointingLaw)
@@ -31,7 +31,7 @@ its own log topics and events. A user estimator can wrap the built-in one::
 
 docs/BLOCKS.md shows a whole one. What a block returns is typed
 (``controllers.messages``). Built-in classes live beside their algorithms:
-``controllers.ukf``, ``controllers.ct_ukf``, ``controllers.guidance``, ``controllers.pointing``.
+``controllers.ukf``, ``controllers.ct_ukf``, ``controllers.imm``, ``controllers.guidance``, ``controllers.pointing``.
 
 This module imports nothing heavy (no solver, filter or OpenCV): the scenario
 validation uses it.
@@ -199,6 +199,11 @@ def _ct_ukf(ctx: BlockContext):
     return CtUkfTargetEstimator(ctx.camera, ctx.config.ukf, ctx.config.ct_ukf)
 
 
+def _imm(ctx: BlockContext):
+    from controllers.imm import ImmTargetEstimator
+    return ImmTargetEstimator(ctx.camera, ctx.config.ukf, ctx.config.ct_ukf, ctx.config.imm)
+
+
 def _orbit(ctx: BlockContext):
     from controllers.guidance import OrbitLoiter
     return OrbitLoiter(ctx.config.orbit, ctx.config.initial_path.max_bank_deg)
@@ -222,7 +227,7 @@ def _ibvs(ctx: BlockContext):
 SLOTS: dict[str, Slot] = {
     "estimator": Slot("estimator", TargetEstimator,
                       ("initialised", "tracked_height_m", "initialise", "predict", "update", "estimate", "status"),
-                      {"ukf": _ukf, "ct_ukf": _ct_ukf}),
+                      {"ukf": _ukf, "ct_ukf": _ct_ukf, "imm": _imm}),
     "after_lock": Slot("after_lock", LoiterGuidance, ("radius_m", "altitude_m", "step"),
                        {"orbit": _orbit, "nmpc": _nmpc}),
     "terminal": Slot("terminal", TerminalGuidance, ("step",), {"bpng": _bpng}),

@@ -564,6 +564,25 @@ class CtUkfConfig(StrictModel):
                           "3.42 m; speed steps alike")
 
 
+class ImmConfig(StrictModel):
+    """The interacting multiple model estimator (``controllers.estimator: imm``, ``controllers.imm``): the
+    paper's UKF (constant velocity) and the manoeuvring-ship UKF (``ct_ukf``: turn rate and along-track
+    acceleration) run side by side on the same detections, mixed each step by the probability that the ship
+    is manoeuvring (Bar-Shalom's IMM). Each model keeps its own settings (``ukf``, ``ct_ukf``)."""
+
+    switch_time_s: float = Field(
+        60.0, gt=0, le=3600,
+        description="mean time the ship keeps to one mode, steady or manoeuvring, s: the Markov chain's switching "
+                    "rate (the chance of a switch over dt is 1 - exp(-dt / this)); the same order as "
+                    "ct_ukf.turn_rate_time_s, how long a turn lasts")
+    prior_manoeuvring: float = Field(
+        0.5, gt=0, lt=1, description="probability of the manoeuvring model at the start")
+    min_probability: float = Field(
+        1e-3, gt=0, lt=0.5,
+        description="each model's probability is kept at least this: a model that has lost for minutes still "
+                    "comes back within seconds when the ship starts (or stops) turning")
+
+
 # --------------------------------------------------------------------------- guidance and pointing
 
 
@@ -930,7 +949,7 @@ def _checked(slot: str, section: str):
     return AfterValidator(check)
 
 
-EstimatorChoice = Annotated[BlockChoice, _checked("estimator", "ukf (and ct_ukf)")]
+EstimatorChoice = Annotated[BlockChoice, _checked("estimator", "ukf (and ct_ukf, imm)")]
 LoiterChoice = Annotated[BlockChoice, _checked("after_lock", "nmpc or controllers.orbit")]
 TerminalChoice = Annotated[BlockChoice, _checked("terminal", "bpng")]
 PointingChoice = Annotated[BlockChoice, _checked("pointing", "ibvs")]
@@ -1020,7 +1039,8 @@ class Controllers(StrictModel):
         default_factory=lambda: BlockChoice(use="ukf"),
         description="the target estimator: ukf (the paper's, settings in ukf), ct_ukf (the UKF with the ship's "
                     "turn rate and along-track acceleration, for manoeuvring ships: settings in ct_ukf and ukf), "
-                    "or a user's class")
+                    "imm (the two mixed by the probability that the ship manoeuvres: settings in imm, ct_ukf "
+                    "and ukf), or a user's class")
     after_lock: LoiterChoice = Field(
         default_factory=lambda: BlockChoice(use="path"),
         description="after the lock: keep the initial path (path), or loiter (Phase 2) with a circle follower "
@@ -1038,6 +1058,7 @@ class Controllers(StrictModel):
     bpng: BpngConfig = Field(default_factory=BpngConfig)
     ukf: UkfConfig = Field(default_factory=UkfConfig)
     ct_ukf: CtUkfConfig = Field(default_factory=CtUkfConfig)
+    imm: ImmConfig = Field(default_factory=ImmConfig)
     target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
     detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)

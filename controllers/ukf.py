@@ -87,6 +87,7 @@ _INIT_VERTICAL_POS_STD_M = 1.0
 _INIT_VERTICAL_VEL_STD_M_S = 0.5
 _NAN2 = np.full(2, np.nan)  # (copied: an estimate's innovation without an update at its time)
 _NAN2.setflags(write=False)
+_LOG_2PI = math.log(2.0 * math.pi)  # a 2-D Gaussian density's constant
 
 
 def _exp_so3(w: np.ndarray, t: float) -> np.ndarray:
@@ -449,11 +450,13 @@ class _CompiledUpdate:
         nis = (dd * y[0] * y[0] - (b + c) * y[0] * y[1] + a * y[1] * y[1]) / (a * dd - b * c)
         K = ca.solve(S.T, Pxz.T).T  # P_xz S^-1 (S symmetric)
         self._fun = Buffered(ca.Function("ukf_update", [X, x, P, z, r, k, R, hc],
-                                         [y, nis, x + ca.mtimes(K, y), P - ca.mtimes(ca.mtimes(K, S), K.T)]))
+                                         [y, nis, x + ca.mtimes(K, y), P - ca.mtimes(ca.mtimes(K, S), K.T),
+                                          a * dd - b * c]))
         self._n = n
 
     def __call__(self, sigmas, x, P, z, r, f_u, f_v, c_u, c_v, R_ec, cam_h, plane_z):
-        """(innovation (5,), chi-square over the pixel rows, updated x, updated P)."""
+        """(innovation (5,), chi-square over the pixel rows, updated x, updated P, the determinant of the
+        pixel rows' innovation covariance (px^4: with the chi-square, the detection's likelihood))."""
         # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
         fun, n = self._fun, self._n
         X_in, x_in, P_in, z_in, r_in, k, R, hc = fun.inputs
@@ -465,8 +468,8 @@ class _CompiledUpdate:
         k[0], k[1], k[2], k[3] = f_u, f_v, c_u, c_v
         R.reshape(3, 3)[:] = np.asarray(R_ec, dtype=float).T
         hc[0], hc[1] = cam_h, plane_z
-        y, nis, x_new, P_new = fun()  # (on the inputs written above)
-        return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy()
+        y, nis, x_new, P_new, det = fun()  # (on the inputs written above)
+        return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy(), float(det[0])
 
 
 def _fx_compiled(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
@@ -586,6 +589,10 @@ class UkfTargetEstimator:
         self._rejects_in_a_row = 0
         self.updates = 0
         self.initialisations = 0
+        #: the last detection's log-likelihood under the filter's prediction (its pixel rows: the Gaussian
+        #: density of the innovation, used or gated; NaN when the last update computed none). A multiple-model
+        #: filter (controllers.imm) weighs its models by it
+        self.last_log_likelihood = math.nan
 
     # ------------------------------------------------------------ properties
     @property
@@ -716,6 +723,7 @@ class UkfTargetEstimator:
 
     def update(self, fix: DetectionFix, motion: CameraMotion) -> FusionResult:
         """Fuse the detection's (corrected) box centre ``u_px, v_px`` (predicts to fix.t_s first)."""
+        self.last_log_likelihood = math.nan
         if not (self._initialised and fix.new):
             return FusionResult(False, FusionReason.NOT_INITIALISED if fix.new else FusionReason.REJECTED)
         if float(fix.t_s) > self._t:
@@ -746,10 +754,12 @@ class UkfTargetEstimator:
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
         core = self._core
         try:
-            y, nis, x_new, P_new = self._update(core.current_sigma_points(), core._x, core._P, z, r, cam.fx, cam.fy,
-                                                cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
-                                                c.target_plane_height_m)
+            y, nis, x_new, P_new, det = self._update(core.current_sigma_points(), core._x, core._P, z, r, cam.fx,
+                                                     cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
+                                                     c.target_plane_height_m)
             core.last_nis = nis
+            if det > 0.0 and math.isfinite(nis):  # the detection's pixels under the prediction (gated or not)
+                self.last_log_likelihood = -0.5 * nis - 0.5 * math.log(det) - _LOG_2PI
             rejected = gating and nis > c.innovation_gate
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
@@ -783,7 +793,7 @@ class UkfTargetEstimator:
         rg[0] += (k * float(b[2] - b[0])) ** 2
         rg[1] += (k * float(b[3] - b[1])) ** 2
         cam = self.camera
-        _, nis, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy, cam.cx,
+        _, nis, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy, cam.cx,
                                     cam.cy, motion.R_enu_from_cam, motion.height_m, self.cfg.target_plane_height_m)
         return float(nis)
 

@@ -357,7 +357,7 @@ def test_the_compiled_process_model_equals_the_numpy_one(dt, omega):
 def test_the_compiled_update_equals_the_numpy_one():
     """The UKF's measurement update is one CasADi function: the same innovation, chi-square statistic, state and
     covariance as UnscentedCore.update with the batched pinhole + flat-sea measurement model in numpy, to
-    rounding."""
+    rounding, and the determinant of the pixel rows' innovation covariance."""
     from controllers.ukf import _CompiledUpdate, _hx_batch
     x = np.array([0.05, -0.02, 100.0, 40.0, 3.75, 2.0, 1.0, 0.0])
     # a covariance as the filter has them (the pixel and r_c rows of S are nearly dependent: S's condition
@@ -373,7 +373,10 @@ def test_the_compiled_update_equals_the_numpy_one():
     y_ref = ref.update(z, _hx_batch, np.diag(r), gate=(math.inf, [0, 1]), **args)
     core = UnscentedCore(8, 5, 1.0, 2.0, 0.0)
     core.set_state(x, P)
-    y, nis, x_new, P_new = _CompiledUpdate.for_core(core)(core.current_sigma_points(), x, core.P, z, r, **args)
+    sigmas = core.current_sigma_points()
+    y, nis, x_new, P_new, det = _CompiledUpdate.for_core(core)(sigmas, x, core.P, z, r, **args)
+    S = core.moments(sigmas, x, _hx_batch(sigmas, **args))[1] + np.diag(r)  # the innovation covariance
+    assert det == pytest.approx(np.linalg.det(S[:2, :2]), rel=1e-10)  # its pixel rows' (the likelihood's)
     np.testing.assert_allclose(y, y_ref, rtol=1e-10, atol=1e-9)
     assert nis == pytest.approx(ref.last_nis, rel=1e-10)
     np.testing.assert_allclose(x_new, ref.x, rtol=1e-10, atol=1e-9)
