@@ -144,7 +144,7 @@ def test_user_guidance_and_pointing_classes_are_accepted():
     ("test_blocks:CALLS", "controllers.estimator: 'test_blocks:CALLS' is not a class"),
     ("test_blocks:NoPredict", "controllers.estimator: test_blocks:NoPredict does not implement TargetEstimator: "
                               "no predict"),
-    ("ukff", "controllers.estimator: expected a built-in name (ukf, ct_ukf) or an import path"),
+    ("ukff", "controllers.estimator: expected a built-in name (ukf, ct_ukf, imm) or an import path"),
     ({"use": "ukf", "options": {"a": 1}}, "controllers.estimator: options are for a user's class"),
     ({"use": "test_blocks:CountingUkf", "options": {"nope": 1}},
      "controllers.estimator: options.nope: Extra inputs are not permitted"),
