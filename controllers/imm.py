@@ -197,9 +197,10 @@ class ImmTargetEstimator:
         var = P.diagonal().copy()
         var[2:4] += mu[0] * self.cv._consider.diagonal() + mu[1] * self.ct._consider.diagonal()
         sd = np.sqrt(np.maximum(var, 0.0))
-        best = self.models[int(np.argmax(mu))].estimate()
+        best = self.models[int(np.argmax(mu))]  # its innovation, when it updated at this time
+        innov = best._innov.copy() if best._innov_t == best.t_s else np.full(2, np.nan)
         return ImmEstimate(self.t_s, x[2:5].copy(), x[5:8].copy(), sd[2:5].copy(), sd[5:8].copy(), float(x[0]),
-                           float(x[1]), np.array(best.innovation_px, dtype=float),
+                           float(x[1]), innov,
                            float(x[I_TURN]), float(sd[I_TURN]), float(x[I_ACCEL]), float(sd[I_ACCEL]),
                            bool(self.ct.held), float(mu[1]))
 
