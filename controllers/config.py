@@ -577,6 +577,13 @@ class ImmConfig(StrictModel):
                     "ct_ukf.turn_rate_time_s, how long a turn lasts")
     prior_manoeuvring: float = Field(
         0.5, gt=0, lt=1, description="probability of the manoeuvring model at the start")
+    hold_with_manoeuvre: bool = Field(
+        True,
+        description="while the CT-UKF holds its manoeuvre (ct_ukf.hold_tgo_s: the dive), hold the models' "
+                    "probabilities as the loiter left them: the dive's box-centre errors, which the hold keeps out "
+                    "of the turn rate, would otherwise reweigh the models (envelope, tuning seed 1642: on ships "
+                    "turning steadily the steady model's probability rose from 0.2-0.4 to 0.6-1 in the last "
+                    "80-150 m, and the estimate, now the UKF's trailing one, went 1 m -> 4 m off)")
     min_probability: float = Field(
         1e-3, gt=0, lt=0.5,
         description="each model's probability is kept at least this: a model that has lost for minutes still "

@@ -21,7 +21,12 @@ detections and weighs them by how well each predicted them (Bar-Shalom's IMM,
   CT model's own (so that mixing does not shrink the CT model's uncertainty
   of a manoeuvre it has not seen). While the CT model holds its manoeuvre
   (``ct_ukf.hold_tgo_s``, the dive) the models do not interact: the hold keeps
-  what the loiter learnt, and mixing would pull it toward the CV model's zero.
+  what the loiter learnt, and mixing would pull it toward the CV model's zero;
+  with ``hold_with_manoeuvre`` (the default) their probabilities are held too,
+  as the loiter left them (the dive's box-centre errors, which the hold keeps
+  out of the turn rate, would otherwise reweigh the models: on the envelope's
+  steadily turning ships the steady model took over in the last 80-150 m, and
+  the estimate went with its trailing one).
 * **Model probabilities** (each detection). ``mu_j ~ c_j L_j``, ``L_j`` the
   detection's likelihood under model j's prediction (the Gaussian density of
   its pixel innovation, whether its gate took the detection or not:
@@ -151,7 +156,7 @@ class ImmTargetEstimator:
             self._check_resets()
             return
         dt = float(t_s) - self.cv.t_s
-        if dt > 0.0:
+        if dt > 0.0 and not self._mode_held():
             T = transition(dt, self.cfg.switch_time_s)
             if self.ct.held:
                 self.mu = T.T @ self.mu
@@ -172,8 +177,9 @@ class ImmTargetEstimator:
         results = [m.update(fix, motion) for m in self.models]
         if self._check_resets():
             return FusionResult(False, FusionReason.ESTIMATOR_RESET)
-        self.mu = update_probabilities(self.mu, [m.last_log_likelihood for m in self.models],
-                                       self.cfg.min_probability)
+        if not self._mode_held():
+            self.mu = update_probabilities(self.mu, [m.last_log_likelihood for m in self.models],
+                                           self.cfg.min_probability)
         best = results[int(np.argmax(self.mu))]
         used = [r for r in results if r.used]
         if used:
@@ -228,6 +234,10 @@ class ImmTargetEstimator:
         return self.estimate() if self.initialised else None
 
     # ------------------------------------------------------------ internals
+    def _mode_held(self) -> bool:
+        """The models' probabilities are held: the CT model holds its manoeuvre and ``hold_with_manoeuvre``."""
+        return self.cfg.hold_with_manoeuvre and self.ct.held
+
     def _common(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Both models' states and covariances in the CT model's dimension: the CV model's with zero turn rate
         and acceleration, uncorrelated, their variances the CT model's."""

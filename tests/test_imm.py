@@ -15,7 +15,7 @@ import pytest
 from test_manoeuvre_estimator import CAM, MOUNT, TurningShip, ct_ukf, fly, rms
 
 from controllers.blocks import TargetEstimator, builtin_names
-from controllers.config import ImmConfig
+from controllers.config import CtUkfConfig, ImmConfig
 from controllers.imm import ImmEstimate, ImmTargetEstimator, mix, transition, update_probabilities
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
 from fwsim import SCENARIO_DIR
@@ -135,3 +135,24 @@ def test_the_scenario_selects_it_and_its_settings():
         assert "\n" not in str(exc.value) and str(exc.value).startswith("x.yaml: " + message), str(exc.value)
     for name, field in ImmConfig.model_fields.items():
         assert field.description, name
+
+
+def test_the_models_probabilities_are_held_with_the_manoeuvre():
+    """While the CT-UKF holds its manoeuvre (the dive), the models neither mix nor reweigh
+    (hold_with_manoeuvre, the default): the probabilities stay as they were over 3 s of detections; with the
+    option off the detections reweigh them."""
+    ship = TurningShip()
+    for hold in (True, False):
+        # (hold_tgo_s 0: the CT-UKF neither holds nor releases by itself; the test holds it)
+        f = ImmTargetEstimator(CAM, UkfConfig(), CtUkfConfig(hold_tgo_s=0.0), ImmConfig(hold_with_manoeuvre=hold))
+        rng = np.random.default_rng(3)
+        for k in range(20 * 30):  # 20 s: the models weighed
+            meas = ship.sample(k / 30.0, rng)
+            f.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+        f.ct._hold()  # as its predict does when the camera closes in
+        mu0 = f.mu.copy()
+        for k in range(20 * 30, 23 * 30):
+            meas = ship.sample(k / 30.0, rng)
+            f.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+            assert f.ct.held
+        assert np.array_equal(f.mu, mu0) == hold, (hold, mu0, f.mu)
