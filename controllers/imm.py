@@ -55,7 +55,7 @@ from controllers.camera_model import CameraMotion, PinholeCamera
 from controllers.config import CtUkfConfig, ImmConfig, UkfConfig
 from controllers.ct_ukf import I_ACCEL, I_TURN, CtUkfTargetEstimator, ManoeuvreEstimate
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult
-from controllers.ukf import UkfTargetEstimator, fix_from_measurements
+from controllers.ukf import UkfTargetEstimator, step_on_measurements
 
 __all__ = ["ImmEstimate", "ImmTargetEstimator", "mix", "transition", "update_probabilities"]
 
@@ -213,25 +213,22 @@ class ImmTargetEstimator:
     def status(self, t_s: float) -> EstimatorStatus:
         """The counters since the start: detections used by either model, gated by both; the models' own
         rejections (the CV model's: both check a detection alike), resets and covariance repairs."""
-        return EstimatorStatus(t_s, self.updates, self.gated_updates, self.cv.rejected_updates,
+        return EstimatorStatus(t_s, self.updates, self.gated_updates, self.rejected_updates,
                                self.cv.divergence_resets + self.ct.divergence_resets,
                                self.cv.numerical_resets + self.ct.numerical_resets, self.initialisations)
 
     def step(self, meas, motion: CameraMotion) -> ImmEstimate | None:
         """One tick on raw measurements, as :meth:`controllers.ukf.UkfTargetEstimator.step`."""
-        fix = fix_from_measurements(meas)
-        if not self.initialised:
-            if not fix.new:
-                return None
-            try:
-                self.initialise(fix, motion)
-            except ValueError:
-                return None
-            return self.estimate()
-        self.predict(meas.t_s, motion)
-        if fix.new:
-            self.update(fix, motion)
-        return self.estimate() if self.initialised else None
+        return step_on_measurements(self, meas, motion)
+
+    @property
+    def rejected_updates(self) -> int:
+        """Detections not used (the models check a detection alike: the CV model's count)."""
+        return self.cv.rejected_updates
+
+    @rejected_updates.setter
+    def rejected_updates(self, n: int) -> None:
+        self.cv.rejected_updates = n
 
     # ------------------------------------------------------------ internals
     def _mode_held(self) -> bool:

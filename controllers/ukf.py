@@ -548,6 +548,26 @@ def _finite_and_any(values: list[float]) -> bool:
     return all(map(math.isfinite, values)) and any(values)
 
 
+def step_on_measurements(estimator, meas: Measurements, motion: CameraMotion):
+    """One tick of a target estimator on raw measurements (its ``step``): initialise on the first valid
+    detection (one whose ray misses the plane counts in ``estimator.rejected_updates``), else predict to
+    meas.t_s and update if one arrived. The estimate, or None while not initialised."""
+    fix = fix_from_measurements(meas)
+    if not estimator.initialised:
+        if not fix.new:
+            return None
+        try:
+            estimator.initialise(fix, motion)
+        except ValueError:
+            estimator.rejected_updates += 1
+            return None
+        return estimator.estimate()
+    estimator.predict(meas.t_s, motion)
+    if fix.new:
+        estimator.update(fix, motion)
+    return estimator.estimate() if estimator.initialised else None
+
+
 def fix_from_measurements(meas: Measurements) -> DetectionFix:
     """The newest detection of ``meas`` as a :class:`DetectionFix`, uncorrected (the box centre as detected)."""
     new = bool(meas.det_new and meas.det_valid)
@@ -844,20 +864,7 @@ class UkfTargetEstimator:
         """One tick on raw measurements (no shape correction): initialise on the first valid detection, else
         predict to meas.t_s and update if one arrived. Returns the estimate, or None while not initialised.
         """
-        fix = fix_from_measurements(meas)
-        if not self._initialised:
-            if not fix.new:
-                return None
-            try:
-                self.initialise(fix, motion)
-            except ValueError:
-                self.rejected_updates += 1
-                return None
-            return self.estimate()
-        self.predict(meas.t_s, motion)
-        if fix.new:
-            self.update(fix, motion)
-        return self.estimate() if self._initialised else None
+        return step_on_measurements(self, meas, motion)
 
     def estimate(self) -> TargetEstimate:
         return TargetEstimate(*self._estimate_fields())
