@@ -321,3 +321,26 @@ def test_the_envelope_paired_comparison_by_hand(tmp_path, capsys):
     assert tool.main([str(tmp_path / "a"), str(tmp_path / "c"), "--paired"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: --paired: no run of") and err.count("\n") == 1
+
+
+def test_the_envelope_loiter_errors_by_hand():
+    """--loiter's per-run numbers: the estimates from 60 s after the lock to the dive's start only, their
+    horizontal errors against the truth interpolated to their times, the median of each."""
+    import numpy as np
+    tool = _envelope_tool()
+    t = np.arange(0.0, 200.0, 1.0)
+    truth_t = np.array([0.0, 200.0])
+    truth_pos = np.array([[0.0, 0.0], [400.0, 0.0]])  # 2 m/s east
+    truth_vel = np.array([[2.0, 0.0], [2.0, 0.0]])
+    # 50 m off before 70 s (the lock at 10 s, then 60 s: not scored), 3 m to 120 s (50 estimates), 1 m after
+    # (30 estimates to the dive at 150 s): the median 3 m
+    pos = np.c_[2.0 * t, np.select([t < 70.0, t < 120.0], [50.0, 3.0], 1.0)]
+    pos[100] = np.nan  # an estimate without a position is left out
+    vel = np.c_[np.full(t.size, 2.0), np.where(t < 150.0, 0.5, 9.0)]  # 9 m/s off only in the dive
+    pe, ve = tool.loiter_errors(t, pos, vel, truth_t, truth_pos, truth_vel, lock_t_s=10.0, switch_t_s=150.0)
+    assert pe == pytest.approx(3.0) and ve == pytest.approx(0.5)
+    pe, _ = tool.loiter_errors(t, pos, vel, truth_t, truth_pos, truth_vel, lock_t_s=10.0, switch_t_s=100.0)
+    assert pe == pytest.approx(3.0)
+    pe, _ = tool.loiter_errors(t, pos, vel, truth_t, truth_pos, truth_vel, lock_t_s=80.0, switch_t_s=math.nan)
+    assert pe == pytest.approx(1.0)  # from 140 s to the end: 1 m
+    assert all(math.isnan(x) for x in tool.loiter_errors(t, pos, vel, truth_t, truth_pos, truth_vel, 10.0, 50.0))

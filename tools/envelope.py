@@ -9,6 +9,7 @@
     python tools/envelope.py runs/envelope --why   # and each run outside 3 m / 3 deg: why (from its log)
     python tools/envelope.py runs/envelope --why-estimate   # and each run failing the estimate bar: why
     python tools/envelope.py runs/envelope runs/envelope_ct_ukf --paired   # and run by run: what moved
+    python tools/envelope.py runs/envelope runs/envelope_ct_ukf --loiter   # and the loiter's errors by motion
 
 The bars, over the runs of each group: every run hits the ship; >= 95 % hit within 3 m of the aim point
 and 3 deg of both impact angles; >= 95 % keep the ship in view >= 99 % of the time after the lock (seen:
@@ -32,6 +33,10 @@ then near twice it or more.
 ``--hold``, or the code before and after a change) adds the comparison run by run: for each bar the runs that
 met it in one folder only, how many miss distances went down or up by over 1 m, and a row for each run that
 moved (its miss distance and its four bars in each). Runs are matched by their scenario and seed.
+
+``--loiter [COLUMN]`` adds, per value of COLUMN (the ship's motion by default), the median over the runs of
+each run's median horizontal position and velocity error in the loiter, from 60 s after the lock to the
+dive: how well an estimator follows the ship's motion, apart from the dive's close-in errors.
 
 ``--why`` adds, for each run outside 3 m / 3 deg, what its log says: which bar it fails (distance, an
 angle, both; or no hit), the estimate's horizontal error in the ship's frame (towards the bow, to port)
@@ -67,6 +72,8 @@ ESTIMATE_BAR_M = 8.0  # the estimate bar: the horizontal error after convergence
 #: --why-estimate's tally: an excursion over the bar this soon after convergence (s) came as the std crossed
 #: the threshold (the error then near twice the std or more), not later in a converged filter
 NEAR_CONVERGENCE_S = 5.0
+#: --loiter: the estimate is scored from this long (s) after the lock (its start) to the dive
+LOITER_SETTLE_S = 60.0
 #: --paired: a run's miss distance changed by more than this (m) counts as better or worse
 PAIR_MARGIN_M = 1.0
 
@@ -398,6 +405,52 @@ def print_paired(dir_a: Path, rows_a: list[dict], dir_b: Path, rows_b: list[dict
     return True
 
 
+def loiter_errors(t_s, est_pos_xy, est_vel_xy, truth_t_s, truth_pos_xy, truth_vel_xy, lock_t_s: float,
+                  switch_t_s: float, settle_s: float = LOITER_SETTLE_S) -> tuple[float, float]:
+    """(median horizontal position error, m; median horizontal velocity error, m/s) of the estimates from
+    ``settle_s`` after the lock to the dive's start (``switch_t_s``; NaN: the run's end), the truth interpolated
+    to their times; NaN when there is none."""
+    from fwsim.log.truth import interp_at
+    t = np.asarray(t_s, dtype=float)
+    p, v = np.asarray(est_pos_xy, dtype=float), np.asarray(est_vel_xy, dtype=float)
+    end = switch_t_s if math.isfinite(switch_t_s) else math.inf
+    sel = (t >= lock_t_s + settle_s) & (t < end) & np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1)
+    if not sel.any():
+        return math.nan, math.nan
+    t = t[sel]
+    pe = np.linalg.norm(p[sel] - interp_at(t, truth_t_s, np.asarray(truth_pos_xy, dtype=float)), axis=1)
+    ve = np.linalg.norm(v[sel] - interp_at(t, truth_t_s, np.asarray(truth_vel_xy, dtype=float)), axis=1)
+    return float(np.median(pe)), float(np.median(ve))
+
+
+def loiter(out_dir: Path, rows: list[dict], by: str) -> list[list[str]]:
+    """--loiter's table rows: for each value of ``by``, the runs and the median over them of each run's median
+    loiter position and velocity error (:func:`loiter_errors`), from the logs."""
+    from fwsim import topics
+    from fwsim.log.reader import read_log
+    from fwsim.metrics import lock_time_s
+    groups: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    for r in rows:
+        if r.get("status") == "failed":
+            continue
+        try:
+            log = read_log(out_dir / r["log"])
+            est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
+            sw = r.get("switch_time_s")
+            errs = loiter_errors(est["t_s"], est["pos_enu_m"][:, :2], est["vel_enu_m_s"][:, :2], tru["t_s"],
+                                 tru["pos_enu_m"][:, :2], tru["vel_enu_m_s"][:, :2], lock_time_s(log),
+                                 float(sw) if isinstance(sw, (int, float)) else math.nan)
+        except (OSError, KeyError, ValueError, IndexError):
+            continue
+        if all(math.isfinite(e) for e in errs):
+            groups[_label(r.get(by))].append(errs)
+    table = []
+    for name, errs in sorted(groups.items()):
+        a = np.array(errs)
+        table.append([name, str(len(errs)), f"{np.median(a[:, 0]):.1f}", f"{np.median(a[:, 1]):.2f}"])
+    return table
+
+
 def _failed_bar(row: dict) -> str:
     """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
     if row.get("hit") != 1.0:
@@ -480,6 +533,11 @@ def main(argv=None) -> int:
                     help="two folders of the same draws (the same spec and --seed; another estimator, a --set "
                          "or --hold, or the code before and after a change): also compare them run by run, "
                          "each bar's runs lost and gained and the miss distances that moved")
+    ap.add_argument("--loiter", metavar="COLUMN", nargs="?", const="set.target.motion", default=None,
+                    help="also give, per value of COLUMN (default: the ship's motion), the median over the runs "
+                         "of each run's median horizontal position and velocity error in the loiter (from 60 s "
+                         "after the lock to the dive): how well each estimator follows the ship's motion, apart "
+                         "from the dive's close-in errors (reads the logs)")
     args = ap.parse_args(argv)
     if args.paired and len(args.out_dirs) != 2:
         print(f"error: --paired compares two folders, got {len(args.out_dirs)}", file=sys.stderr)
@@ -521,6 +579,15 @@ def main(argv=None) -> int:
         print(f"error: --paired: no run of {per_dir[0][0]} has the scenario and seed of one of {per_dir[1][0]} "
               "(not the same spec and --seed?)", file=sys.stderr)
         return 2
+    if args.loiter:
+        for out_dir, these in per_dir:
+            print(f"\nThe estimate in the loiter ({LOITER_SETTLE_S:g} s after the lock to the dive) in {out_dir}, "
+                  f"by {args.loiter}:\n")
+            print(f"| {args.loiter} | runs | position error, m (median run's median) | "
+                  "velocity error, m/s (median run's median) |")
+            print("|---|---|---|---|")
+            for cells in loiter(out_dir, these, args.loiter):
+                print("| " + " | ".join(cells) + " |")
     if args.why:
         head = ["run", "outside by", "miss, m", "miss (bow, port), m", "ship", "motion", "speed, m/s",
                 "longest hidden after lock, s"] + [
