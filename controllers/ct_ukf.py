@@ -30,7 +30,10 @@ an IMM of a CV and a CT model: a zigzag or a helm order is a continuous
 change of the turn rate, which one mean-reverting state follows without a
 mode switch; a straight-running ship has omega, a ~ 0, where the model is the
 UKF's CV model and the extra states cost little (tests: not worse than the
-UKF on a straight line). Paper missions (seeds 21, 22; tuned on 11-13), UKF
+UKF on a straight line). On ships unlike the class they cost more: the box
+centres' errors make the turn rate wander on a straight ship (envelope, seed
+1648: velocity error in the loiter 0.48 m/s at the median run against the
+UKF's 0.16), which :mod:`controllers.imm` (an IMM of the two) avoids. Paper missions (seeds 21, 22; tuned on 11-13), UKF
 -> this: a 1.5 deg/s turn, miss 3.35/2.90 -> 0.75/2.19 m, estimate error at
 impact 6.4/5.2 -> 0.8/2.9 m; speed steps at 0.5 m/s^2, loiter position error
 2.6/2.7 -> 0.7/0.8 m RMS (miss ~0.9 m either way); a +-30 deg, 60 s zigzag,
