@@ -244,14 +244,13 @@ def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, 
             "std_then_m": float(std[i]), "over_s": float(np.sum(dt[k:][after > bar_m]))}
 
 
-def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict]:
-    """--why-estimate's table rows (strings), each run failing the estimate bar, from its log; and a tally:
-    runs that never converged (and how many of them kept the error within the bar from the dive's start), and
-    runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
+def _estimates(out_dir: Path, rows: list[dict]):
+    """For each run that did not fail: (its row, (its /fsw/estimate and /target/state tables, the lock time,
+    the last dive's start from the summary, NaN without one)), or (its row, the exception) when its log
+    cannot be read."""
     from fwsim import topics
     from fwsim.log.reader import read_log
     from fwsim.metrics import lock_time_s
-    table, tally = [], defaultdict(int)
     for r in rows:
         if r.get("status") == "failed":
             continue
@@ -259,9 +258,24 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
             log = read_log(out_dir / r["log"])
             est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
             sw = r.get("switch_time_s")
+            got = (est, tru, lock_time_s(log), float(sw) if isinstance(sw, (int, float)) else math.nan)
+        except (OSError, KeyError, ValueError, IndexError) as exc:
+            got = exc
+        yield r, got
+
+
+def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict]:
+    """--why-estimate's table rows (strings), each run failing the estimate bar, from its log; and a tally:
+    runs that never converged (and how many of them kept the error within the bar from the dive's start), and
+    runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
+    table, tally = [], defaultdict(int)
+    for r, got in _estimates(out_dir, rows):
+        try:
+            if isinstance(got, BaseException):
+                raise got
+            est, tru, lock_t, switch_t = got
             f = estimate_failure(est["t_s"], est["pos_enu_m"][:, :2], est["pos_std_m"][:, :2], tru["t_s"],
-                                 tru["pos_enu_m"][:, :2], lock_time_s(log),
-                                 float(sw) if isinstance(sw, (int, float)) else math.nan)
+                                 tru["pos_enu_m"][:, :2], lock_t, switch_t)
         except (OSError, KeyError, ValueError, IndexError) as exc:
             table.append([str(r.get("id", "?")), f"(log: {type(exc).__name__})"] + ["-"] * 9)
             continue
@@ -426,21 +440,15 @@ def loiter_errors(t_s, est_pos_xy, est_vel_xy, truth_t_s, truth_pos_xy, truth_ve
 def loiter(out_dir: Path, rows: list[dict], by: str) -> list[list[str]]:
     """--loiter's table rows: for each value of ``by``, the runs and the median over them of each run's median
     loiter position and velocity error (:func:`loiter_errors`), from the logs."""
-    from fwsim import topics
-    from fwsim.log.reader import read_log
-    from fwsim.metrics import lock_time_s
     groups: dict[str, list[tuple[float, float]]] = defaultdict(list)
-    for r in rows:
-        if r.get("status") == "failed":
+    for r, got in _estimates(out_dir, rows):
+        if isinstance(got, BaseException):
             continue
+        est, tru, lock_t, switch_t = got
         try:
-            log = read_log(out_dir / r["log"])
-            est, tru = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
-            sw = r.get("switch_time_s")
             errs = loiter_errors(est["t_s"], est["pos_enu_m"][:, :2], est["vel_enu_m_s"][:, :2], tru["t_s"],
-                                 tru["pos_enu_m"][:, :2], tru["vel_enu_m_s"][:, :2], lock_time_s(log),
-                                 float(sw) if isinstance(sw, (int, float)) else math.nan)
-        except (OSError, KeyError, ValueError, IndexError):
+                                 tru["pos_enu_m"][:, :2], tru["vel_enu_m_s"][:, :2], lock_t, switch_t)
+        except (KeyError, ValueError, IndexError):
             continue
         if all(math.isfinite(e) for e in errs):
             groups[_label(r.get(by))].append(errs)
