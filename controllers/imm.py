@@ -8,9 +8,9 @@ with the box centres' errors (envelope, seed 1648, straight ships over 2 m/s
 in the loiter: turn rate 0.3-1.2 deg/s RMS, the course 1.4-7 deg off; the
 median run's velocity error 0.48 m/s against the UKF's 0.16; on turning and
 zigzagging ships the other way round, 0.45 and 0.50 against 0.63 and 0.75).
-This filter runs both on the same
-detections and weighs them by how well each predicted them (Bar-Shalom's IMM,
-"Estimation with Applications to Tracking and Navigation", 11.6.6):
+This filter runs both on the same detections and weighs them by how well each
+predicted them: the interacting multiple model estimator of Bar-Shalom, Li and
+Kirubarajan, "Estimation with Applications to Tracking and Navigation":
 
 * **Mode switching.** A two-state Markov chain: over ``dt`` the ship leaves
   its mode with probability ``1 - exp(-dt / switch_time_s)``.
