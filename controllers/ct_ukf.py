@@ -33,12 +33,13 @@ UKF's CV model and the extra states cost little (tests: not worse than the
 UKF on a straight line). On ships unlike the class they cost more: the box
 centres' errors make the turn rate wander on a straight ship (envelope, seed
 1648: velocity error in the loiter 0.48 m/s at the median run against the
-UKF's 0.16), which :mod:`controllers.imm` (an IMM of the two) avoids. Paper missions (seeds 21, 22; tuned on 11-13), UKF
--> this: a 1.5 deg/s turn, miss 3.35/2.90 -> 0.75/2.19 m, estimate error at
-impact 6.4/5.2 -> 0.8/2.9 m; speed steps at 0.5 m/s^2, loiter position error
-2.6/2.7 -> 0.7/0.8 m RMS (miss ~0.9 m either way); a +-30 deg, 60 s zigzag,
-no better (miss ~6 m either way: the turn rate changes within the dive);
-a straight line, loiter error 0.41/0.53 -> 0.65/0.76 m (all hit).
+UKF's 0.16), which :mod:`controllers.imm` (an IMM of the two) avoids.
+Paper missions (seeds 21, 22; tuned on 11-13), UKF -> this: a 1.5 deg/s
+turn, miss 3.35/2.90 -> 0.75/2.19 m, estimate error at impact 6.4/5.2 ->
+0.8/2.9 m; speed steps at 0.5 m/s^2, loiter position error 2.6/2.7 ->
+0.7/0.8 m RMS (miss ~0.9 m either way); a +-30 deg, 60 s zigzag, no better
+(miss ~6 m either way: the turn rate changes within the dive); a straight
+line, loiter error 0.41/0.53 -> 0.65/0.76 m (all hit).
 
 The hold (``hold_tgo_s``). Extra states make the velocity less stiff: a
 burst of biased box centres (the dive's fast-changing view; a detection the

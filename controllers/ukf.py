@@ -609,15 +609,22 @@ class UkfTargetEstimator:
         self._rejects_in_a_row = 0
         self.updates = 0
         self.initialisations = 0
-        #: the last detection's log-likelihood under the filter's prediction (its pixel rows: the Gaussian
-        #: density of the innovation, used or gated; NaN when the last update computed none). A multiple-model
-        #: filter (controllers.imm) weighs its models by it
-        self.last_log_likelihood = math.nan
+        self._last_nis_det = (math.nan, math.nan)  # the last update's chi-square and pixel-rows determinant
 
     # ------------------------------------------------------------ properties
     @property
     def initialised(self) -> bool:
         return self._initialised
+
+    @property
+    def last_log_likelihood(self) -> float:
+        """The last detection's log-likelihood under the filter's prediction: the Gaussian density of its
+        pixel innovation, whether the gate took it or not (NaN when the last update computed none). A
+        multiple-model filter (controllers.imm) weighs its models by it."""
+        nis, det = self._last_nis_det
+        if not (det > 0.0 and math.isfinite(nis)):
+            return math.nan
+        return -0.5 * nis - 0.5 * math.log(det) - _LOG_2PI
 
     @property
     def t_s(self) -> float:
@@ -743,7 +750,7 @@ class UkfTargetEstimator:
 
     def update(self, fix: DetectionFix, motion: CameraMotion) -> FusionResult:
         """Fuse the detection's (corrected) box centre ``u_px, v_px`` (predicts to fix.t_s first)."""
-        self.last_log_likelihood = math.nan
+        self._last_nis_det = (math.nan, math.nan)
         if not (self._initialised and fix.new):
             return FusionResult(False, FusionReason.NOT_INITIALISED if fix.new else FusionReason.REJECTED)
         if float(fix.t_s) > self._t:
@@ -778,8 +785,7 @@ class UkfTargetEstimator:
                                                      cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
                                                      c.target_plane_height_m)
             core.last_nis = nis
-            if det > 0.0 and math.isfinite(nis):  # the detection's pixels under the prediction (gated or not)
-                self.last_log_likelihood = -0.5 * nis - 0.5 * math.log(det) - _LOG_2PI
+            self._last_nis_det = (nis, det)
             rejected = gating and nis > c.innovation_gate
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
@@ -813,8 +819,9 @@ class UkfTargetEstimator:
         rg[0] += (k * float(b[2] - b[0])) ** 2
         rg[1] += (k * float(b[3] - b[1])) ** 2
         cam = self.camera
-        _, nis, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy, cam.cx,
-                                    cam.cy, motion.R_enu_from_cam, motion.height_m, self.cfg.target_plane_height_m)
+        _, nis, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy,
+                                       cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
+                                       self.cfg.target_plane_height_m)
         return float(nis)
 
     def _box_bias_cov(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:

@@ -348,9 +348,7 @@ def paired(rows_a: list[dict], rows_b: list[dict], margin_m: float = PAIR_MARGIN
                 out["lost"][i].append((ra, rb))
             elif x is False and y:
                 out["gained"][i].append((ra, rb))
-        ma, mb = (r.get("miss_distance_m") for r in (ra, rb))
-        ma = float(ma) if isinstance(ma, (int, float)) and math.isfinite(ma) else math.nan
-        mb = float(mb) if isinstance(mb, (int, float)) and math.isfinite(mb) else math.nan
+        ma, mb = _miss(ra), _miss(rb)
         if math.isnan(ma) and math.isnan(mb) or abs(mb - ma) <= margin_m:
             out["same"].append((ra, rb))
         else:
@@ -362,9 +360,15 @@ def paired(rows_a: list[dict], rows_b: list[dict], margin_m: float = PAIR_MARGIN
     return out
 
 
-def _miss_cell(r: dict) -> str:
+def _miss(r: dict) -> float:
+    """A run's miss distance, NaN when it has none."""
     m = r.get("miss_distance_m")
-    return f"{m:.2f}" if isinstance(m, (int, float)) and math.isfinite(m) else "-"
+    return float(m) if isinstance(m, (int, float)) and math.isfinite(m) else math.nan
+
+
+def _miss_cell(r: dict) -> str:
+    m = _miss(r)
+    return f"{m:.2f}" if math.isfinite(m) else "-"
 
 
 def _bars_cell(r: dict) -> str:
@@ -395,21 +399,18 @@ def print_paired(dir_a: Path, rows_a: list[dict], dir_b: Path, rows_b: list[dict
     print(f"\nMiss distance: better by over {PAIR_MARGIN_M:g} m in {len(p['better'])} runs, worse by over "
           f"{PAIR_MARGIN_M:g} m in {len(p['worse'])}, within {PAIR_MARGIN_M:g} m of each other in "
           f"{len(p['same'])}.\n")
-    changed = p["better"] + p["worse"] + [pair for i in range(len(BARS)) for pair in p["lost"][i] + p["gained"][i]]
+    # each run that moved once (by its miss distance or a bar), best first; a miss distance lost last
+    changed = {id(pair[0]): pair for pair in p["better"] + p["worse"]
+               + [pair for i in range(len(BARS)) for pair in p["lost"][i] + p["gained"][i]]}
+
+    def change(pair) -> float:
+        d = _miss(pair[1]) - _miss(pair[0])
+        return d if math.isfinite(d) else (math.inf if math.isnan(_miss(pair[1])) else -math.inf)
     if changed:
         print("| run (the first's id) | miss, m, first | miss, m, second | bars, first | bars, second | ship | "
               "motion | speed, m/s |")
         print("|---|---|---|---|---|---|---|---|")
-        done = set()
-
-        def change(pair) -> float:
-            ma, mb = (r.get("miss_distance_m") for r in pair)
-            ok = all(isinstance(m, (int, float)) and math.isfinite(m) for m in (ma, mb))
-            return float(mb) - float(ma) if ok else (math.inf if isinstance(ma, (int, float)) else -math.inf)
-        for ra, rb in sorted(changed, key=change):
-            if id(ra) in done:
-                continue
-            done.add(id(ra))
+        for ra, rb in sorted(changed.values(), key=change):
             speed = ra.get("set.target.speed_m_s")
             print(f"| {ra.get('id', '?')} | {_miss_cell(ra)} | {_miss_cell(rb)} | {_bars_cell(ra)} | "
                   f"{_bars_cell(rb)} | {ra.get('set.target.type', '-')} | "
