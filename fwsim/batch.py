@@ -170,18 +170,23 @@ class SpecChanges:
     dispersed field at or under it (``camera.detector`` holds its noise, misses and latency). The other
     fields' draws are as they were (each field draws from its own stream), so the batch flies the same
     draws with one factor held: what that factor costs.
+    ``only``: fly only the runs of these scenario seeds (``fwsim batch --only``; sample k of a dispersed entry
+    flies the scenario's seed plus k): the draws are made for the whole spec first, so each run kept is the
+    same draw as in the whole batch, flown again (with ``sets``: flown with a change) in a fraction of the time.
     """
 
     seed: int | None = None
     sets: dict[str, Any] = field(default_factory=dict)
     hold: tuple[str, ...] = ()
+    only: tuple[int, ...] = ()
 
     def __bool__(self) -> bool:
-        return self.seed is not None or bool(self.sets) or bool(self.hold)
+        return self.seed is not None or bool(self.sets) or bool(self.hold) or bool(self.only)
 
     def describe(self) -> dict[str, Any]:
         """For the summary's ``batch`` info (empty parts left out)."""
-        return {k: v for k, v in (("seed", self.seed), ("set", self.sets), ("hold", list(self.hold)))
+        return {k: v for k, v in (("seed", self.seed), ("set", self.sets), ("hold", list(self.hold)),
+                                  ("only", list(self.only)))
                 if v is not None and v != {} and v != []}
 
 
@@ -243,6 +248,13 @@ def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None
     jobs: list[RunJob] = []
     for i, entry in enumerate(data["runs"]):
         jobs += _entry_jobs(path, i, entry, logs, seed)
+    if changes is not None and changes.only:
+        flown = {j.seed for j in jobs}
+        absent = [s for s in changes.only if s not in flown]
+        if absent:
+            raise BatchSpecError(f"--only {absent[0]}: no run of {path.name} flies that scenario seed (its "
+                                 f"seeds: {_seed_ranges(sorted(flown))})")
+        jobs = [j for j in jobs if j.seed in set(changes.only)]
     seen: dict[str, int] = {}
     for j in jobs:
         seen[j.id] = seen.get(j.id, 0) + 1
@@ -251,6 +263,17 @@ def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None
         raise BatchSpecError(f"{path}: {len(dup)} run id(s) appear more than once (same scenario name, seed and "
                              f"overrides), e.g. {dup[0]}")
     return name, jobs
+
+
+def _seed_ranges(seeds: list[int]) -> str:
+    """Sorted seeds as ranges: [7, 8, 9, 12] -> "7-9, 12"."""
+    runs: list[list[int]] = []
+    for s in seeds:
+        if runs and s == runs[-1][1] + 1:
+            runs[-1][1] = s
+        else:
+            runs.append([s, s])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
 
 
 def _cases(entry: dict, where: str) -> list[dict[str, Any]]:

@@ -261,6 +261,21 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _only_seeds(values: list[str]) -> tuple[int, ...]:
+    """``--only`` values ("30", "30,59", "s30", "10-14"; repeatable) as scenario seeds, in order, once each."""
+    seeds: list[int] = []
+    for value in values:
+        for part in value.split(","):
+            p = part.strip().removeprefix("s")
+            lo, sep, hi = p.partition("-")
+            if not (lo.isdigit() and (not sep or hi.isdigit())) or (sep and int(hi) < int(lo)):
+                raise ScenarioError(f"--only {part.strip()!r}: expected scenario seeds, e.g. 30, s30, 30,59 or 10-14")
+            for s in range(int(lo), int(hi if sep else lo) + 1):
+                if s not in seeds:
+                    seeds.append(s)
+    return tuple(seeds)
+
+
 def cmd_batch(args) -> int:
     from rich.progress import TimeRemainingColumn
 
@@ -272,7 +287,8 @@ def cmd_batch(args) -> int:
     bad = [h for h in args.hold if not h.strip() or any(not p for p in h.strip().split("."))]
     if bad:
         raise ScenarioError(f"--hold {bad[0]!r}: expected a dotted field path (e.g. world.wind_enu_m_s)")
-    changes = SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold))
+    only = _only_seeds(args.only)
+    changes = SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold), only)
     out = Path(args.out) if args.out else Path("runs") / Path(args.spec).stem
     failed = 0
     with Progress(TextColumn("runs {task.completed:>4.0f} / {task.total:.0f}"), BarColumn(),
@@ -444,6 +460,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="do not draw this dispersed field, or those under it (repeatable): it keeps the "
                          "scenario's value and the other fields keep their draws, so the batch shows what "
                          "the field costs (e.g. --hold camera.detector)")
+    ba.add_argument("--only", action="append", default=[], metavar="SEEDS",
+                    help="fly only the runs of these scenario seeds (30, s30, 30,59, 10-14; repeatable), each the "
+                         "same draw as in the whole batch: a batch's failing runs flown again with a --set change")
     ba.set_defaults(func=cmd_batch)
     c = sub.add_parser("compare", help="compare a run's metrics with a baseline; exit 1 on a regression")
     c.add_argument("baseline", help="baseline: a log (.mcap), metrics (.json) or baseline file (.yaml)")

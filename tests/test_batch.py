@@ -12,7 +12,7 @@ import pytest
 from fwsim import SCENARIO_DIR
 from fwsim.batch import BASE_COLUMNS, BatchSpecError, SpecChanges, load_spec, run_batch, run_id, run_one
 from fwsim.log import read_log
-from fwsim.scenario import load_scenario
+from fwsim.scenario import ScenarioError, load_scenario
 
 CHECKOUT = (SCENARIO_DIR / "autopilot_checkout.yaml").as_posix()
 
@@ -413,3 +413,36 @@ def test_sigterm_to_a_batch_reaches_the_runs_in_flight(tmp_path):
     assert len(logs) == 2
     for log in logs:
         assert log.status == "interrupted" and "SIGTERM" in log.reason and not log.truncated, log.reason
+
+
+def test_only_flies_the_same_draws_of_the_chosen_seeds(tmp_path):
+    """--only keeps the runs of the seeds named, each drawn as in the whole batch (also with a --set change),
+    in the spec's order; a seed no run flies is a one-line error naming the seeds there are."""
+    spec = write_spec(tmp_path, DISPERSED)
+    jobs = load_spec(spec, tmp_path)[1]
+    seeds = [j.seed for j in jobs]
+    pick = (seeds[2], seeds[0])
+    only = load_spec(spec, tmp_path, SpecChanges(only=pick))[1]
+    assert [j.seed for j in only] == [seeds[0], seeds[2]]
+    assert [j.overrides for j in only] == [jobs[0].overrides, jobs[2].overrides]
+    changed = load_spec(spec, tmp_path, SpecChanges(sets={"duration_s": 1}, only=pick))[1]
+    assert [j.overrides["initial.heading_deg"] for j in changed] == [j.overrides["initial.heading_deg"] for j in only]
+    assert all(j.overrides["duration_s"] == 1 for j in changed)
+    with pytest.raises(BatchSpecError, match=rf"--only 999: no run of spec.yaml flies that scenario seed \(its "
+                                             rf"seeds: {seeds[0]}-{seeds[-1]}\)") as exc:
+        load_spec(spec, tmp_path, SpecChanges(only=(999,)))
+    assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("values, seeds", [(["30"], (30,)), (["s30,59"], (30, 59)), (["10-12", "11"], (10, 11, 12))])
+def test_only_reads_seeds_lists_and_ranges(values, seeds):
+    from fwsim.cli import _only_seeds
+    assert _only_seeds(values) == seeds
+
+
+@pytest.mark.parametrize("value", ["x", "12-10", "3-", ""])
+def test_only_bad_values_are_one_line_errors(value):
+    from fwsim.cli import _only_seeds
+    with pytest.raises(ScenarioError, match="--only .*expected scenario seeds") as exc:
+        _only_seeds([value])
+    assert "\n" not in str(exc.value)
