@@ -254,7 +254,8 @@ def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None
         if absent:
             raise BatchSpecError(f"--only {absent[0]}: no run of {path.name} flies that scenario seed (its "
                                  f"seeds: {_seed_ranges(sorted(flown))})")
-        jobs = [j for j in jobs if j.seed in set(changes.only)]
+        keep = set(changes.only)
+        jobs = [j for j in jobs if j.seed in keep]
     seen: dict[str, int] = {}
     for j in jobs:
         seen[j.id] = seen.get(j.id, 0) + 1

@@ -261,6 +261,9 @@ def cmd_bench(args) -> int:
     return 0
 
 
+_ONLY_MAX_RANGE = 100_000  # --only's ranges: at most this many seeds (a batch of more is not a retry)
+
+
 def _only_seeds(values: list[str]) -> tuple[int, ...]:
     """``--only`` values ("30", "30,59", "s30", "10-14"; repeatable) as scenario seeds, in order, once each."""
     seeds: list[int] = []
@@ -270,10 +273,10 @@ def _only_seeds(values: list[str]) -> tuple[int, ...]:
             lo, sep, hi = p.partition("-")
             if not (lo.isdigit() and (not sep or hi.isdigit())) or (sep and int(hi) < int(lo)):
                 raise ScenarioError(f"--only {part.strip()!r}: expected scenario seeds, e.g. 30, s30, 30,59 or 10-14")
-            for s in range(int(lo), int(hi if sep else lo) + 1):
-                if s not in seeds:
-                    seeds.append(s)
-    return tuple(seeds)
+            if sep and int(hi) - int(lo) >= _ONLY_MAX_RANGE:
+                raise ScenarioError(f"--only {part.strip()!r}: a range of at most {_ONLY_MAX_RANGE} seeds")
+            seeds.extend(range(int(lo), int(hi if sep else lo) + 1))
+    return tuple(dict.fromkeys(seeds))
 
 
 def cmd_batch(args) -> int:
