@@ -270,14 +270,16 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
     runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
     table, tally = [], defaultdict(int)
     for r, got in _estimates(out_dir, rows):
-        try:
-            if isinstance(got, BaseException):
-                raise got
+        f = got  # the log's exception, or the run's failure (None: it meets the bar)
+        if not isinstance(got, BaseException):
             est, tru, lock_t, switch_t = got
-            f = estimate_failure(est["t_s"], est["pos_enu_m"][:, :2], est["pos_std_m"][:, :2], tru["t_s"],
-                                 tru["pos_enu_m"][:, :2], lock_t, switch_t)
-        except (OSError, KeyError, ValueError, IndexError) as exc:
-            table.append([str(r.get("id", "?")), f"(log: {type(exc).__name__})"] + ["-"] * 9)
+            try:
+                f = estimate_failure(est["t_s"], est["pos_enu_m"][:, :2], est["pos_std_m"][:, :2], tru["t_s"],
+                                     tru["pos_enu_m"][:, :2], lock_t, switch_t)
+            except (KeyError, ValueError, IndexError) as exc:
+                f = exc
+        if isinstance(f, BaseException):
+            table.append([str(r.get("id", "?")), f"(log: {type(f).__name__})"] + ["-"] * 9)
             continue
         if f is None:
             continue
