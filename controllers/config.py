@@ -266,6 +266,20 @@ class ShapeHeadingConfig(StrictModel):
                     "that moved along a course does not face the other way seconds later, and the shapes of a "
                     "ship unlike the class may prefer its stern (1.5: the turn rate the envelope's ships "
                     "reach). 0: off, the shapes alone")
+    end_from_velocity_std_floor_m_s: float | None = Field(
+        None, gt=0, le=50,
+        description="while the course is unknown (the estimated speed under min_speed_for_course_m_s), the "
+                    "estimated velocity still says which end of the axis is the bow: a ship moves bow first, so "
+                    "each heading is weighed by the probability that the velocity's component along it is "
+                    "positive (its std the estimate's horizontal velocity std and this floor in quadrature: the "
+                    "filter's velocity std is tighter than a still ship's estimated velocity wanders). A heading "
+                    "and its opposite share one unit of it, so the axis stays the box shapes'; a still ship's "
+                    "velocity, noise, nudges its ends a little either way. Ships unlike the class, whose box shapes "
+                    "read with the class's outline pick an end at random (a patrol boat with its cabin "
+                    "amidships), have it from how they move. Off (None: the box shapes and a course held alone) "
+                    "by default: the end it picks moves the corrected fixes along the ship, and so the estimated "
+                    "velocity itself, which a still ship's then follows; over the envelope's slow ships it did "
+                    "harm at 0.25 and 0.5 (README, 'The bow from a slow ship's velocity')")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "

@@ -1195,7 +1195,9 @@ class ShipModel:
           likelihood (a ship's bow points along its course; the course's std is the velocity's over the
           speed, at least ``fuse_min_course_std_deg``), so each sharpens the other;
         * course known, shapes not ready: the course alone;
-        * course unknown: the headings the shapes allow, else ``headings_when_unknown`` equal ones.
+        * course unknown: the headings the shapes allow (weighed by the course last followed while it is
+          recent, and by which end the estimated velocity moves toward, :meth:`_velocity_end_weights`), else
+          ``headings_when_unknown`` equal ones.
         """
         course = self.course(vel_enu, vel_std_m_s)
         sh = self.cfg.heading_from_shape
@@ -1209,8 +1211,14 @@ class ShipModel:
                 return np.array([course]), np.ones(1), course
             return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), course)
         held = self._held_course_weights()
-        if held is not None:  # the shapes' headings weighed by the course last followed
-            w = self.shape.heading_weights() * held
+        ends = self._velocity_end_weights(vel_enu, vel_std_m_s)
+        if held is not None or ends is not None:
+            # the shapes' headings weighed by the course last followed and by which end the velocity moves
+            w = self.shape.heading_weights()
+            if held is not None:
+                w = w * held
+            if ends is not None:
+                w = w * ends
             if w.sum() > 0.0:
                 return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), None)
         shaped = self.shape.headings()
@@ -1232,6 +1240,19 @@ class ShipModel:
         if not sig < 180.0:  # (also NaN)
             return None
         return _course_likelihood(self.shape.courses_enu_rad, course, math.radians(sig))
+
+    def _velocity_end_weights(self, vel_enu, vel_std_m_s: float) -> np.ndarray | None:
+        """The probability, for each of the shapes' headings (:attr:`ShapeHeading.courses_enu_rad`), that the
+        ship's velocity has a positive component along it (a ship moves bow first): ``Phi(v . u / s)``, ``v``
+        the estimated horizontal velocity, ``u`` the heading's unit vector, ``s`` the velocity std
+        ``vel_std_m_s`` and ``end_from_velocity_std_floor_m_s`` in quadrature. A heading's and its opposite's
+        sum to 1. None when off, before the shapes are ready, or for a velocity std that is not a number."""
+        floor = self.cfg.heading_from_shape.end_from_velocity_std_floor_m_s
+        if floor is None or not self.shape.ready or not math.isfinite(vel_std_m_s):
+            return None
+        c = self.shape.courses_enu_rad
+        along = float(vel_enu[0]) * np.cos(c) + float(vel_enu[1]) * np.sin(c)
+        return scipy.special.ndtr(along / math.hypot(vel_std_m_s, floor))
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
                    t_s: float | None = None) -> bool:

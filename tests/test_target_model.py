@@ -579,7 +579,8 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
     counter-clockwise from East, while it moved along 60 deg: as a ship of the other layout looks to the
     class). While the course is followed the headings are the course's side; when it is lost (the speed dips
     under 1.5 m/s) they stay on that side, the held course's std 3 deg growing 1.5 deg/s, until it spans the
-    circle (118 s), and then the shapes alone say 240 again. Off (0), the shapes alone at once."""
+    circle (118 s), and then the shapes alone say 240 again. Off (0), the shapes alone at once. (The slow
+    velocity's own say on the bow, end_from_velocity_std_floor_m_s, is off here: the next test has it.)"""
     from controllers.config import ShapeHeadingConfig
 
     def best(ship, vel):
@@ -588,7 +589,8 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
 
     along = 3.0 * np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
     for spread in (1.5, 0.0):
-        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(held_course_spread_deg_s=spread))
+        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(held_course_spread_deg_s=spread,
+                                                                    end_from_velocity_std_floor_m_s=None))
         ship = _ship_with_shape(210.0, cfg=cfg)  # the shapes: bow 210 deg from North, course 240 deg ENU
         assert _deg_off(best(ship, np.zeros(3)), 240.0) <= 5.0
         views_ = list(ring_views(210.0, range(0, 360, 10)))
@@ -604,6 +606,44 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
             cp, Rc, box = views_[21]
             ship.observe_box(119.0 + 120.0, cp, Rc, np.zeros(3), box, slow, 0.1)
         assert _deg_off(best(ship, slow), 240.0) <= 10.0  # the shapes alone
+
+
+def test_a_slow_ships_velocity_says_which_end_is_the_bow():
+    """The box shapes put the bow at 240 deg (counter-clockwise from East) on a ship moving slowly (under
+    min_speed_for_course_m_s: no course) along 60 deg, as the shapes of a ship unlike the class may: its
+    velocity (end_from_velocity_std_floor_m_s 0.25) turns the headings to the end it moves toward, and leaves
+    the shapes' axis. A still ship's velocity nudges neither end; moving across the axis, the ends stay the
+    shapes'; off (None, the default), the shapes alone. A heading's and its opposite's weights from the
+    velocity sum to 1 (checked against the normal distribution's integral)."""
+    from controllers.config import ShapeHeadingConfig
+
+    def best(ship, vel, std=0.1):
+        courses, weights, course = ship.headings_and_course(vel, std)
+        assert course is None
+        return math.degrees(float(courses[int(np.argmax(weights))])) % 360.0
+
+    u = np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
+    across = np.array([math.cos(math.radians(150.0)), math.sin(math.radians(150.0)), 0.0])
+    ship = _ship_with_shape(210.0, cfg=ShipModelConfig(  # the shapes: bow 210 deg from North, 240 deg ENU
+        heading_from_shape=ShapeHeadingConfig(end_from_velocity_std_floor_m_s=0.25)))
+    assert _deg_off(best(ship, np.zeros(3)), 240.0) <= 5.0
+    assert _deg_off(best(ship, 1.0 * u), 60.0) <= 5.0  # 1 m/s along 60 deg: that end
+    assert _deg_off(best(ship, 0.4 * u, std=0.1), 60.0) <= 5.0
+    assert _deg_off(best(ship, 1.0 * u, std=50.0), 240.0) <= 5.0  # a velocity nothing is known of: the shapes
+    assert _deg_off(best(ship, 1.0 * across), 240.0) <= 5.0  # across the axis: the shapes' end and axis
+    assert _deg_off(best(ship, -1.0 * across), 240.0) <= 5.0
+    w = ship._velocity_end_weights(0.7 * u, 0.2)
+    n = len(w)
+    assert np.allclose(w + np.roll(w, n // 2), 1.0)
+    c = ship.shape.courses_enu_rad
+    sig = math.hypot(0.2, ship.cfg.heading_from_shape.end_from_velocity_std_floor_m_s)
+    for k in (0, 12, 30):  # P(along > 0) for along ~ N(v . u_k, sig^2), by the error function
+        mean = 0.7 * math.cos(float(c[k]) - math.radians(60.0))
+        assert math.isclose(float(w[k]), 0.5 * (1.0 + math.erf(mean / (sig * math.sqrt(2.0)))), rel_tol=1e-9)
+    assert ship._velocity_end_weights(u, math.nan) is None
+    off = _ship_with_shape(210.0)  # the default: off
+    assert off.cfg.heading_from_shape.end_from_velocity_std_floor_m_s is None
+    assert _deg_off(best(off, 1.0 * u), 240.0) <= 5.0
 
 
 def _perception(ship: ShipModel, size_mismatch_action: str = "skip") -> Perception:
