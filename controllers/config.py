@@ -280,6 +280,17 @@ class ShapeHeadingConfig(StrictModel):
                     "by default: the end it picks moves the corrected fixes along the ship, and so the estimated "
                     "velocity itself, which a still ship's then follows; over the envelope's slow ships it did "
                     "harm at 0.25 and 0.5 (README, 'The bow from a slow ship's velocity')")
+    end_velocity_source: Literal["estimate", "box_centres"] = Field(
+        "box_centres",
+        description="the velocity end_from_velocity_std_floor_m_s reads: the estimator's (which the corrected "
+                    "fixes, and so the end picked, move), or a straight-line fit over end_velocity_window_s to "
+                    "the plain detected box centres met with the tracked point's plane (ShipModel's "
+                    "BoxCentreTrack: nothing the correction does moves them; the superstructure's pull on them "
+                    "goes round with the loiter and largely cancels over a lap)")
+    end_velocity_window_s: float = Field(
+        120.0, gt=5, le=1000,
+        description="the box-centre fit's window, s (box_centres): about a loiter lap, so that the pull of the "
+                    "superstructure on the box centre, which turns with the view, averages out")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "

@@ -1123,6 +1123,70 @@ class LayoutFit:
         return False
 
 
+#: the box-centre track's residuals are correlated over about this long (the superstructure's pull turns with the
+#: view): its slope's std counts one independent point per this many seconds of the window
+_TRACK_CORRELATION_S = 10.0
+
+
+class BoxCentreTrack:
+    """The ship's horizontal velocity from its plain detected box centres: each box's centre ray met with the
+    tracked point's plane, a straight line fitted to those ground points over the last ``window_s`` (least
+    squares, east and north apart). Nothing the box-centre correction does moves these points, so the end of
+    the ship it picks cannot feed back into this velocity as it does into the estimator's. The superstructure
+    pulls the box centre toward itself by an amount that turns with the view, which over a loiter lap largely
+    cancels; the slope's std counts one independent point per ``_TRACK_CORRELATION_S`` of the window."""
+
+    def __init__(self, camera: PinholeCamera, window_s: float, rate_hz: float = 3.0, edge_px: float = 6.0):
+        self.camera = camera
+        self.window_s = float(window_s)
+        self.rate_hz = float(rate_hz)
+        self.edge_px = float(edge_px)
+        self._t: list[float] = []
+        self._g: list[tuple[float, float]] = []
+        self._lo = 0  # the window's first point
+
+    def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, plane_z: float, box_px) -> bool:
+        """Take one box (u0, v0, u1, v1) unless too soon after the last one, at the image border or not
+        finite, or its centre's ray does not come down to the plane; True when taken."""
+        if self._t and t_s - self._t[-1] < 1.0 / self.rate_hz - 1e-9:
+            return False
+        b = np.asarray(box_px, dtype=float)
+        cam, e = self.camera, self.edge_px
+        if not np.isfinite(b).all() or (cam.width_px > 0 and (
+                b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e or b[3] >= cam.height_px - 1.0 - e)):
+            return False
+        x1, x2 = (0.5 * (b[0] + b[2]) - cam.cx) / cam.fx, (0.5 * (b[1] + b[3]) - cam.cy) / cam.fy
+        R = np.asarray(R_enu_from_cam, dtype=float)
+        cam_pos = np.asarray(cam_pos_enu_m, dtype=float)
+        Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), float(plane_z))
+        if not math.isfinite(Z):
+            return False
+        g = cam_pos + Z * (R @ np.array([x1, x2, 1.0]))
+        self._t.append(float(t_s))
+        self._g.append((float(g[0]), float(g[1])))
+        while self._t[self._lo] < t_s - self.window_s:
+            self._lo += 1
+        if self._lo > 4096:  # drop what left the window
+            del self._t[:self._lo], self._g[:self._lo]
+            self._lo = 0
+        return True
+
+    def velocity(self) -> tuple[np.ndarray, float] | None:
+        """(east, north velocity, m/s; its std, m/s: the larger axis's) of the line through the window's points,
+        or None before the window holds half of ``window_s`` and 20 points."""
+        t = np.asarray(self._t[self._lo:])
+        if len(t) < 20 or t[-1] - t[0] < 0.5 * self.window_s:
+            return None
+        g = np.asarray(self._g[self._lo:])
+        tau = t - t.mean()
+        stt = float(tau @ tau)
+        v = (tau @ (g - g.mean(axis=0))) / stt
+        r = g - g.mean(axis=0) - np.outer(tau, v)
+        n_eff = min(float(len(t)), (t[-1] - t[0]) / _TRACK_CORRELATION_S)
+        var = float(np.max(np.mean(r * r, axis=0))) * len(t) / max(n_eff, 1.0) / stt
+        return v, math.sqrt(var)
+
+
 @dataclass(frozen=True, slots=True)
 class ShipHeadingStatus:
     """The ship's heading as the box shapes tell it (:class:`ShapeHeading`), for the log."""
@@ -1162,6 +1226,10 @@ class ShipModel:
         self._course_known_since = math.nan  # since when the course has been known without a break
         self._now = math.nan  # the time of the latest box (observe_box)
         self._held = (math.nan, math.nan)  # the course last followed and when (held_course_spread_deg_s)
+        sh = cfg.heading_from_shape
+        # the plain box centres' velocity (end_velocity_source: box_centres), for which end of the axis is the bow
+        self.track = BoxCentreTrack(camera, sh.end_velocity_window_s, sh.rate_hz, edge_px) \
+            if sh.end_from_velocity_std_floor_m_s is not None and sh.end_velocity_source == "box_centres" else None
 
     @property
     def outline(self) -> ShipOutline:
@@ -1244,11 +1312,20 @@ class ShipModel:
     def _velocity_end_weights(self, vel_enu, vel_std_m_s: float) -> np.ndarray | None:
         """The probability, for each of the shapes' headings (:attr:`ShapeHeading.courses_enu_rad`), that the
         ship's velocity has a positive component along it (a ship moves bow first): ``Phi(v . u / s)``, ``v``
-        the estimated horizontal velocity, ``u`` the heading's unit vector, ``s`` the velocity std
-        ``vel_std_m_s`` and ``end_from_velocity_std_floor_m_s`` in quadrature. A heading's and its opposite's
-        sum to 1. None when off, before the shapes are ready, or for a velocity std that is not a number."""
+        the horizontal velocity (``end_velocity_source``: the plain box centres' (:class:`BoxCentreTrack`), or
+        the estimated one, ``vel_enu``), ``u`` the heading's unit vector, ``s`` the velocity's std
+        (``vel_std_m_s`` for the estimate's) and ``end_from_velocity_std_floor_m_s`` in quadrature. A heading's
+        and its opposite's sum to 1. None when off, before the shapes are ready or the box centres' track is,
+        or for a velocity std that is not a number."""
         floor = self.cfg.heading_from_shape.end_from_velocity_std_floor_m_s
-        if floor is None or not self.shape.ready or not math.isfinite(vel_std_m_s):
+        if floor is None or not self.shape.ready:
+            return None
+        if self.track is not None:  # the plain box centres' velocity, not the estimator's
+            fit = self.track.velocity()
+            if fit is None:
+                return None
+            vel_enu, vel_std_m_s = fit
+        if not math.isfinite(vel_std_m_s):
             return None
         c = self.shape.courses_enu_rad
         along = float(vel_enu[0]) * np.cos(c) + float(vel_enu[1]) * np.sin(c)
@@ -1279,6 +1356,9 @@ class ShipModel:
                                                     lambda: self.course(vel_enu, vel_std_m_s), tracked_height_m,
                                                     self.size.scale, vel_enu, self.shape.reverse_log_ratio):
             self.size.outline = self.outline  # the size fit goes on with the layout in use
+        if self.track is not None:
+            self.track.observe(t_s, cam_pos_enu_m, R_enu_from_cam, float(np.asarray(ref_enu_m)[2]) + tracked_height_m,
+                               box_px)
         sh = self.shape
         self._now = float(t_s)
         follow = self._course_to_follow(t_s, vel_enu, vel_std_m_s)
