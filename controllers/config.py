@@ -277,9 +277,11 @@ class ShapeHeadingConfig(StrictModel):
                     "velocity, noise, nudges its ends a little either way. Ships unlike the class, whose box shapes "
                     "read with the class's outline pick an end at random (a patrol boat with its cabin "
                     "amidships), have it from how they move. Off (None: the box shapes and a course held alone) "
-                    "by default: the end it picks moves the corrected fixes along the ship, and so the estimated "
-                    "velocity itself, which a still ship's then follows; over the envelope's slow ships it did "
-                    "harm at 0.25 and 0.5 (README, 'The bow from a slow ship's velocity')")
+                    "by default: read from the estimate, the end it picks moves the corrected fixes along the ship, "
+                    "and so the velocity itself, which a still ship's then follows (over the envelope's slow ships "
+                    "it did harm at 0.25 and 0.5); read from the box centres, it turned bridge-forward ships, whose "
+                    "shapes' reversed end was the right superstructure for the class's outline, end for end "
+                    "(README, 'The bow from a slow ship's velocity')")
     end_velocity_source: Literal["estimate", "box_centres"] = Field(
         "box_centres",
         description="the velocity end_from_velocity_std_floor_m_s reads: the estimator's (which the corrected "
