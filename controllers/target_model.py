@@ -405,9 +405,8 @@ class ShapeHeading:
         b = np.asarray(box_px, dtype=float)
         if not c.enabled or t_s - self._last_t < 1.0 / c.rate_hz - 1e-9 or not np.all(np.isfinite(b)):
             return False
-        cam, e = self.camera, self.edge_px
-        if cam.width_px > 0 and (b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e
-                                 or b[3] >= cam.height_px - 1.0 - e):
+        cam = self.camera
+        if _at_image_border(cam, b, self.edge_px):
             return False
         pred = predicted_boxes_px(self.outline, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, self.courses_enu_rad)
         if not np.all(np.isfinite(pred)):
@@ -661,6 +660,14 @@ class ShapeHeading:
         return min(d, math.pi - d)
 
 
+def _at_image_border(camera: PinholeCamera, box: np.ndarray, edge_px: float) -> bool:
+    """A box (u0, v0, u1, v1) within ``edge_px`` of the image's border (the ship may be cut there: its size and
+    centre are not the whole ship's); never for a camera without an image size."""
+    e, b = edge_px, box
+    return camera.width_px > 0 and bool(b[0] <= e or b[1] <= e or b[2] >= camera.width_px - 1.0 - e
+                                        or b[3] >= camera.height_px - 1.0 - e)
+
+
 def _course_likelihood(courses: np.ndarray, course: float, sig_rad: float) -> np.ndarray:
     """The Gaussian likelihood (unnormalised) of each of ``courses`` under ``course`` with std ``sig_rad``,
     the difference taken round the circle."""
@@ -858,11 +865,10 @@ class ShipSize:
         if not self.takes_boxes(t_s):
             return False
         b = np.asarray(box_px, dtype=float)
-        cam, e = self.camera, self.edge_px
+        cam = self.camera
         if b.shape != (4,) or not np.isfinite(b).all() or b[2] - b[0] < 2.0 or b[3] - b[1] < 2.0:
             return False
-        if cam.width_px > 0 and (b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e
-                                 or b[3] >= cam.height_px - 1.0 - e):
+        if _at_image_border(cam, b, self.edge_px):
             return False  # a box at the image's edge is cut: not the ship's size
         d = np.asarray(ref_enu_m, float) - np.asarray(cam_pos_enu_m, float)
         if math.sqrt(d.dot(d)) < cfg.min_range_m:  # (np.linalg.norm's numbers, without its wrapper)
@@ -993,9 +999,8 @@ class LayoutFit:
             if course_enu_rad is None:
                 return False
         b = np.asarray(box_px, dtype=float)
-        cam, e = self.camera, self.edge_px
-        if b.shape != (4,) or not np.isfinite(b).all() or (cam.width_px > 0 and (
-                b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e or b[3] >= cam.height_px - 1.0 - e)):
+        cam = self.camera
+        if b.shape != (4,) or not np.isfinite(b).all() or _at_image_border(cam, b, self.edge_px):
             return False
         ref = np.asarray(ref_enu_m, dtype=float)
         cam_pos = np.asarray(cam_pos_enu_m, dtype=float)
@@ -1151,9 +1156,8 @@ class BoxCentreTrack:
         if self._t and t_s - self._t[-1] < 1.0 / self.rate_hz - 1e-9:
             return False
         b = np.asarray(box_px, dtype=float)
-        cam, e = self.camera, self.edge_px
-        if not np.isfinite(b).all() or (cam.width_px > 0 and (
-                b[0] <= e or b[1] <= e or b[2] >= cam.width_px - 1.0 - e or b[3] >= cam.height_px - 1.0 - e)):
+        cam = self.camera
+        if not np.isfinite(b).all() or _at_image_border(cam, b, self.edge_px):
             return False
         x1, x2 = (0.5 * (b[0] + b[2]) - cam.cx) / cam.fx, (0.5 * (b[1] + b[3]) - cam.cy) / cam.fy
         R = np.asarray(R_enu_from_cam, dtype=float)
