@@ -660,12 +660,22 @@ class ShapeHeading:
         return min(d, math.pi - d)
 
 
-def _at_image_border(camera: PinholeCamera, box: np.ndarray, edge_px: float) -> bool:
-    """A box (u0, v0, u1, v1) within ``edge_px`` of the image's border (the ship may be cut there: its size and
-    centre are not the whole ship's); never for a camera without an image size."""
-    e, b = edge_px, box
+def _at_image_border(camera: PinholeCamera, b: np.ndarray, e: float) -> bool:
+    """A box ``b`` (u0, v0, u1, v1) within ``e`` px of the image's border (the ship may be cut there: its size
+    and centre are not the whole ship's); never for a camera without an image size."""
     return camera.width_px > 0 and bool(b[0] <= e or b[1] <= e or b[2] >= camera.width_px - 1.0 - e
                                         or b[3] >= camera.height_px - 1.0 - e)
+
+
+def _pixel_on_plane(camera: PinholeCamera, uv, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
+    """(the point (3,) where pixel ``uv``'s ray meets the plane z = ``plane_z``, its normalised image
+    coordinates x1, x2), or None where the ray does not come down to it
+    (:func:`~controllers.camera_model.depth_on_plane`)."""
+    x1, x2 = (float(uv[0]) - camera.cx) / camera.fx, (float(uv[1]) - camera.cy) / camera.fy
+    Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), plane_z)
+    if not math.isfinite(Z):
+        return None
+    return cam_pos + Z * (R @ np.array([x1, x2, 1.0])), x1, x2
 
 
 def _course_likelihood(courses: np.ndarray, course: float, sig_rad: float) -> np.ndarray:
@@ -1068,13 +1078,13 @@ class LayoutFit:
         """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v: m per px,
         :func:`controllers.ukf.ground_from_pixel_jacobian`) or None where the ray does not come down to it
         (:func:`~controllers.camera_model.depth_on_plane`)."""
-        cam = self.camera
-        x1, x2 = (float(uv[0]) - cam.cx) / cam.fx, (float(uv[1]) - cam.cy) / cam.fy
-        Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), plane_z)
-        if not math.isfinite(Z):
+        hit = _pixel_on_plane(self.camera, uv, cam_pos, R, plane_z)
+        if hit is None:
             return None
+        g, x1, x2 = hit
+        cam = self.camera
         J = ground_from_pixel_jacobian(x1, x2, R, float(cam_pos[2]), plane_z, cam.fx, cam.fy)
-        return (cam_pos + Z * (R @ np.array([x1, x2, 1.0])))[:2], J[:2, 0], J[:2, 1]
+        return g[:2], J[:2, 0], J[:2, 1]
 
     def misfits(self) -> tuple[float, float, int] | None:
         """(each layout's weighted sum of squares about its best track, the boxes in the window), or None."""
@@ -1149,6 +1159,7 @@ class BoxCentreTrack:
         self._t: list[float] = []
         self._g: list[tuple[float, float]] = []
         self._lo = 0  # the window's first point
+        self._fit: tuple[np.ndarray, float] | None = None  # velocity()'s answer until the next point
 
     def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, plane_z: float, box_px) -> bool:
         """Take one box (u0, v0, u1, v1) unless too soon after the last one, at the image border or not
@@ -1156,16 +1167,14 @@ class BoxCentreTrack:
         if self._t and t_s - self._t[-1] < 1.0 / self.rate_hz - 1e-9:
             return False
         b = np.asarray(box_px, dtype=float)
-        cam = self.camera
-        if not np.isfinite(b).all() or _at_image_border(cam, b, self.edge_px):
+        if not np.isfinite(b).all() or _at_image_border(self.camera, b, self.edge_px):
             return False
-        x1, x2 = (0.5 * (b[0] + b[2]) - cam.cx) / cam.fx, (0.5 * (b[1] + b[3]) - cam.cy) / cam.fy
-        R = np.asarray(R_enu_from_cam, dtype=float)
-        cam_pos = np.asarray(cam_pos_enu_m, dtype=float)
-        Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), float(plane_z))
-        if not math.isfinite(Z):
+        hit = _pixel_on_plane(self.camera, 0.5 * (b[0:2] + b[2:4]), np.asarray(cam_pos_enu_m, dtype=float),
+                              np.asarray(R_enu_from_cam, dtype=float), float(plane_z))
+        if hit is None:
             return False
-        g = cam_pos + Z * (R @ np.array([x1, x2, 1.0]))
+        g = hit[0]
+        self._fit = None
         self._t.append(float(t_s))
         self._g.append((float(g[0]), float(g[1])))
         while self._t[self._lo] < t_s - self.window_s:
@@ -1177,7 +1186,10 @@ class BoxCentreTrack:
 
     def velocity(self) -> tuple[np.ndarray, float] | None:
         """(east, north velocity, m/s; its std, m/s: the larger axis's) of the line through the window's points,
-        or None before the window holds half of ``window_s`` and 20 points."""
+        or None before the window holds half of ``window_s`` and 20 points. (Worked out once per point taken:
+        the correction asks for it with every detection.)"""
+        if self._fit is not None:
+            return self._fit
         t = np.asarray(self._t[self._lo:])
         if len(t) < 20 or t[-1] - t[0] < 0.5 * self.window_s:
             return None
@@ -1188,7 +1200,8 @@ class BoxCentreTrack:
         r = g - g.mean(axis=0) - np.outer(tau, v)
         n_eff = min(float(len(t)), (t[-1] - t[0]) / _TRACK_CORRELATION_S)
         var = float(np.max(np.mean(r * r, axis=0))) * len(t) / max(n_eff, 1.0) / stt
-        return v, math.sqrt(var)
+        self._fit = (v, math.sqrt(var))
+        return self._fit
 
 
 @dataclass(frozen=True, slots=True)
