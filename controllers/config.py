@@ -591,6 +591,40 @@ class CtUkfConfig(StrictModel):
                           "3.42 m; speed steps alike")
 
 
+class TurnFromCourseConfig(StrictModel):
+    """A turning ship seen through a constant-velocity estimator (the paper's UKF; ``controllers.course_turn``):
+    the turn rate from the slope of the estimate's course, and the filter's steady lag in the turn (its
+    velocity a few degrees and its position about a metre behind, from its own covariance) taken out of the
+    state the perception, the pointing and the guidance read; the guidance then predicts the ship along the
+    turn. The logged estimate (``/fsw/estimate``) stays the filter's. An estimator that estimates the turn
+    itself (``ct_ukf``, ``imm``) is left alone."""
+
+    enabled: bool = Field(False, description="on: find the turn and take the lag out; off: the estimate as it is")
+    window_s: float = Field(
+        30.0, gt=0, le=600, description="the course history fitted with a straight line (course against time), s")
+    min_span_frac: float = Field(
+        0.8, gt=0, le=1, description="fit only once the history spans this share of window_s")
+    sample_s: float = Field(0.5, gt=0, le=10, description="one course sample per this, s")
+    min_speed_m_s: float = Field(
+        3.0, ge=0, le=50,
+        description="the estimated horizontal speed under which the course says nothing (the history restarts), "
+                    "m/s")
+    min_turn_deg_s: float = Field(
+        0.3, ge=0, le=20, description="a slope under this is no turn, deg/s")
+    max_turn_deg_s: float = Field(3.0, gt=0, le=20, description="the turn rate's cap, deg/s")
+    significance: float = Field(
+        3.0, ge=0, le=100, description="the slope must be this many of its stds (from the course's scatter about "
+                                       "the line) to be a turn")
+    residual_corr_s: float = Field(
+        5.0, gt=0, le=600,
+        description="the course residuals count as one independent residual per this (the estimate's course is "
+                    "smooth, its errors correlated over seconds), s")
+    max_lag_s: float = Field(
+        10.0, gt=0, le=120,
+        description="a lag correction implying a filter lag over this (velocity: lag x acceleration, position: "
+                    "lag^2 x acceleration / 2) is not applied (a covariance far from steady state), s")
+
+
 class ImmConfig(StrictModel):
     """The interacting multiple model estimator (``controllers.estimator: imm``, ``controllers.imm``): the
     paper's UKF (constant velocity) and the manoeuvring-ship UKF (``ct_ukf``: turn rate and along-track
@@ -1093,6 +1127,7 @@ class Controllers(StrictModel):
     ukf: UkfConfig = Field(default_factory=UkfConfig)
     ct_ukf: CtUkfConfig = Field(default_factory=CtUkfConfig)
     imm: ImmConfig = Field(default_factory=ImmConfig)
+    turn_from_course: TurnFromCourseConfig = Field(default_factory=TurnFromCourseConfig)
     target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
     detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
     ibvs: IbvsConfig = Field(default_factory=IbvsConfig)

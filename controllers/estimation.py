@@ -30,6 +30,7 @@ import operator
 import numpy as np
 
 from controllers.camera_model import CameraMotion
+from controllers.course_turn import CourseTurn
 from controllers.messages import DetectionFix, DetectionFusion, FusionReason, FusionResult, TargetEstimate, TargetState
 from fwsim import topics
 from fwsim.messages import Measurements
@@ -43,7 +44,7 @@ _NAN3.setflags(write=False)
 class Estimation:
     """The estimator's life cycle (see the module text); ``filter`` implements ``TargetEstimator``."""
 
-    def __init__(self, filter, min_range_m: float, lock_detections: int, recorder):
+    def __init__(self, filter, min_range_m: float, lock_detections: int, recorder, turn_from_course=None):
         self.filter = filter
         self.label = getattr(filter, "label", type(filter).__name__)  # its name in the events
         self.min_range_m = float(min_range_m)
@@ -52,6 +53,9 @@ class Estimation:
         self._running = False  # the filter ran at the start of this tick (it may reset itself in it)
         self._last: tuple[float, np.ndarray, np.ndarray] | None = None  # (t_s, pos, vel) of its last estimate
         self._status = None
+        # a turning ship through a constant-velocity filter (controllers.course_turn); None: off
+        self._turn_cfg = turn_from_course if turn_from_course is not None and turn_from_course.enabled else None
+        self.turn = CourseTurn(self._turn_cfg) if self._turn_cfg is not None else None
 
     # ------------------------------------------------------------------ steps
     def predict(self, nav: Measurements, cam: CameraMotion | None) -> TargetState:
@@ -79,6 +83,8 @@ class Estimation:
                                    "target left the camera's front half-space); extrapolating the last estimate")
         elif fix.locked and cam is not None and fix.new:
             result = self._restart(nav, fix, cam)
+        if self.turn is not None and result is not None and result.used and self.filter.initialised:
+            self._observe_turn(t)
         state, est = self._state(t)
         if est is not None:
             self._last = (t, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))
@@ -89,8 +95,18 @@ class Estimation:
         return state
 
     # ------------------------------------------------------------------ internals
+    def _observe_turn(self, t_s: float) -> None:
+        """Give the course-turn finder this fused estimate (a filter that estimates the turn itself: skipped)."""
+        est = self.filter.estimate()
+        if hasattr(est, "turn_rate_rad_s"):
+            return
+        vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
+        self.turn.observe(t_s, est.pos_enu_m, est.vel_enu_m_s, vel_std, getattr(self.filter, "pos_vel_cov", None))
+
     def _initialise(self, fix: DetectionFix, cam: CameraMotion) -> str:
         """Start the filter from this detection; '' when it did, else why not (e.g. the ray misses the sea)."""
+        if self._turn_cfg is not None:
+            self.turn = CourseTurn(self._turn_cfg)  # a new start: no history of its course
         try:
             self.filter.initialise(fix, cam)
         except ValueError as exc:
@@ -124,6 +140,9 @@ class Estimation:
             est = self.filter.estimate()
             vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
             turn, accel = float(getattr(est, "turn_rate_rad_s", 0.0)), float(getattr(est, "accel_along_m_s2", 0.0))
+            turned = self.turn.state(t_s) if self.turn is not None else None
+            if turned is not None:  # the turn found in the course, the filter's lag taken out
+                return TargetState(t_s, "estimator", turned[0], turned[1], vel_std, h, turned[2], 0.0), est
             return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,
                                turn if math.isfinite(turn) else 0.0, accel if math.isfinite(accel) else 0.0), est
         if self._last is not None:

@@ -1,0 +1,160 @@
+"""A turning ship seen through a constant-velocity estimator: its turn rate from the estimate's course history,
+and the estimator's lag in the turn taken out (``controllers.turn_from_course``).
+
+The paper's UKF models the ship at constant velocity. In a steady turn (turn
+rate ``w``, so an acceleration ``a = w x v`` across the track) such a filter
+settles behind the ship: its velocity trails by a constant angle and its
+position by a constant distance. For a Kalman filter that measures position
+(the UKF, linearised about the ship: its pixels are the ship's position seen
+from a known camera) the steady state of the error ``e = truth - estimate``
+under a constant ``a`` is, with the gains ``K_p = P_pp R^-1`` and
+``K_v = P_vp R^-1``,
+
+    e_p = K_v^-1 a,   e_v = K_p e_p = P_pp P_vp^-1 a = M a,
+
+and the filter's own steady-state Riccati equation for the position block
+(``P_pv + P_vp = P_pp R^-1 P_pp``) gives ``R`` from ``P``, so that
+``e_p = P_pp (P_pv + P_vp)^-1 P_pp P_vp^-1 a`` (``~ M M a / 2`` when ``P_pv``
+is symmetric). ``M`` is a time: ``tr(P_pp) / tr(P_pv)`` is the filter's lag,
+about 4 s for the UKF's default tuning in a loiter (velocity 4-6 deg behind
+a ship turning at 1-1.5 deg/s, tests/test_course_turn.py against the
+analytic circle).
+
+The turn rate itself is the slope of the estimate's course over the last
+``window_s`` (a lagging course turns at the ship's rate): a weighted
+straight-line fit, taken only while the ship is fast enough for its course to
+mean something (``min_speed_m_s``), and only when the slope stands out of the
+course's scatter about the line (``significance``, with one independent
+residual per ``residual_corr_s``) and is at least ``min_turn_deg_s``: a
+straight ship keeps the filter's estimate untouched.
+
+With a turn found, :meth:`CourseTurn.state` gives the estimate with the lag
+taken out, carried along the turn from the last fused detection (the coast of
+the last seconds follows the turn, not the trailing straight line), and the
+turn rate, for the guidance's prediction of where the ship will be
+(``controllers.guidance``) and the perception's heading of the ship.
+
+Nothing here reads the truth (DESIGN.md section 1).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+__all__ = ["CourseTurn", "lag_matrices"]
+
+
+def lag_matrices(pos_vel_cov) -> tuple[np.ndarray, np.ndarray] | None:
+    """(the velocity's and the position's steady-state lag per unit acceleration, horizontal 2 x 2: ``e_v = Mv
+    a``, ``e_p = Mp a``, s and s^2) from a constant-velocity filter's position-velocity covariance (6 x 6:
+    position then velocity, ENU); None when the cross-covariance is not invertible or the lags not finite."""
+    P = np.asarray(pos_vel_cov, dtype=float)
+    Ppp, Ppv = P[0:2, 0:2], P[0:2, 3:5]
+    Pvp = Ppv.T
+    try:
+        mv = Ppp @ np.linalg.inv(Pvp)
+        mp = Ppp @ np.linalg.inv(Ppv + Pvp) @ mv
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.isfinite(mv).all() and np.isfinite(mp).all()):
+        return None
+    return mv, mp
+
+
+class CourseTurn:
+    """The turn rate from an estimate's course history and the lag-corrected estimate (see the module text).
+
+    Feed it every fused estimate with :meth:`observe`; :meth:`state` gives the state to use at any time."""
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self._hist: deque[tuple[float, float, float]] = deque()  # (t, unwrapped course, weight)
+        self._last_t = -math.inf
+        self.turn_rad_s = 0.0  # the turn rate in use (ENU, counter-clockwise positive); 0: none found
+        self.fit_rad_s = math.nan  # the last fit's slope (NaN: no fit), whether or not in use
+        self._fused: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, corrected pos, corrected vel)
+
+    def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov) -> None:
+        """A fused estimate at ``t_s``: its position, velocity, horizontal velocity std and position-velocity
+        covariance (6 x 6, or None when the filter has none)."""
+        c = self.cfg
+        vel = np.asarray(vel_enu, dtype=float)
+        speed = math.hypot(float(vel[0]), float(vel[1]))
+        if t_s - self._last_t >= c.sample_s:
+            self._last_t = t_s
+            if speed < c.min_speed_m_s or not math.isfinite(speed):
+                self._hist.clear()  # a course that means nothing breaks the history
+            else:
+                course = math.atan2(float(vel[1]), float(vel[0]))
+                if self._hist:
+                    prev = self._hist[-1][1]
+                    course = prev + (course - prev + math.pi) % (2.0 * math.pi) - math.pi
+                sig = max(float(vel_std_m_s) / speed, 1e-3) if math.isfinite(vel_std_m_s) else 1.0
+                self._hist.append((t_s, course, 1.0 / (sig * sig)))
+            while self._hist and self._hist[0][0] < t_s - c.window_s:
+                self._hist.popleft()
+            self.turn_rad_s = self._fit()
+        self._fused = None
+        if self.turn_rad_s != 0.0 and pos_vel_cov is not None:
+            lags = lag_matrices(pos_vel_cov)
+            if lags is not None:
+                pos = np.array(pos_enu, dtype=float)
+                mv, mp = lags
+                a = self.turn_rad_s * np.array([-vel[1], vel[0]])  # w x v, horizontal
+                dv, dp = mv @ a, mp @ a
+                cap = c.max_lag_s
+                if math.hypot(*dv) <= cap * math.hypot(*a) and math.hypot(*dp) <= 0.5 * cap * cap * math.hypot(*a):
+                    v2 = vel.copy()
+                    v2[:2] += dv
+                    pos[:2] += dp
+                    self._fused = (t_s, pos, v2)
+
+    def _fit(self) -> float:
+        """The course's slope over the window when it stands out (else 0), rad/s."""
+        c = self.cfg
+        self.fit_rad_s = math.nan
+        n = len(self._hist)
+        if n < 3:
+            return 0.0
+        h = np.array(self._hist)
+        t, y, w = h[:, 0], h[:, 1], h[:, 2]
+        span = float(t[-1] - t[0])
+        if span < c.min_span_frac * c.window_s:
+            return 0.0
+        sw = w.sum()
+        tm, ym = (w * t).sum() / sw, (w * y).sum() / sw
+        stt = (w * (t - tm) ** 2).sum()
+        if not stt > 0.0:
+            return 0.0
+        slope = float((w * (t - tm) * (y - ym)).sum() / stt)
+        self.fit_rad_s = slope
+        res = y - ym - slope * (t - tm)
+        # the slope's std from the residuals' weighted variance, with one independent residual per
+        # residual_corr_s (the estimate's course is smooth: its neighbours' errors are one error)
+        n_eff = min(max(span / c.residual_corr_s, 3.0), float(n))
+        var = float((w * res * res).sum() / sw) * n_eff / (n_eff - 2.0)
+        slope_std = math.sqrt(var / (n_eff * stt / sw))
+        turn = abs(slope)
+        if turn < math.radians(c.min_turn_deg_s) or turn < c.significance * slope_std:
+            return 0.0
+        return math.copysign(min(turn, math.radians(c.max_turn_deg_s)), slope)
+
+    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(position, velocity, turn rate) at ``t_s``: the last fused estimate with the lag taken out, carried
+        along the turn; None when no turn is in use (the estimate stands as it is)."""
+        if self._fused is None or self.turn_rad_s == 0.0:
+            return None
+        t0, pos, vel = self._fused
+        w = self.turn_rad_s
+        dt = t_s - t0
+        # the circle at constant speed: v(t) = R(w t) v0, p(t) = p0 + (sin(w t) / w) v0 + ((1 - cos(w t)) / w) z x v0
+        s, k = math.sin(w * dt), math.cos(w * dt)
+        vx, vy = float(vel[0]), float(vel[1])
+        p, v = pos.copy(), vel.copy()
+        p[0] += (s * vx - (1.0 - k) * vy) / w
+        p[1] += (s * vy + (1.0 - k) * vx) / w
+        p[2] += float(vel[2]) * dt
+        v[0], v[1] = k * vx - s * vy, s * vx + k * vy
+        return p, v, w

@@ -1,0 +1,190 @@
+"""A turning ship through the paper's constant-velocity UKF (controllers.course_turn, controllers.turn_from_course).
+
+Oracles: the analytic circle of a ship turning at 1-1.5 deg/s seen from an
+orbiting camera (tests/test_manoeuvre_estimator.py's TurningShip), the UKF's own
+lag measured against it, a straight line, and synthetic course histories with a
+known slope.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from test_manoeuvre_estimator import TurningShip
+from test_ukf import CAM, MOUNT
+
+from controllers.config import TurnFromCourseConfig
+from controllers.course_turn import CourseTurn, lag_matrices
+from controllers.estimation import Estimation
+from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
+from fwsim import SCENARIO_DIR
+from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+
+ON = TurnFromCourseConfig(enabled=True)
+
+
+def fly(turn_deg_s: float, duration_s: float = 150.0, seed: int = 3, ship_speed: float = 5.0):
+    """The UKF and a CourseTurn on 30 Hz measurements of a ship turning at ``turn_deg_s`` -> rows after 60 s:
+    (t, the UKF's velocity error (2), its lag model's (2), position error (2), its model's (2), the corrected
+    state's position and velocity errors, the UKF's, the turn in use), and the CourseTurn."""
+    truth = TurningShip(turn_deg_s=turn_deg_s, ship_speed=ship_speed)
+    ukf = UkfTargetEstimator(CAM, UkfConfig())
+    turn = CourseTurn(ON)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for k in range(int(duration_s * 30) + 1):
+        t = k / 30.0
+        if k % 3 == 0:
+            gnss_err = rng.normal(0, 0.5, 3)
+        meas = truth.sample(t, rng, gnss_err=gnss_err)
+        est = ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+        turn.observe(t, est.pos_enu_m, est.vel_enu_m_s, float(max(est.vel_std_m_s[:2])), ukf.pos_vel_cov)
+        if t < 60.0:
+            continue
+        p_true, v_true = truth.ship(t)[:2], truth.ship_vel(t)[:2]
+        a = truth.w_enu * np.array([-v_true[1], v_true[0]])
+        mv, mp = lag_matrices(ukf.pos_vel_cov)
+        state = turn.state(t)
+        p, v = (est.pos_enu_m, est.vel_enu_m_s) if state is None else state[:2]
+        rows.append(np.concatenate([[t], v_true - est.vel_enu_m_s[:2], mv @ a, p_true - est.pos_enu_m[:2], mp @ a,
+                                    [np.linalg.norm(p[:2] - p_true), np.linalg.norm(v[:2] - v_true),
+                                     np.linalg.norm(est.pos_enu_m[:2] - p_true),
+                                     np.linalg.norm(est.vel_enu_m_s[:2] - v_true), turn.turn_rad_s]]))
+    return np.array(rows), turn
+
+
+def rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+@pytest.mark.parametrize("turn_deg_s", [1.5, -1.0])
+def test_the_covariance_gives_the_ukfs_own_lag_in_a_steady_turn(turn_deg_s):
+    """The UKF trails a turning ship by a constant angle; lag_matrices(P) predicts the trailing velocity and
+    position from the acceleration w x v: the model's error against the measured lag is a fraction of it."""
+    r, _ = fly(turn_deg_s)
+    ev, ev_model, ep, ep_model = r[:, 1:3], r[:, 3:5], r[:, 5:7], r[:, 7:9]
+    lag_v = rms(np.linalg.norm(ev, axis=1))
+    assert lag_v > 0.25  # the lag is there to model: 5 m/s at 1-1.5 deg/s, 3-6 deg behind
+    assert rms(np.linalg.norm(ev - ev_model, axis=1)) < 0.3 * lag_v
+    # the position's lag is noisier (the pixel noise is of its size): the model takes most of it
+    assert rms(np.linalg.norm(ep - ep_model, axis=1)) < 0.75 * rms(np.linalg.norm(ep, axis=1))
+
+
+@pytest.mark.parametrize("turn_deg_s", [1.5, 1.0, -1.0])
+def test_the_turn_is_found_and_the_lag_taken_out(turn_deg_s):
+    r, _ = fly(turn_deg_s)
+    used = r[:, 13]
+    # the turn rate (ENU, counter-clockwise; the ship's turn_deg_s is clockwise) within 0.1 deg/s all along
+    assert np.all(np.abs(np.degrees(used) + turn_deg_s) < 0.1)
+    pos_c, vel_c, pos_u, vel_u = r[:, 9], r[:, 10], r[:, 11], r[:, 12]
+    assert rms(vel_c) < 0.4 * rms(vel_u)
+    assert rms(pos_c) < 0.7 * rms(pos_u)
+
+
+def test_a_straight_ship_is_left_alone():
+    r, turn = fly(0.0)
+    assert np.all(r[:, 13] == 0.0)
+    assert turn.state(150.0) is None
+    assert abs(math.degrees(turn.fit_rad_s)) < 0.1  # the slope was fitted, and found to be no turn
+
+
+def test_a_slow_ship_gets_no_turn():
+    """Under min_speed_m_s the course says nothing: no history, no turn."""
+    r, turn = fly(1.5, duration_s=90.0, ship_speed=2.0)
+    assert np.all(r[:, 13] == 0.0) and math.isnan(turn.fit_rad_s)
+
+
+def feed(turn: CourseTurn, slope_rad_s: float, noise_rad: float, n_s: float = 40.0, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    for t in np.arange(0.0, n_s, 0.1):
+        c = 0.3 + slope_rad_s * t + rng.normal(0.0, noise_rad)
+        turn.observe(t, np.zeros(3), 6.0 * np.array([math.cos(c), math.sin(c), 0.0]), 0.2, None)
+
+
+def test_the_slope_must_stand_out_of_the_courses_scatter():
+    """The same slope is a turn in a quiet course and not in a noisy one; a slope under min_turn_deg_s is none;
+    the rate is capped at max_turn_deg_s; across the +-180 deg wrap the course is unwrapped."""
+    quiet, noisy, small, fast = (CourseTurn(ON) for _ in range(4))
+    feed(quiet, math.radians(0.8), math.radians(0.5))
+    feed(noisy, math.radians(0.8), math.radians(20.0))
+    feed(small, math.radians(0.2), 0.0)
+    feed(fast, math.radians(5.0), math.radians(0.5))
+    assert quiet.turn_rad_s == pytest.approx(math.radians(0.8), abs=math.radians(0.05))
+    assert noisy.turn_rad_s == 0.0 and math.isfinite(noisy.fit_rad_s)
+    assert small.turn_rad_s == 0.0 and small.fit_rad_s == pytest.approx(math.radians(0.2), rel=1e-6)
+    assert fast.turn_rad_s == pytest.approx(math.radians(ON.max_turn_deg_s))
+    # no covariance given: the turn is found, but no lag to take out, so the estimate stands
+    assert quiet.state(40.0) is None
+
+
+def test_the_state_is_carried_along_the_circle():
+    """From the last fused estimate, state() follows the circle of the turn rate at constant speed."""
+    turn = CourseTurn(ON)
+    feed(turn, math.radians(1.2), math.radians(0.2))
+    w = turn.turn_rad_s
+    p0, v0 = np.array([10.0, -5.0, 3.0]), np.array([4.0, 3.0, 0.0])
+    turn._fused = (40.0, p0, v0)  # a fused, lag-corrected state
+    for dt in (0.0, 0.7, 5.0, 30.0):
+        p, v, rate = turn.state(40.0 + dt)
+        c0, speed = math.atan2(v0[1], v0[0]), 5.0
+        c = c0 + w * dt
+        exact = p0[:2] + speed / w * np.array([math.sin(c) - math.sin(c0), math.cos(c0) - math.cos(c)])
+        assert np.allclose(p[:2], exact, atol=1e-9) and p[2] == 3.0
+        assert np.allclose(v[:2], speed * np.array([math.cos(c), math.sin(c)]), atol=1e-12) and rate == w
+
+
+class _Recorder:
+    def __init__(self):
+        self.events = []
+
+    def log(self, topic, msg):
+        pass
+
+    def event(self, text):
+        self.events.append(text)
+
+
+def test_the_estimation_block_gives_the_turned_state_to_its_readers():
+    """Through the estimation block (as the flight software runs it): with the turn on, the state the
+    perception and the guidance read has the turn rate and less error than the filter's; off, it is the
+    filter's own, number for number."""
+    truth = TurningShip(turn_deg_s=1.5)
+    rows = []
+    blocks = {on: Estimation(UkfTargetEstimator(CAM, UkfConfig()), 120.0, 5, _Recorder(),
+                             TurnFromCourseConfig(enabled=on)) for on in (False, True)}
+    rngs = {on: np.random.default_rng(5) for on in blocks}
+    for k in range(int(120 * 30) + 1):
+        t = k / 30.0
+        row = [t]
+        for on, block in blocks.items():
+            meas = truth.sample(t, rngs[on])
+            cam = CameraMotion.from_measurements(meas, MOUNT)
+            fix = dataclasses.replace(fix_from_measurements(meas), locked=True, lock_now=k == 0)
+            block.predict(meas, cam)
+            state = block.update(meas, cam, fix)
+            est = block.filter.estimate()
+            row += [np.linalg.norm(state.vel_enu_m_s[:2] - truth.ship_vel(t)[:2]), state.turn_rate_rad_s,
+                    float(np.max(np.abs(state.vel_enu_m_s - est.vel_enu_m_s)))]
+        rows.append(row)
+    r = np.array(rows)
+    late = r[:, 0] >= 60.0
+    off, on = r[late, 1:4], r[late, 4:7]
+    assert np.all(off[:, 1] == 0.0) and np.all(off[:, 2] == 0.0)  # off: the filter's own state
+    assert np.all(np.abs(np.degrees(on[:, 1]) + 1.5) < 0.1)
+    assert rms(on[:, 0]) < 0.4 * rms(off[:, 0])
+
+
+def test_the_scenario_turns_it_on_and_a_bad_setting_is_one_line():
+    scenario, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"controllers.turn_from_course.enabled": True})
+    from controllers.mission import FlightSoftware
+    fsw = FlightSoftware(scenario.controllers, scenario.initial, scenario.camera)
+    assert fsw.estimation.turn is not None and fsw.estimation.turn.cfg.window_s == 30.0
+    default, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml")
+    assert FlightSoftware(default.controllers, default.initial, default.camera).estimation.turn is None
+    base = "name: x\nduration_s: 10\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n"
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(base, "x.yaml", {"controllers.turn_from_course.window_s": -3})
+    text = str(exc.value)
+    assert "\n" not in text and text.startswith("x.yaml: controllers.turn_from_course.window_s"), text
