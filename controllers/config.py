@@ -601,7 +601,11 @@ class TurnFromCourseConfig(StrictModel):
 
     enabled: bool = Field(False, description="on: find the turn and take the lag out; off: the estimate as it is")
     window_s: float = Field(
-        30.0, gt=0, le=600, description="the course history fitted with a straight line (course against time), s")
+        15.0, gt=0, le=600,
+        description="the course history fitted with a straight line (course against time), s: longer finds a "
+                    "steady turn's rate more surely, shorter follows a zigzag's reversals (against the analytic "
+                    "paths of tests/test_course_turn.py, 30 s made a +-30 deg, 60 s zigzag's velocity error worse "
+                    "than none, 15 s better)")
     min_span_frac: float = Field(
         0.8, gt=0, le=1, description="fit only once the history spans this share of window_s")
     sample_s: float = Field(0.5, gt=0, le=10, description="one course sample per this, s")
@@ -619,6 +623,12 @@ class TurnFromCourseConfig(StrictModel):
         5.0, gt=0, le=600,
         description="the course residuals count as one independent residual per this (the estimate's course is "
                     "smooth, its errors correlated over seconds), s")
+    hold_tgo_s: float = Field(
+        15.0, ge=0, le=600,
+        description="while the camera closes on the estimate fast enough to reach it within this time (range / "
+                    "closing speed: a dive), s, hold the turn rate found before (the dive's box-centre errors turn "
+                    "the estimate's course: at 1651 s70 the fit went from 1.2 to 2.4 deg/s in the last 10 s, the "
+                    "ship's 1.5); released when the time to go exceeds twice this; 0: never hold")
     max_lag_s: float = Field(
         10.0, gt=0, le=120,
         description="a lag correction implying a filter lag over this (velocity: lag x acceleration, position: "

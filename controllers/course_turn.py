@@ -28,6 +28,12 @@ course's scatter about the line (``significance``, with one independent
 residual per ``residual_corr_s``) and is at least ``min_turn_deg_s``: a
 straight ship keeps the filter's estimate untouched.
 
+While the camera closes on the ship within ``hold_tgo_s`` (a dive) the turn
+rate found before is held, not fitted: the dive's fast-changing view brings
+box-centre errors that turn the estimate's course (as
+``controllers.ct_ukf``'s hold, for the same reason). The lag is still taken
+from the filter's covariance of the moment.
+
 With a turn found, :meth:`CourseTurn.state` gives the estimate with the lag
 taken out, carried along the turn from the last fused detection (the coast of
 the last seconds follows the turn, not the trailing straight line), and the
@@ -75,14 +81,22 @@ class CourseTurn:
         self.turn_rad_s = 0.0  # the turn rate in use (ENU, counter-clockwise positive); 0: none found
         self.fit_rad_s = math.nan  # the last fit's slope (NaN: no fit), whether or not in use
         self._fused: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, corrected pos, corrected vel)
+        self.held = False  # the turn rate is held (hold_tgo_s: the camera closes in)
 
-    def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov) -> None:
+    def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov,
+                tgo_s: float = math.inf) -> None:
         """A fused estimate at ``t_s``: its position, velocity, horizontal velocity std and position-velocity
-        covariance (6 x 6, or None when the filter has none)."""
+        covariance (6 x 6, or None when the filter has none); ``tgo_s``: the time in which the camera closes on
+        it (range over closing speed; inf when it does not close), for the hold (``hold_tgo_s``)."""
         c = self.cfg
         vel = np.asarray(vel_enu, dtype=float)
         speed = math.hypot(float(vel[0]), float(vel[1]))
-        if t_s - self._last_t >= c.sample_s:
+        if c.hold_tgo_s > 0.0:
+            if not self.held and tgo_s < c.hold_tgo_s:
+                self.held = True
+            elif self.held and tgo_s > 2.0 * c.hold_tgo_s:
+                self.held = False
+        if not self.held and t_s - self._last_t >= c.sample_s:
             self._last_t = t_s
             if speed < c.min_speed_m_s or not math.isfinite(speed):
                 self._hist.clear()  # a course that means nothing breaks the history

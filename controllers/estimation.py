@@ -84,7 +84,7 @@ class Estimation:
         elif fix.locked and cam is not None and fix.new:
             result = self._restart(nav, fix, cam)
         if self.turn is not None and result is not None and result.used and self.filter.initialised:
-            self._observe_turn(t)
+            self._observe_turn(t, cam)
         state, est = self._state(t)
         if est is not None:
             self._last = (t, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))
@@ -95,13 +95,19 @@ class Estimation:
         return state
 
     # ------------------------------------------------------------------ internals
-    def _observe_turn(self, t_s: float) -> None:
-        """Give the course-turn finder this fused estimate (a filter that estimates the turn itself: skipped)."""
+    def _observe_turn(self, t_s: float, cam: CameraMotion) -> None:
+        """Give the course-turn finder this fused estimate and the time to go of the camera closing on it (a
+        filter that estimates the turn itself: skipped)."""
         est = self.filter.estimate()
         if hasattr(est, "turn_rate_rad_s"):
             return
         vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
-        self.turn.observe(t_s, est.pos_enu_m, est.vel_enu_m_s, vel_std, getattr(self.filter, "pos_vel_cov", None))
+        pos, vel = np.asarray(est.pos_enu_m, dtype=float), np.asarray(est.vel_enu_m_s, dtype=float)
+        rel = pos - cam.pos_enu_m
+        rng = math.sqrt(float(rel @ rel))
+        closing = -float(rel @ (vel - cam.vel_enu_m_s)) / max(rng, 1e-9)
+        self.turn.observe(t_s, pos, vel, vel_std, getattr(self.filter, "pos_vel_cov", None),
+                          rng / closing if closing > 0.0 else math.inf)
 
     def _initialise(self, fix: DetectionFix, cam: CameraMotion) -> str:
         """Start the filter from this detection; '' when it did, else why not (e.g. the ray misses the sea)."""

@@ -76,8 +76,9 @@ def test_the_covariance_gives_the_ukfs_own_lag_in_a_steady_turn(turn_deg_s):
 def test_the_turn_is_found_and_the_lag_taken_out(turn_deg_s):
     r, _ = fly(turn_deg_s)
     used = r[:, 13]
-    # the turn rate (ENU, counter-clockwise; the ship's turn_deg_s is clockwise) within 0.1 deg/s all along
-    assert np.all(np.abs(np.degrees(used) + turn_deg_s) < 0.1)
+    # the turn rate (ENU, counter-clockwise; the ship's turn_deg_s is clockwise): within 0.2 deg/s all along
+    err = np.degrees(used) + turn_deg_s
+    assert np.all(np.abs(err) < 0.2) and rms(err) < 0.1
     pos_c, vel_c, pos_u, vel_u = r[:, 9], r[:, 10], r[:, 11], r[:, 12]
     assert rms(vel_c) < 0.4 * rms(vel_u)
     assert rms(pos_c) < 0.7 * rms(pos_u)
@@ -87,7 +88,7 @@ def test_a_straight_ship_is_left_alone():
     r, turn = fly(0.0)
     assert np.all(r[:, 13] == 0.0)
     assert turn.state(150.0) is None
-    assert abs(math.degrees(turn.fit_rad_s)) < 0.1  # the slope was fitted, and found to be no turn
+    assert abs(math.degrees(turn.fit_rad_s)) < 0.2  # the slope was fitted, and found to be no turn
 
 
 def test_a_slow_ship_gets_no_turn():
@@ -117,6 +118,21 @@ def test_the_slope_must_stand_out_of_the_courses_scatter():
     assert fast.turn_rad_s == pytest.approx(math.radians(ON.max_turn_deg_s))
     # no covariance given: the turn is found, but no lag to take out, so the estimate stands
     assert quiet.state(40.0) is None
+
+
+def test_the_turn_rate_is_held_while_the_camera_closes_in_and_released_after():
+    """Within hold_tgo_s of the ship the fit stops (the dive's view turns the course); past twice it, it resumes."""
+    turn = CourseTurn(ON)
+    feed(turn, math.radians(1.0), math.radians(0.3))
+    held = turn.turn_rad_s
+    assert held == pytest.approx(math.radians(1.0), abs=math.radians(0.05))
+    for t in np.arange(40.0, 100.0, 0.1):  # the course now turns the other way, fast
+        c = 0.3 + math.radians(40.0) - math.radians(2.0) * (t - 40.0)
+        tgo = ON.hold_tgo_s - 1.0 if t < 60.0 else 1.5 * ON.hold_tgo_s if t < 70.0 else 2.5 * ON.hold_tgo_s
+        turn.observe(t, np.zeros(3), 6.0 * np.array([math.cos(c), math.sin(c), 0.0]), 0.2, None, tgo)
+        if t < 70.0:  # held from the first, and still at 1.5 x hold_tgo_s
+            assert turn.held and turn.turn_rad_s == held
+    assert not turn.held and turn.turn_rad_s == pytest.approx(math.radians(-2.0), abs=math.radians(0.1))
 
 
 def test_the_state_is_carried_along_the_circle():
@@ -172,7 +188,7 @@ def test_the_estimation_block_gives_the_turned_state_to_its_readers():
     late = r[:, 0] >= 60.0
     off, on = r[late, 1:4], r[late, 4:7]
     assert np.all(off[:, 1] == 0.0) and np.all(off[:, 2] == 0.0)  # off: the filter's own state
-    assert np.all(np.abs(np.degrees(on[:, 1]) + 1.5) < 0.1)
+    assert np.all(np.abs(np.degrees(on[:, 1]) + 1.5) < 0.2)
     assert rms(on[:, 0]) < 0.4 * rms(off[:, 0])
 
 
@@ -180,7 +196,7 @@ def test_the_scenario_turns_it_on_and_a_bad_setting_is_one_line():
     scenario, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"controllers.turn_from_course.enabled": True})
     from controllers.mission import FlightSoftware
     fsw = FlightSoftware(scenario.controllers, scenario.initial, scenario.camera)
-    assert fsw.estimation.turn is not None and fsw.estimation.turn.cfg.window_s == 30.0
+    assert fsw.estimation.turn is not None and fsw.estimation.turn.cfg.window_s == 15.0
     default, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml")
     assert FlightSoftware(default.controllers, default.initial, default.camera).estimation.turn is None
     base = "name: x\nduration_s: 10\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n"
