@@ -623,6 +623,15 @@ class TurnFromCourseConfig(StrictModel):
         5.0, gt=0, le=600,
         description="the course residuals count as one independent residual per this (the estimate's course is "
                     "smooth, its errors correlated over seconds), s")
+    steady_s: float = Field(
+        20.0, ge=0, le=600,
+        description="a turn is used only when every fit of the last this long found one, within steady_tol of the "
+                    "newest: a steady turn, not a zigzag's swing (a +-30 deg, 60 s zigzag's rate reverses every "
+                    "30 s; held into a dive, a swing's rate leads the guidance the wrong way); 0: no such test, s")
+    steady_tol_deg_s: float = Field(
+        0.6, ge=0, le=20, description="see steady_s: the fits' spread allowed, deg/s (or steady_tol_frac)")
+    steady_tol_frac: float = Field(
+        0.5, ge=0, le=10, description="see steady_s: the fits' spread allowed, as a share of the newest's rate")
     hold_tgo_s: float = Field(
         15.0, ge=0, le=600,
         description="while the camera closes on the estimate fast enough to reach it within this time (range / "

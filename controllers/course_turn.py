@@ -82,6 +82,7 @@ class CourseTurn:
         self.fit_rad_s = math.nan  # the last fit's slope (NaN: no fit), whether or not in use
         self._fused: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, corrected pos, corrected vel)
         self.held = False  # the turn rate is held (hold_tgo_s: the camera closes in)
+        self._fits: deque[tuple[float, float]] = deque()  # (t, slope) of the fits over the last steady_s
 
     def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov,
                 tgo_s: float = math.inf) -> None:
@@ -109,7 +110,7 @@ class CourseTurn:
                 self._hist.append((t_s, course, 1.0 / (sig * sig)))
             while self._hist and self._hist[0][0] < t_s - c.window_s:
                 self._hist.popleft()
-            self.turn_rad_s = self._fit()
+            self.turn_rad_s = self._steady(t_s, self._fit())
         self._fused = None
         if self.turn_rad_s != 0.0 and pos_vel_cov is not None:
             lags = lag_matrices(pos_vel_cov)
@@ -154,6 +155,20 @@ class CourseTurn:
         if turn < math.radians(c.min_turn_deg_s) or turn < c.significance * slope_std:
             return 0.0
         return math.copysign(min(turn, math.radians(c.max_turn_deg_s)), slope)
+
+    def _steady(self, t_s: float, turn: float) -> float:
+        """``turn`` when the fits of the last ``steady_s`` all found a turn within ``steady_tol_deg_s`` (or
+        ``steady_tol_frac`` of it) of it: a steady turn, not a zigzag's swing; else 0."""
+        c = self.cfg
+        if c.steady_s <= 0.0:
+            return turn
+        self._fits.append((t_s, turn))
+        while self._fits and self._fits[0][0] < t_s - c.steady_s:
+            self._fits.popleft()
+        if turn == 0.0 or self._fits[0][0] > t_s - c.steady_s + c.sample_s + 1e-9:
+            return 0.0
+        tol = max(math.radians(c.steady_tol_deg_s), c.steady_tol_frac * abs(turn))
+        return turn if all(w != 0.0 and abs(w - turn) <= tol for _, w in self._fits) else 0.0
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, float] | None:
         """(position, velocity, turn rate) at ``t_s``: the last fused estimate with the lag taken out, carried

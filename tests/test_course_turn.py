@@ -120,13 +120,29 @@ def test_the_slope_must_stand_out_of_the_courses_scatter():
     assert quiet.state(40.0) is None
 
 
+def test_a_zigzags_swing_is_not_a_steady_turn():
+    """A +-30 deg, 60 s zigzag's course: each swing's slope stands out, but the fits of the last steady_s do not
+    agree, so no turn is used (a swing's rate held into a dive would lead the guidance the wrong way); without
+    the steadiness test the swings are taken for turns."""
+    share = {}
+    for steady in (ON.steady_s, 0.0):
+        turn, on = CourseTurn(ON.model_copy(update={"steady_s": steady})), []
+        for t in np.arange(0.0, 300.0, 0.1):
+            c = 0.3 + math.radians(30.0) * math.sin(2.0 * math.pi * t / 60.0)
+            turn.observe(t, np.zeros(3), 6.0 * np.array([math.cos(c), math.sin(c), 0.0]), 0.2, None)
+            if t >= 60.0:
+                on.append(turn.turn_rad_s != 0.0)
+        share[steady] = float(np.mean(on))
+    assert share[ON.steady_s] < 0.1 and share[0.0] > 0.5, share
+
+
 def test_the_turn_rate_is_held_while_the_camera_closes_in_and_released_after():
     """Within hold_tgo_s of the ship the fit stops (the dive's view turns the course); past twice it, it resumes."""
     turn = CourseTurn(ON)
     feed(turn, math.radians(1.0), math.radians(0.3))
     held = turn.turn_rad_s
     assert held == pytest.approx(math.radians(1.0), abs=math.radians(0.05))
-    for t in np.arange(40.0, 100.0, 0.1):  # the course now turns the other way, fast
+    for t in np.arange(40.0, 120.0, 0.1):  # the course now turns the other way, fast
         c = 0.3 + math.radians(40.0) - math.radians(2.0) * (t - 40.0)
         tgo = ON.hold_tgo_s - 1.0 if t < 60.0 else 1.5 * ON.hold_tgo_s if t < 70.0 else 2.5 * ON.hold_tgo_s
         turn.observe(t, np.zeros(3), 6.0 * np.array([math.cos(c), math.sin(c), 0.0]), 0.2, None, tgo)
