@@ -46,10 +46,23 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CourseTurn", "lag_matrices"]
+__all__ = ["CourseTurn", "CourseTurnStatus", "lag_matrices"]
+
+
+@dataclass(frozen=True, slots=True)
+class CourseTurnStatus:
+    """The course-turn finder after a fit, for the log (``/fsw/course_turn``)."""
+
+    t_s: float
+    turn_rate_deg_s: float  # in use: clockwise seen from above (the scenario's convention); 0: none
+    fit_deg_s: float  # the newest fit's slope, clockwise (NaN: no fit: too slow, or too short a history)
+    held: bool  # the turn rate is held (hold_tgo_s)
+    lag_vel_m_s: float  # the velocity's lag taken out, m/s (0 when none)
+    lag_pos_m: float  # the position's lag taken out, m (0 when none)
 
 
 def lag_matrices(pos_vel_cov) -> tuple[np.ndarray, np.ndarray] | None:
@@ -82,6 +95,8 @@ class CourseTurn:
         self.fit_rad_s = math.nan  # the last fit's slope (NaN: no fit), whether or not in use
         self._fused: tuple[float, np.ndarray, np.ndarray] | None = None  # (t, corrected pos, corrected vel)
         self.held = False  # the turn rate is held (hold_tgo_s: the camera closes in)
+        self.fitted = False  # observe() sampled the course (and fitted) this time: a status to log
+        self._lag = (0.0, 0.0)  # (velocity, position) lag taken out at the last fused estimate
         self._fits: deque[tuple[float, float]] = deque()  # (t, slope) of the fits over the last steady_s
 
     def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov,
@@ -97,7 +112,8 @@ class CourseTurn:
                 self.held = True
             elif self.held and tgo_s > 2.0 * c.hold_tgo_s:
                 self.held = False
-        if not self.held and t_s - self._last_t >= c.sample_s:
+        self.fitted = not self.held and t_s - self._last_t >= c.sample_s
+        if self.fitted:
             self._last_t = t_s
             if speed < c.min_speed_m_s or not math.isfinite(speed):
                 self._hist.clear()  # a course that means nothing breaks the history
@@ -112,6 +128,7 @@ class CourseTurn:
                 self._hist.popleft()
             self.turn_rad_s = self._steady(t_s, self._fit())
         self._fused = None
+        self._lag = (0.0, 0.0)
         if self.turn_rad_s != 0.0 and pos_vel_cov is not None:
             lags = lag_matrices(pos_vel_cov)
             if lags is not None:
@@ -125,6 +142,12 @@ class CourseTurn:
                     v2[:2] += dv
                     pos[:2] += dp
                     self._fused = (t_s, pos, v2)
+                    self._lag = (math.hypot(*dv), math.hypot(*dp))
+
+    def status(self, t_s: float) -> CourseTurnStatus:
+        """The finder now, for the log."""
+        return CourseTurnStatus(t_s, 0.0 - math.degrees(self.turn_rad_s), 0.0 - math.degrees(self.fit_rad_s), self.held,
+                                *self._lag)
 
     def _fit(self) -> float:
         """The course's slope over the window when it stands out (else 0), rad/s."""

@@ -108,6 +108,8 @@ class Estimation:
         closing = -float(rel @ (vel - cam.vel_enu_m_s)) / max(rng, 1e-9)
         self.turn.observe(t_s, pos, vel, vel_std, getattr(self.filter, "pos_vel_cov", None),
                           rng / closing if closing > 0.0 else math.inf)
+        if self.turn.fitted:
+            self._record.log(topics.FSW_COURSE_TURN, self.turn.status(t_s))
 
     def _initialise(self, fix: DetectionFix, cam: CameraMotion) -> str:
         """Start the filter from this detection; '' when it did, else why not (e.g. the ray misses the sea)."""

@@ -16,10 +16,10 @@ from test_manoeuvre_estimator import TurningShip
 from test_ukf import CAM, MOUNT
 
 from controllers.config import TurnFromCourseConfig
-from controllers.course_turn import CourseTurn, lag_matrices
+from controllers.course_turn import CourseTurn, CourseTurnStatus, lag_matrices
 from controllers.estimation import Estimation
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
-from fwsim import SCENARIO_DIR
+from fwsim import SCENARIO_DIR, topics
 from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
 
 ON = TurnFromCourseConfig(enabled=True)
@@ -169,10 +169,10 @@ def test_the_state_is_carried_along_the_circle():
 
 class _Recorder:
     def __init__(self):
-        self.events = []
+        self.events, self.logs = [], []
 
     def log(self, topic, msg):
-        pass
+        self.logs.append((topic, msg))
 
     def event(self, text):
         self.events.append(text)
@@ -206,6 +206,12 @@ def test_the_estimation_block_gives_the_turned_state_to_its_readers():
     assert np.all(off[:, 1] == 0.0) and np.all(off[:, 2] == 0.0)  # off: the filter's own state
     assert np.all(np.abs(np.degrees(on[:, 1]) + 1.5) < 0.2)
     assert rms(on[:, 0]) < 0.4 * rms(off[:, 0])
+    # the log: /fsw/course_turn with the turn in the scenario's convention (clockwise) and the lag taken out
+    status = [m for topic, m in blocks[True]._record.logs if topic == topics.FSW_COURSE_TURN]
+    late = [m for m in status if m.t_s >= 60.0]
+    assert 100 < len(status) and all(isinstance(m, CourseTurnStatus) for m in status)
+    assert all(abs(m.turn_rate_deg_s - 1.5) < 0.2 and not m.held and 0.2 < m.lag_vel_m_s < 1.0 for m in late)
+    assert not any(topic == topics.FSW_COURSE_TURN for topic, _ in blocks[False]._record.logs)
 
 
 def test_the_scenario_turns_it_on_and_a_bad_setting_is_one_line():
