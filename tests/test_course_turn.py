@@ -25,7 +25,7 @@ from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
 ON = TurnFromCourseConfig(enabled=True)
 
 
-def fly(turn_deg_s: float, duration_s: float = 150.0, seed: int = 3, ship_speed: float = 5.0):
+def fly(turn_deg_s: float, duration_s: float = 120.0, seed: int = 3, ship_speed: float = 5.0):
     """The UKF and a CourseTurn on 30 Hz measurements of a ship turning at ``turn_deg_s`` -> rows after 60 s:
     (t, the UKF's velocity error (2), its lag model's (2), position error (2), its model's (2), the corrected
     state's position and velocity errors, the UKF's, the turn in use), and the CourseTurn."""
@@ -87,7 +87,7 @@ def test_the_turn_is_found_and_the_lag_taken_out(turn_deg_s):
 def test_a_straight_ship_is_left_alone():
     r, turn = fly(0.0)
     assert np.all(r[:, 13] == 0.0)
-    assert turn.state(150.0) is None
+    assert turn.state(120.0) is None
     assert abs(math.degrees(turn.fit_rad_s)) < 0.2  # the slope was fitted, and found to be no turn
 
 
