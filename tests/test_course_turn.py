@@ -97,7 +97,7 @@ def test_a_slow_ship_gets_no_turn():
     assert np.all(r[:, 13] == 0.0) and math.isnan(turn.fit_rad_s)
 
 
-def feed(turn: CourseTurn, slope_rad_s: float, noise_rad: float, n_s: float = 40.0, seed: int = 0):
+def feed(turn: CourseTurn, slope_rad_s: float, noise_rad: float, n_s: float = 60.0, seed: int = 0):
     rng = np.random.default_rng(seed)
     for t in np.arange(0.0, n_s, 0.1):
         c = 0.3 + slope_rad_s * t + rng.normal(0.0, noise_rad)
@@ -117,7 +117,7 @@ def test_the_slope_must_stand_out_of_the_courses_scatter():
     assert small.turn_rad_s == 0.0 and small.fit_rad_s == pytest.approx(math.radians(0.2), rel=1e-6)
     assert fast.turn_rad_s == pytest.approx(math.radians(ON.max_turn_deg_s))
     # no covariance given: the turn is found, but no lag to take out, so the estimate stands
-    assert quiet.state(40.0) is None
+    assert quiet.state(60.0) is None
 
 
 def test_a_zigzags_swing_is_not_a_steady_turn():
@@ -142,11 +142,11 @@ def test_the_turn_rate_is_held_while_the_camera_closes_in_and_released_after():
     feed(turn, math.radians(1.0), math.radians(0.3))
     held = turn.turn_rad_s
     assert held == pytest.approx(math.radians(1.0), abs=math.radians(0.05))
-    for t in np.arange(40.0, 120.0, 0.1):  # the course now turns the other way, fast
-        c = 0.3 + math.radians(40.0) - math.radians(2.0) * (t - 40.0)
-        tgo = ON.hold_tgo_s - 1.0 if t < 60.0 else 1.5 * ON.hold_tgo_s if t < 70.0 else 2.5 * ON.hold_tgo_s
+    for t in np.arange(60.0, 150.0, 0.1):  # the course now turns the other way, fast
+        c = 0.3 + math.radians(60.0) - math.radians(2.0) * (t - 60.0)
+        tgo = ON.hold_tgo_s - 1.0 if t < 80.0 else 1.5 * ON.hold_tgo_s if t < 90.0 else 2.5 * ON.hold_tgo_s
         turn.observe(t, np.zeros(3), 6.0 * np.array([math.cos(c), math.sin(c), 0.0]), 0.2, None, tgo)
-        if t < 70.0:  # held from the first, and still at 1.5 x hold_tgo_s
+        if t < 90.0:  # held from the first, and still at 1.5 x hold_tgo_s
             assert turn.held and turn.turn_rad_s == held
     assert not turn.held and turn.turn_rad_s == pytest.approx(math.radians(-2.0), abs=math.radians(0.1))
 
