@@ -599,7 +599,7 @@ class TurnFromCourseConfig(StrictModel):
     turn. The logged estimate (``/fsw/estimate``) stays the filter's. An estimator that estimates the turn
     itself (``ct_ukf``, ``imm``) is left alone."""
 
-    enabled: bool = Field(False, description="on: find the turn and take the lag out; off: the estimate as it is")
+    enabled: bool = Field(True, description="on: find the turn and take the lag out; off: the estimate as it is")
     window_s: float = Field(
         15.0, gt=0, le=600,
         description="the course history fitted with a straight line (course against time), s: longer finds a "

@@ -214,13 +214,15 @@ def test_the_estimation_block_gives_the_turned_state_to_its_readers():
     assert not any(topic == topics.FSW_COURSE_TURN for topic, _ in blocks[False]._record.logs)
 
 
-def test_the_scenario_turns_it_on_and_a_bad_setting_is_one_line():
-    scenario, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"controllers.turn_from_course.enabled": True})
+def test_it_is_on_by_default_the_scenario_turns_it_off_and_a_bad_setting_is_one_line():
     from controllers.mission import FlightSoftware
-    fsw = FlightSoftware(scenario.controllers, scenario.initial, scenario.camera)
+    default, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml")  # on by default
+    fsw = FlightSoftware(default.controllers, default.initial, default.camera)
     assert fsw.estimation.turn is not None and fsw.estimation.turn.cfg.window_s == 15.0
-    default, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml")
-    assert FlightSoftware(default.controllers, default.initial, default.camera).estimation.turn is None
+    scenario, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"controllers.turn_from_course.enabled": False,
+                                                                      "controllers.turn_from_course.steady_s": 20})
+    assert FlightSoftware(scenario.controllers, scenario.initial, scenario.camera).estimation.turn is None
+    assert scenario.controllers.turn_from_course.steady_s == 20.0
     base = "name: x\nduration_s: 10\ninitial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}\n"
     with pytest.raises(ScenarioError) as exc:
         parse_scenario(base, "x.yaml", {"controllers.turn_from_course.window_s": -3})
