@@ -12,6 +12,11 @@ estimates; this block decides when it starts and restarts:
   next detection, unless the last estimate, carried on at its velocity, is
   closer than ``detection_gate.min_range_m`` (the detections the gate
   distrusts would restart it); meanwhile that extrapolated estimate stands in.
+* with ``controllers.turn_from_course`` (on by default) a constant-velocity
+  filter's fused estimates feed :class:`controllers.course_turn.CourseTurn`;
+  once it finds a steady turn, the state handed on has the filter's lag in
+  the turn taken out and the turn rate (carried along the turn between
+  fused detections), while ``/fsw/estimate`` stays the filter's own.
 
 Its output, :class:`~controllers.messages.TargetState`, is what the phase
 logic, the guidance and the pointing read. It writes ``/fsw/estimate``, one

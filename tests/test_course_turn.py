@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from test_manoeuvre_estimator import TurningShip
+from test_manoeuvre_estimator import TurningShip, orbit_measurements
 from test_ukf import CAM, MOUNT
 
 from controllers.config import TurnFromCourseConfig
@@ -32,14 +32,9 @@ def fly(turn_deg_s: float, duration_s: float = 120.0, seed: int = 3, ship_speed:
     truth = TurningShip(turn_deg_s=turn_deg_s, ship_speed=ship_speed)
     ukf = UkfTargetEstimator(CAM, UkfConfig())
     turn = CourseTurn(ON)
-    rng = np.random.default_rng(seed)
     rows = []
-    for k in range(int(duration_s * 30) + 1):
-        t = k / 30.0
-        if k % 3 == 0:
-            gnss_err = rng.normal(0, 0.5, 3)
-        meas = truth.sample(t, rng, gnss_err=gnss_err)
-        est = ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+    for t, meas, cam in orbit_measurements(truth, duration_s, seed):
+        est = ukf.step(meas, cam)
         turn.observe(t, est.pos_enu_m, est.vel_enu_m_s, float(max(est.vel_std_m_s[:2])), ukf.pos_vel_cov)
         if t < 60.0:
             continue

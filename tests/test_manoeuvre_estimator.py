@@ -54,17 +54,24 @@ class TurningShip(OrbitTruth):
         return pos, vel, np.array([self.roll, 0.0, math.atan2(vel[0], vel[1])])
 
 
-def fly(estimator, truth, duration_s=75.0, seed=7):
-    """Feed the estimator 30 Hz measurements (a detection each tick, GNSS held over 3) -> rows (t, position
-    error, velocity error, turn rate estimate or NaN), horizontal."""
+def orbit_measurements(truth, duration_s, seed):
+    """30 Hz measurements of ``truth`` (a detection each tick, the GNSS error held over 3 ticks):
+    yields (t, measurements, camera motion)."""
     rng = np.random.default_rng(seed)
-    rows = []
     for k in range(int(duration_s * 30) + 1):
         t = k / 30.0
         if k % 3 == 0:
             gnss_err = rng.normal(0, 0.5, 3)
         meas = truth.sample(t, rng, gnss_err=gnss_err)
-        est = estimator.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+        yield t, meas, CameraMotion.from_measurements(meas, MOUNT)
+
+
+def fly(estimator, truth, duration_s=75.0, seed=7):
+    """Feed the estimator 30 Hz measurements (a detection each tick, GNSS held over 3) -> rows (t, position
+    error, velocity error, turn rate estimate or NaN), horizontal."""
+    rows = []
+    for t, meas, cam in orbit_measurements(truth, duration_s, seed):
+        est = estimator.step(meas, cam)
         rows.append((t, np.linalg.norm(est.pos_enu_m[:2] - truth.ship(t)[:2]),
                      np.linalg.norm(est.vel_enu_m_s[:2] - truth.ship_vel(t)[:2]),
                      getattr(est, "turn_rate_rad_s", math.nan)))
