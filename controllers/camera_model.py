@@ -34,7 +34,7 @@ from fwsim.frames import R_frd_from_cam, camera_angular_velocity, camera_pose_wo
 from fwsim.messages import Measurements
 
 __all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "rotation_matrix",
-           "translation_rates", "interaction_matrix", "depth_on_plane"]
+           "translation_rates", "interaction_matrix", "depth_on_plane", "closing_time_s", "held_while_closing"]
 
 #: rays whose downward component (-d_z / |d|) is below this are treated as not meeting the sea
 MIN_RAY_DOWN = 1e-6
@@ -241,3 +241,20 @@ class CameraMotion:
 def camera_motion(meas: Measurements, mount_offset_frd_m) -> CameraMotion | None:
     """:meth:`CameraMotion.from_measurements`, or None without gimbal encoders (pan or tilt NaN)."""
     return CameraMotion.from_measurements(meas, mount_offset_frd_m) if math.isfinite(meas.pan_rad) else None
+
+
+def closing_time_s(point_enu_m, point_vel_enu_m_s, cam_pos_enu_m, cam_vel_enu_m_s) -> float:
+    """The range from the camera to a moving point over the speed at which it closes (inf when it does not):
+    the time to go of a dive on the point."""
+    rel = point_enu_m - cam_pos_enu_m
+    rng = math.sqrt(float(rel @ rel))
+    closing = -float(rel @ (point_vel_enu_m_s - cam_vel_enu_m_s)) / max(rng, 1e-9)
+    return rng / closing if closing > 0.0 else math.inf
+
+
+def held_while_closing(held: bool, tgo_s: float, hold_tgo_s: float) -> bool:
+    """A hold of what an estimator learnt, by the camera's time to go (:func:`closing_time_s`): taken once it is
+    under ``hold_tgo_s`` (a dive), kept until it exceeds twice that (or the camera recedes)."""
+    if not held:
+        return tgo_s < hold_tgo_s
+    return not tgo_s > 2.0 * hold_tgo_s

@@ -50,6 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.camera_model import held_while_closing
+
 __all__ = ["CourseTurn", "CourseTurnStatus", "lag_matrices"]
 
 
@@ -108,10 +110,7 @@ class CourseTurn:
         vel = np.asarray(vel_enu, dtype=float)
         speed = math.hypot(float(vel[0]), float(vel[1]))
         if c.hold_tgo_s > 0.0:
-            if not self.held and tgo_s < c.hold_tgo_s:
-                self.held = True
-            elif self.held and tgo_s > 2.0 * c.hold_tgo_s:
-                self.held = False
+            self.held = held_while_closing(self.held, tgo_s, c.hold_tgo_s)
         self.fitted = not self.held and t_s - self._last_t >= c.sample_s
         if self.fitted:
             self._last_t = t_s

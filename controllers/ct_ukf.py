@@ -88,7 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import PinholeCamera
+from controllers.camera_model import PinholeCamera, closing_time_s, held_while_closing
 from controllers.config import CtUkfConfig, UkfConfig
 from controllers.messages import TargetEstimate
 from controllers.ukf import UkfTargetEstimator, _CompiledProcess, _process_noise_of
@@ -253,19 +253,16 @@ class CtUkfTargetEstimator(UkfTargetEstimator):
         """The UKF's predict, then hold or release the manoeuvre by the time to go (``hold_tgo_s``)."""
         super().predict(t_s, motion)
         if self._initialised and self.ct_cfg.hold_tgo_s > 0.0:
-            tgo = self.time_to_go_s(motion)
-            if not self.held and tgo < self.ct_cfg.hold_tgo_s:
+            hold = held_while_closing(self.held, self.time_to_go_s(motion), self.ct_cfg.hold_tgo_s)
+            if hold and not self.held:
                 self._hold()
-            elif self.held and tgo > 2.0 * self.ct_cfg.hold_tgo_s:
+            elif self.held and not hold:
                 self._release()
 
     def time_to_go_s(self, motion) -> float:
         """Range from the camera to the estimate over the speed at which it closes (inf when it does not)."""
         x = self._core._x
-        rel = x[2:5] - motion.pos_enu_m
-        rng = math.sqrt(float(rel @ rel))
-        closing = -float(rel @ (x[5:8] - motion.vel_enu_m_s)) / max(rng, 1e-9)
-        return rng / closing if closing > 0.0 else math.inf
+        return closing_time_s(x[2:5], x[5:8], motion.pos_enu_m, motion.vel_enu_m_s)
 
     @property
     def held(self) -> bool:

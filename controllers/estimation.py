@@ -34,7 +34,7 @@ import operator
 
 import numpy as np
 
-from controllers.camera_model import CameraMotion
+from controllers.camera_model import CameraMotion, closing_time_s
 from controllers.course_turn import CourseTurn
 from controllers.messages import DetectionFix, DetectionFusion, FusionReason, FusionResult, TargetEstimate, TargetState
 from fwsim import topics
@@ -88,9 +88,10 @@ class Estimation:
                                    "target left the camera's front half-space); extrapolating the last estimate")
         elif fix.locked and cam is not None and fix.new:
             result = self._restart(nav, fix, cam)
-        if self.turn is not None and result is not None and result.used and self.filter.initialised:
-            self._observe_turn(t, cam)
-        state, est = self._state(t)
+        est = self.filter.estimate() if self.filter.initialised else None
+        if self.turn is not None and est is not None and result is not None and result.used:
+            self._observe_turn(t, cam, est)
+        state, est = self._state(t, est)
         if est is not None:
             self._last = (t, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))
             self._record.log(topics.FSW_ESTIMATE, est)
@@ -100,19 +101,15 @@ class Estimation:
         return state
 
     # ------------------------------------------------------------------ internals
-    def _observe_turn(self, t_s: float, cam: CameraMotion) -> None:
+    def _observe_turn(self, t_s: float, cam: CameraMotion, est) -> None:
         """Give the course-turn finder this fused estimate and the time to go of the camera closing on it (a
         filter that estimates the turn itself: skipped)."""
-        est = self.filter.estimate()
         if hasattr(est, "turn_rate_rad_s"):
             return
         vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
         pos, vel = np.asarray(est.pos_enu_m, dtype=float), np.asarray(est.vel_enu_m_s, dtype=float)
-        rel = pos - cam.pos_enu_m
-        rng = math.sqrt(float(rel @ rel))
-        closing = -float(rel @ (vel - cam.vel_enu_m_s)) / max(rng, 1e-9)
         self.turn.observe(t_s, pos, vel, vel_std, getattr(self.filter, "pos_vel_cov", None),
-                          rng / closing if closing > 0.0 else math.inf)
+                          closing_time_s(pos, vel, cam.pos_enu_m, cam.vel_enu_m_s))
         if self.turn.fitted:
             self._record.log(topics.FSW_COURSE_TURN, self.turn.status(t_s))
 
@@ -146,11 +143,13 @@ class Estimation:
         t0, pos, vel = self._last
         return pos + vel * (t_s - t0), vel
 
-    def _state(self, t_s: float) -> tuple[TargetState, TargetEstimate | None]:
-        """The target state now: the filter's estimate, else the last one extrapolated, else none."""
+    def _state(self, t_s: float, est: TargetEstimate | None = None) -> tuple[TargetState, TargetEstimate | None]:
+        """The target state now: the filter's estimate (``est`` when the caller has it already), else the last
+        one extrapolated, else none."""
         h = float(self.filter.tracked_height_m)
         if self.filter.initialised:
-            est = self.filter.estimate()
+            if est is None:
+                est = self.filter.estimate()
             vel_std = _larger_of_first_two(np.asarray(est.vel_std_m_s, dtype=float))
             turn, accel = float(getattr(est, "turn_rate_rad_s", 0.0)), float(getattr(est, "accel_along_m_s2", 0.0))
             turned = self.turn.state(t_s) if self.turn is not None else None

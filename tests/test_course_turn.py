@@ -15,6 +15,7 @@ import pytest
 from test_manoeuvre_estimator import TurningShip, orbit_measurements
 from test_ukf import CAM, MOUNT
 
+from controllers.camera_model import closing_time_s, held_while_closing
 from controllers.config import TurnFromCourseConfig
 from controllers.course_turn import CourseTurn, CourseTurnStatus, lag_matrices
 from controllers.estimation import Estimation
@@ -223,3 +224,14 @@ def test_it_is_on_by_default_the_scenario_turns_it_off_and_a_bad_setting_is_one_
         parse_scenario(base, "x.yaml", {"controllers.turn_from_course.window_s": -3})
     text = str(exc.value)
     assert "\n" not in text and text.startswith("x.yaml: controllers.turn_from_course.window_s"), text
+
+
+def test_the_time_to_go_and_the_hold_it_sets():
+    """closing_time_s: range over closing speed, inf when the camera recedes; held_while_closing: taken under
+    hold_tgo_s, kept up to twice it, and a time to go that is not a number changes nothing."""
+    cam, cam_v = np.zeros(3), np.array([20.0, 0.0, 0.0])
+    assert closing_time_s(np.array([300.0, 0.0, 0.0]), np.array([5.0, 0.0, 0.0]), cam, cam_v) == pytest.approx(20.0)
+    assert closing_time_s(np.array([300.0, 0.0, 0.0]), np.array([25.0, 0.0, 0.0]), cam, cam_v) == math.inf
+    assert held_while_closing(False, 14.9, 15.0) and not held_while_closing(False, 15.0, 15.0)
+    assert held_while_closing(True, 30.0, 15.0) and not held_while_closing(True, 30.1, 15.0)
+    assert held_while_closing(True, math.nan, 15.0) and not held_while_closing(False, math.nan, 15.0)
