@@ -591,6 +591,34 @@ class CtUkfConfig(StrictModel):
                           "3.42 m; speed steps alike")
 
 
+class PeriodicCourseConfig(StrictModel):
+    """A zigzagging ship seen through a constant-velocity estimator (``controllers.turn_from_course.periodic``,
+    ``controllers.course_turn``): the estimate's course history fitted with a line plus one sinusoid; when the
+    sinusoid stands out, the ship's course is that fit one filter lag ahead, and the state handed on follows
+    it (its velocity's direction, its position's lag, the turn rate the guidance predicts with)."""
+
+    enabled: bool = Field(True, description="on: fit and use a periodic course; off: steady turns only")
+    window_s: float = Field(
+        150.0, gt=0, le=3600, description="the course history fitted, s (the longest period it can find)")
+    min_span_s: float = Field(
+        90.0, gt=0, le=3600, description="fit only once the history spans this, s; a period must fit in the span")
+    min_period_s: float = Field(20.0, gt=0, le=3600, description="the shortest period searched, s")
+    max_period_s: float = Field(180.0, gt=0, le=3600, description="the longest period searched, s")
+    period_step_s: float = Field(2.0, gt=0, le=600, description="the period search's step (then refined), s")
+    min_amplitude_deg: float = Field(
+        5.0, ge=0, le=180, description="a sinusoid under this amplitude is no zigzag, deg")
+    min_explained: float = Field(
+        0.8, ge=0, le=1,
+        description="the share of the course's weighted residual about the line that the sinusoid must take out")
+
+    @model_validator(mode="after")
+    def _periods(self):
+        if self.max_period_s < self.min_period_s:
+            raise ValueError(f"max_period_s ({self.max_period_s:g}) must be at least min_period_s "
+                             f"({self.min_period_s:g})")
+        return self
+
+
 class TurnFromCourseConfig(StrictModel):
     """A turning ship seen through a constant-velocity estimator (the paper's UKF; ``controllers.course_turn``):
     the turn rate from the slope of the estimate's course, and the filter's steady lag in the turn (its
@@ -645,6 +673,8 @@ class TurnFromCourseConfig(StrictModel):
         10.0, gt=0, le=120,
         description="a lag correction implying a filter lag over this (velocity: lag x acceleration, position: "
                     "lag^2 x acceleration / 2) is not applied (a covariance far from steady state), s")
+    periodic: PeriodicCourseConfig = Field(
+        default_factory=PeriodicCourseConfig, description="a zigzag: the course fitted with a sinusoid")
 
 
 class ImmConfig(StrictModel):

@@ -34,6 +34,20 @@ box-centre errors that turn the estimate's course (as
 ``controllers.ct_ukf``'s hold, for the same reason). The lag is still taken
 from the filter's covariance of the moment.
 
+A zigzag's course swings to and fro: its rate never holds for ``steady_s``,
+and a swing's rate held into a dive leads the guidance the wrong way. With
+``periodic`` on, the course history of the last ``periodic.window_s`` is also
+fitted with a line plus one sinusoid (the period searched over
+``periodic.min_period_s``-``max_period_s``). When the sinusoid is large
+(``min_amplitude_deg``), explains most of what the line leaves
+(``min_explained``), and at least one whole period has been seen, the course
+is taken from it: the estimate's course trails the ship's by the filter's lag
+``tau = tr(M) / 2`` (the lag of a ramp's velocity, ``e_v = M a``, as a time),
+so the ship's course now is the fitted course ``tau`` ahead, and its turn rate
+that course's slope. The velocity's direction is that course, the position's
+lag ``e_p`` is taken out for the acceleration it implies, and the state is
+carried along the fitted course (held, like the turn rate, in a dive).
+
 With a turn found, :meth:`CourseTurn.state` gives the estimate with the lag
 taken out, carried along the turn from the last fused detection (the coast of
 the last seconds follows the turn, not the trailing straight line), and the
@@ -52,7 +66,7 @@ import numpy as np
 
 from controllers.camera_model import held_while_closing
 
-__all__ = ["CourseTurn", "CourseTurnStatus", "lag_matrices"]
+__all__ = ["CourseTurn", "CourseTurnStatus", "PeriodicCourse", "fit_periodic", "lag_matrices"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +79,8 @@ class CourseTurnStatus:
     held: bool  # the turn rate is held (hold_tgo_s)
     lag_vel_m_s: float  # the velocity's lag taken out, m/s (0 when none)
     lag_pos_m: float  # the position's lag taken out, m (0 when none)
+    period_s: float = math.nan  # the periodic course in use (a zigzag): its period, s (NaN: none)
+    amplitude_deg: float = math.nan  # its amplitude, deg (NaN: none)
 
 
 def lag_matrices(pos_vel_cov) -> tuple[np.ndarray, np.ndarray] | None:
@@ -84,6 +100,85 @@ def lag_matrices(pos_vel_cov) -> tuple[np.ndarray, np.ndarray] | None:
     return mv, mp
 
 
+@dataclass(frozen=True, slots=True)
+class PeriodicCourse:
+    """A course fitted as ``c0 + c1 x + a cos(W x) + b sin(W x)``, ``x = t - t_ref`` (rad, ENU: counter-clockwise
+    from east), with how well it fits."""
+
+    t_ref: float
+    coef: tuple[float, float, float, float]  # c0, c1, a, b
+    omega_rad_s: float  # W
+    amplitude_rad: float  # hypot(a, b)
+    explained: float  # the share of the line's weighted residual the sinusoid takes out
+    residual_rad: float  # the fit's weighted RMS residual
+
+    @property
+    def period_s(self) -> float:
+        return 2.0 * math.pi / self.omega_rad_s
+
+    def course(self, t_s: float) -> float:
+        c0, c1, a, b = self.coef
+        x = t_s - self.t_ref
+        return c0 + c1 * x + a * math.cos(self.omega_rad_s * x) + b * math.sin(self.omega_rad_s * x)
+
+    def rate(self, t_s: float) -> float:
+        c0, c1, a, b = self.coef
+        x, w = t_s - self.t_ref, self.omega_rad_s
+        return c1 + w * (b * math.cos(w * x) - a * math.sin(w * x))
+
+
+def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
+    """The weighted least-squares fit of a line plus a sinusoid to the course samples ``y`` (rad, unwrapped) at
+    ``t`` with weights ``w``, the period the best of ``periods_s`` refined between its neighbours (a parabola
+    through the three residuals); None when there are too few samples or no period."""
+    t, y, w = (np.asarray(v, dtype=float) for v in (t, y, w))
+    periods = np.asarray(periods_s, dtype=float)
+    if t.size < 8 or periods.size == 0:
+        return None
+    t_ref = float(t[-1])
+    x = t - t_ref
+    syy = float((w * y * y).sum())
+
+    def solve(omegas):
+        om = np.asarray(omegas, dtype=float)[:, None] * x[None, :]
+        phi = np.stack([np.ones_like(om), np.broadcast_to(x, om.shape), np.cos(om), np.sin(om)], axis=-1)
+        a = np.einsum("kni,n,knj->kij", phi, w, phi)
+        b = np.einsum("kni,n,n->ki", phi, w, y)
+        try:
+            c = np.linalg.solve(a, b[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            return None, None
+        return c, syy - (c * b).sum(axis=1)
+
+    a2 = np.array([[w.sum(), (w * x).sum()], [(w * x).sum(), (w * x * x).sum()]])
+    b2 = np.array([(w * y).sum(), (w * x * y).sum()])
+    try:
+        ss_line = syy - float(np.linalg.solve(a2, b2) @ b2)
+    except np.linalg.LinAlgError:
+        return None
+    omegas = 2.0 * math.pi / periods
+    c, ss = solve(omegas)
+    if c is None:
+        return None
+    k = int(np.argmin(ss))
+    om = float(omegas[k])
+    if 0 < k < len(omegas) - 1:  # the parabola's vertex through the best and its neighbours
+        x0, x1, x2 = omegas[k - 1:k + 2]
+        y0, y1, y2 = ss[k - 1:k + 2]
+        den = (x0 - x1) * (x0 - x2) * (x1 - x2)
+        aa = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / den
+        bb = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / den
+        if aa > 0.0:
+            om = float(np.clip(-bb / (2.0 * aa), min(x0, x2), max(x0, x2)))
+    c, ss = solve([om])
+    if c is None:
+        return None
+    cf, res = c[0], max(float(ss[0]), 0.0)
+    explained = 1.0 - res / ss_line if ss_line > 0.0 else 0.0
+    return PeriodicCourse(t_ref, (float(cf[0]), float(cf[1]), float(cf[2]), float(cf[3])), om,
+                          math.hypot(float(cf[2]), float(cf[3])), float(explained), math.sqrt(res / float(w.sum())))
+
+
 class CourseTurn:
     """The turn rate from an estimate's course history and the lag-corrected estimate (see the module text).
 
@@ -100,6 +195,9 @@ class CourseTurn:
         self.fitted = False  # observe() sampled the course (and fitted) this time: a status to log
         self._lag = (0.0, 0.0)  # (velocity, position) lag taken out at the last fused estimate
         self._fits: deque[tuple[float, float]] = deque()  # (t, slope) of the fits over the last steady_s
+        self._long: deque[tuple[float, float, float]] = deque()  # the course history of periodic.window_s
+        self.periodic: PeriodicCourse | None = None  # the periodic course in use (a zigzag); None: none
+        self._tau = 0.0  # the filter's lag as a time at the last fused estimate (the periodic course), s
 
     def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov,
                 tgo_s: float = math.inf) -> None:
@@ -116,6 +214,7 @@ class CourseTurn:
             self._last_t = t_s
             if speed < c.min_speed_m_s or not math.isfinite(speed):
                 self._hist.clear()  # a course that means nothing breaks the history
+                self._long.clear()
             else:
                 course = math.atan2(float(vel[1]), float(vel[0]))
                 if self._hist:
@@ -123,12 +222,18 @@ class CourseTurn:
                     course = prev + (course - prev + math.pi) % (2.0 * math.pi) - math.pi
                 sig = max(float(vel_std_m_s) / speed, 1e-3) if math.isfinite(vel_std_m_s) else 1.0
                 self._hist.append((t_s, course, 1.0 / (sig * sig)))
+                self._long.append(self._hist[-1])
             while self._hist and self._hist[0][0] < t_s - c.window_s:
                 self._hist.popleft()
+            while self._long and self._long[0][0] < t_s - c.periodic.window_s:
+                self._long.popleft()
             self.turn_rad_s = self._steady(t_s, self._fit())
+            self.periodic = self._fit_periodic() if c.periodic.enabled else None
         self._fused = None
         self._lag = (0.0, 0.0)
-        if self.turn_rad_s != 0.0 and pos_vel_cov is not None:
+        if self.periodic is not None and pos_vel_cov is not None:
+            self._observe_periodic(t_s, pos_enu, vel, pos_vel_cov)
+        elif self.turn_rad_s != 0.0 and pos_vel_cov is not None:
             lags = lag_matrices(pos_vel_cov)
             if lags is not None:
                 pos = np.array(pos_enu, dtype=float)
@@ -143,8 +248,53 @@ class CourseTurn:
                     self._fused = (t_s, pos, v2)
                     self._lag = (math.hypot(*dv), math.hypot(*dp))
 
+    def _fit_periodic(self) -> PeriodicCourse | None:
+        """The periodic course of the last periodic.window_s when it passes the tests (see the module text)."""
+        pc = self.cfg.periodic
+        if len(self._long) < 8:
+            return None
+        h = np.array(self._long)
+        span = float(h[-1, 0] - h[0, 0])
+        top = min(pc.max_period_s, span)
+        if span < pc.min_span_s or top < pc.min_period_s:
+            return None
+        fit = fit_periodic(h[:, 0], h[:, 1], h[:, 2], np.arange(pc.min_period_s, top + 1e-9, pc.period_step_s))
+        if (fit is None or fit.period_s > span or fit.amplitude_rad < math.radians(pc.min_amplitude_deg)
+                or fit.explained < pc.min_explained):
+            return None
+        return fit
+
+    def _observe_periodic(self, t_s: float, pos_enu, vel: np.ndarray, pos_vel_cov) -> None:
+        """The fused estimate with the periodic course: its velocity along the course ``tau`` ahead of the
+        fitted one, its position's lag for that course's turn taken out."""
+        lags = lag_matrices(pos_vel_cov)
+        if lags is None:
+            return
+        mv, mp = lags
+        tau = 0.5 * float(np.trace(mv))
+        if not 0.0 <= tau <= self.cfg.max_lag_s:
+            return
+        speed = math.hypot(float(vel[0]), float(vel[1]))
+        course, w = self.periodic.course(t_s + tau), self.periodic.rate(t_s + tau)
+        v2 = vel.copy()
+        v2[0], v2[1] = speed * math.cos(course), speed * math.sin(course)
+        a = w * np.array([-v2[1], v2[0]])
+        dp = mp @ a
+        if math.hypot(*dp) > 0.5 * self.cfg.max_lag_s ** 2 * math.hypot(*a):
+            return
+        pos = np.array(pos_enu, dtype=float)
+        pos[:2] += dp
+        self._tau = tau
+        self._fused = (t_s, pos, v2)
+        self._lag = (math.hypot(float(v2[0] - vel[0]), float(v2[1] - vel[1])), math.hypot(*dp))
+
     def status(self, t_s: float) -> CourseTurnStatus:
         """The finder now, for the log."""
+        p = self.periodic
+        if p is not None and self._fused is not None:
+            turn = self.periodic.rate(t_s + self._tau)
+            return CourseTurnStatus(t_s, 0.0 - math.degrees(turn), 0.0 - math.degrees(self.fit_rad_s), self.held,
+                                    *self._lag, p.period_s, math.degrees(p.amplitude_rad))
         return CourseTurnStatus(t_s, 0.0 - math.degrees(self.turn_rad_s), 0.0 - math.degrees(self.fit_rad_s), self.held,
                                 *self._lag)
 
@@ -194,8 +344,12 @@ class CourseTurn:
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, float] | None:
         """(position, velocity, turn rate) at ``t_s``: the last fused estimate with the lag taken out, carried
-        along the turn; None when no turn is in use (the estimate stands as it is)."""
-        if self._fused is None or self.turn_rad_s == 0.0:
+        along the turn (or the periodic course); None when no turn is in use (the estimate stands as it is)."""
+        if self._fused is None:
+            return None
+        if self.periodic is not None:
+            return self._periodic_state(t_s)
+        if self.turn_rad_s == 0.0:
             return None
         t0, pos, vel = self._fused
         w = self.turn_rad_s
@@ -209,3 +363,23 @@ class CourseTurn:
         p[2] += float(vel[2]) * dt
         v[0], v[1] = k * vx - s * vy, s * vx + k * vy
         return p, v, w
+
+    def _periodic_state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """The last fused estimate carried along the periodic course to ``t_s`` (midpoint steps of at most
+        0.5 s at the fused speed)."""
+        t0, pos, vel = self._fused
+        pc, tau = self.periodic, self._tau
+        speed = math.hypot(float(vel[0]), float(vel[1]))
+        dt = t_s - t0
+        n = max(1, math.ceil(abs(dt) / 0.5))
+        h = dt / n
+        p = pos.copy()
+        for i in range(n):
+            course = pc.course(t0 + (i + 0.5) * h + tau)
+            p[0] += speed * math.cos(course) * h
+            p[1] += speed * math.sin(course) * h
+        p[2] += float(vel[2]) * dt
+        course = pc.course(t_s + tau)
+        v = vel.copy()
+        v[0], v[1] = speed * math.cos(course), speed * math.sin(course)
+        return p, v, pc.rate(t_s + tau)

@@ -17,7 +17,7 @@ from test_ukf import CAM, MOUNT
 
 from controllers.camera_model import closing_time_s, held_while_closing
 from controllers.config import TurnFromCourseConfig
-from controllers.course_turn import CourseTurn, CourseTurnStatus, lag_matrices
+from controllers.course_turn import CourseTurn, CourseTurnStatus, fit_periodic, lag_matrices
 from controllers.estimation import Estimation
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
 from fwsim import SCENARIO_DIR, topics
@@ -130,6 +130,91 @@ def test_a_zigzags_swing_is_not_a_steady_turn():
                 on.append(turn.turn_rad_s != 0.0)
         share[steady] = float(np.mean(on))
     assert share[ON.steady_s] < 0.1 and share[0.0] > 0.5, share
+
+
+class ZigzagShip(TurningShip):
+    """TurningShip's camera and start, the ship on a zigzag: heading 30 deg + amplitude sin(2 pi t / period)
+    (clockwise, as fwsim.target's zigzag) at constant speed, its track integrated on a 0.01 s grid."""
+
+    def __init__(self, amplitude_deg: float = 30.0, period_s: float = 60.0, duration_s: float = 400.0, **kw):
+        super().__init__(turn_deg_s=0.0, **kw)
+        self.amp, self.om = math.radians(amplitude_deg), 2.0 * math.pi / period_s
+        self.dt = 0.01
+        t = np.arange(0.0, duration_s + 1.0, self.dt)
+        c = self.course(t)
+        v = self.speed * np.stack([np.cos(c), np.sin(c)], axis=1)
+        p = np.zeros_like(v)
+        p[1:] = np.cumsum(0.5 * (v[1:] + v[:-1]) * self.dt, axis=0)  # the trapezoid rule, exact to 1e-6 m
+        self._p = p
+
+    def course(self, t):
+        return self.course0 - self.amp * np.sin(self.om * np.asarray(t))  # ENU: counter-clockwise
+
+    def ship(self, t):
+        k = t / self.dt
+        i = min(int(k), len(self._p) - 2)
+        f = k - i
+        p = (1.0 - f) * self._p[i] + f * self._p[i + 1]
+        return np.array([p[0], p[1], 0.0])
+
+    def ship_vel(self, t):
+        c = float(self.course(t))
+        return self.speed * np.array([math.cos(c), math.sin(c), 0.0])
+
+
+def test_a_periodic_course_is_fitted_exactly():
+    """A line plus a sinusoid, sampled and noised, is recovered: period, amplitude, course and rate."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 150.0, 0.5)
+    y = 0.2 + 0.004 * t + 0.5 * np.cos(2 * math.pi * t / 73.0 + 0.4) + rng.normal(0.0, 0.01, t.size)
+    fit = fit_periodic(t, y, np.ones_like(t), np.arange(20.0, 150.0, 2.0))
+    assert fit.period_s == pytest.approx(73.0, abs=0.3)
+    assert fit.amplitude_rad == pytest.approx(0.5, abs=0.01) and fit.explained > 0.99
+    for tq in (100.0, 149.5, 160.0):  # inside the history and 10 s past its end
+        assert fit.course(tq) == pytest.approx(0.2 + 0.004 * tq + 0.5 * math.cos(2 * math.pi * tq / 73.0 + 0.4),
+                                               abs=0.02)
+        assert fit.rate(tq) == pytest.approx(0.004 - 0.5 * 2 * math.pi / 73.0 * math.sin(2 * math.pi * tq / 73.0
+                                                                                          + 0.4), abs=0.002)
+    line = fit_periodic(t, 0.2 + 0.004 * t + rng.normal(0.0, 0.01, t.size), np.ones_like(t), np.arange(20.0, 150.0))
+    assert line.amplitude_rad < 0.01 and line.explained < 0.5  # noise: nothing for the sinusoid to explain
+
+
+@pytest.mark.parametrize("amplitude_deg, period_s", [(30.0, 90.0), (-20.0, 60.0)])
+def test_a_zigzags_course_is_found_and_followed(amplitude_deg, period_s):
+    """A ship zigzagging at 6 m/s seen through the UKF: its periodic course is found once a period is seen
+    (period and amplitude), and the state handed on (velocity along the fitted course one filter lag ahead,
+    the position's lag taken out) is nearer the ship than the UKF's; held from 240 s on (a dive's 15 s and
+    more), the fit still gives the ship's course."""
+    truth = ZigzagShip(amplitude_deg, period_s, ship_speed=6.0)
+    ukf = UkfTargetEstimator(CAM, UkfConfig())
+    turn = CourseTurn(ON)
+    rows = []
+    for t, meas, cam in orbit_measurements(truth, 270.0, 5):
+        est = ukf.step(meas, cam)
+        turn.observe(t, est.pos_enu_m, est.vel_enu_m_s, float(max(est.vel_std_m_s[:2])), ukf.pos_vel_cov,
+                     1.0 if t >= 240.0 else math.inf)
+        if t < 150.0:
+            continue
+        assert turn.periodic is not None, t
+        p, v, w = turn.state(t)
+        p_true, v_true = truth.ship(t)[:2], truth.ship_vel(t)[:2]
+        rows.append([np.linalg.norm(p[:2] - p_true), np.linalg.norm(v[:2] - v_true),
+                     np.linalg.norm(est.pos_enu_m[:2] - p_true), np.linalg.norm(est.vel_enu_m_s[:2] - v_true),
+                     w - float(-truth.amp * truth.om * math.cos(truth.om * t)), t >= 240.0])
+    r = np.array(rows)
+    assert turn.held and turn.periodic.period_s == pytest.approx(period_s, rel=0.05)
+    assert math.degrees(turn.periodic.amplitude_rad) == pytest.approx(abs(amplitude_deg), abs=3.0)
+    assert rms(r[:, 1]) < 0.2 * rms(r[:, 3])  # the velocity (0.6 -> 0.06 m/s when written)
+    assert rms(r[:, 0]) < 0.65 * rms(r[:, 2])  # the position (1.2 -> 0.6 m)
+    assert rms(r[:, 4]) < 0.25 * abs(truth.amp * truth.om)  # the turn rate, against its amplitude
+    held = r[:, 5] == 1.0
+    assert rms(r[held, 1]) < 0.2 * rms(r[held, 3])
+
+
+def test_a_straight_or_turning_ship_has_no_periodic_course():
+    for turn_deg_s in (0.0, 1.0):
+        r, turn = fly(turn_deg_s, duration_s=200.0)
+        assert turn.periodic is None
 
 
 def test_the_turn_rate_is_held_while_the_camera_closes_in_and_released_after():
