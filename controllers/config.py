@@ -605,6 +605,10 @@ class PeriodicCourseConfig(StrictModel):
     min_period_s: float = Field(20.0, gt=0, le=3600, description="the shortest period searched, s")
     max_period_s: float = Field(180.0, gt=0, le=3600, description="the longest period searched, s")
     period_step_s: float = Field(2.0, gt=0, le=600, description="the period search's step (then refined), s")
+    search_every_s: float = Field(
+        10.0, ge=0, le=600,
+        description="the whole period range is searched this often, s; between, the last period and its two "
+                    "neighbours (a search costs about a millisecond; 0: search at every fit)")
     min_amplitude_deg: float = Field(
         5.0, ge=0, le=180, description="a sinusoid under this amplitude is no zigzag, deg")
     min_explained: float = Field(

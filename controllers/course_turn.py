@@ -139,19 +139,29 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
     x = t - t_ref
     syy = float((w * y * y).sum())
 
+    sw, swx, swxx = float(w.sum()), float((w * x).sum()), float((w * x * x).sum())
+    wx, wy, wxy = w * x, w * y, w * x * y
+
     def solve(omegas):
         om = np.asarray(omegas, dtype=float)[:, None] * x[None, :]
-        phi = np.stack([np.ones_like(om), np.broadcast_to(x, om.shape), np.cos(om), np.sin(om)], axis=-1)
-        a = np.einsum("kni,n,knj->kij", phi, w, phi)
-        b = np.einsum("kni,n,n->ki", phi, w, y)
+        cs, sn = np.cos(om), np.sin(om)
+        a = np.empty((om.shape[0], 4, 4))
+        a[:, 0, 0], a[:, 0, 1], a[:, 1, 1] = sw, swx, swxx
+        a[:, 0, 2], a[:, 0, 3] = cs @ w, sn @ w
+        a[:, 1, 2], a[:, 1, 3] = cs @ wx, sn @ wx
+        a[:, 2, 2], a[:, 2, 3], a[:, 3, 3] = (cs * cs) @ w, (cs * sn) @ w, (sn * sn) @ w
+        a[:, 1, 0], a[:, 2, 0], a[:, 3, 0], a[:, 2, 1], a[:, 3, 1], a[:, 3, 2] = (
+            a[:, 0, 1], a[:, 0, 2], a[:, 0, 3], a[:, 1, 2], a[:, 1, 3], a[:, 2, 3])
+        b = np.empty((om.shape[0], 4))
+        b[:, 0], b[:, 1], b[:, 2], b[:, 3] = float(wy.sum()), float(wxy.sum()), cs @ wy, sn @ wy
         try:
             c = np.linalg.solve(a, b[..., None])[..., 0]
         except np.linalg.LinAlgError:
             return None, None
         return c, syy - (c * b).sum(axis=1)
 
-    a2 = np.array([[w.sum(), (w * x).sum()], [(w * x).sum(), (w * x * x).sum()]])
-    b2 = np.array([(w * y).sum(), (w * x * y).sum()])
+    a2 = np.array([[sw, swx], [swx, swxx]])
+    b2 = np.array([float(wy.sum()), float(wxy.sum())])
     try:
         ss_line = syy - float(np.linalg.solve(a2, b2) @ b2)
     except np.linalg.LinAlgError:
@@ -165,7 +175,7 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
     if 0 < k < len(omegas) - 1:  # the parabola's vertex through the best and its neighbours
         x0, x1, x2 = omegas[k - 1:k + 2]
         y0, y1, y2 = ss[k - 1:k + 2]
-        den = (x0 - x1) * (x0 - x2) * (x1 - x2)
+        den = (x0 - x1) * (x0 - x2) * (x1 - x2) or math.inf
         aa = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / den
         bb = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / den
         if aa > 0.0:
@@ -198,6 +208,8 @@ class CourseTurn:
         self._long: deque[tuple[float, float, float]] = deque()  # the course history of periodic.window_s
         self.periodic: PeriodicCourse | None = None  # the periodic course in use (a zigzag); None: none
         self._tau = 0.0  # the filter's lag as a time at the last fused estimate (the periodic course), s
+        self._period_guess: float | None = None  # the periodic fit's last period (refined between searches), s
+        self._last_search = -math.inf  # when the whole period range was last searched
 
     def observe(self, t_s: float, pos_enu, vel_enu, vel_std_m_s: float, pos_vel_cov,
                 tgo_s: float = math.inf) -> None:
@@ -258,7 +270,16 @@ class CourseTurn:
         top = min(pc.max_period_s, span)
         if span < pc.min_span_s or top < pc.min_period_s:
             return None
-        fit = fit_periodic(h[:, 0], h[:, 1], h[:, 2], np.arange(pc.min_period_s, top + 1e-9, pc.period_step_s))
+        t_s = float(h[-1, 0])
+        g = self._period_guess
+        if g is not None and t_s - self._last_search < pc.search_every_s and pc.min_period_s <= g <= top:
+            # between searches, the period found last time and its neighbours (the period drifts slowly)
+            periods = np.clip(g + pc.period_step_s * np.array([-1.0, 0.0, 1.0]), pc.min_period_s, top)
+        else:
+            periods = np.arange(pc.min_period_s, top + 1e-9, pc.period_step_s)
+            self._last_search = t_s
+        fit = fit_periodic(h[:, 0], h[:, 1], h[:, 2], periods)
+        self._period_guess = fit.period_s if fit is not None else None
         if (fit is None or fit.period_s > span or fit.amplitude_rad < math.radians(pc.min_amplitude_deg)
                 or fit.explained < pc.min_explained):
             return None
