@@ -610,10 +610,13 @@ class PeriodicCourseConfig(StrictModel):
         description="the whole period range is searched this often, s; between, the last period and its two "
                     "neighbours (a search costs about a millisecond; 0: search at every fit)")
     min_amplitude_deg: float = Field(
-        5.0, ge=0, le=180, description="a sinusoid under this amplitude is no zigzag, deg")
+        8.0, ge=0, le=180,
+        description="a sinusoid under this amplitude is no zigzag, deg (a ship turning at 1.5 deg/s, its "
+                    "estimate's turn settling, showed 5-6 deg at a period as long as the history)")
     min_explained: float = Field(
-        0.8, ge=0, le=1,
-        description="the share of the course's weighted residual about the line that the sinusoid must take out")
+        0.9, ge=0, le=1,
+        description="the share of the course's weighted residual about the line that the sinusoid must take out "
+                    "(1652's zigzags over 3 m/s: 0.98-1.0; the settling turn above: 0.86)")
 
     @model_validator(mode="after")
     def _periods(self):

@@ -40,7 +40,9 @@ and a swing's rate held into a dive leads the guidance the wrong way. With
 fitted with a line plus one sinusoid (the period searched over
 ``periodic.min_period_s``-``max_period_s``). When the sinusoid is large
 (``min_amplitude_deg``), explains most of what the line leaves
-(``min_explained``), and at least one whole period has been seen, the course
+(``min_explained``), and its period lies inside the range searched (at least
+a step short of the history's span: a smooth bend of the course, such as a
+turn's estimate settling, fits best with the longest period), the course
 is taken from it: the estimate's course trails the ship's by the filter's lag
 ``tau = tr(M) / 2`` (the lag of a ramp's velocity, ``e_v = M a``, as a time),
 so the ship's course now is the fitted course ``tau`` ahead, and its turn rate
@@ -280,7 +282,10 @@ class CourseTurn:
             self._last_search = t_s
         fit = fit_periodic(h[:, 0], h[:, 1], h[:, 2], periods)
         self._period_guess = fit.period_s if fit is not None else None
-        if (fit is None or fit.period_s > span or fit.amplitude_rad < math.radians(pc.min_amplitude_deg)
+        # the period must lie inside the range searched, a step from its ends: a smooth bend of the course
+        # (a turn's settling, a slow change of course) fits best with the longest period the span allows
+        inside = pc.min_period_s + pc.period_step_s <= fit.period_s <= top - pc.period_step_s if fit else False
+        if (not inside or fit.amplitude_rad < math.radians(pc.min_amplitude_deg)
                 or fit.explained < pc.min_explained):
             return None
         return fit
