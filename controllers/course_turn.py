@@ -140,7 +140,6 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
     t_ref = float(t[-1])
     x = t - t_ref
     syy = float((w * y * y).sum())
-
     sw, swx, swxx = float(w.sum()), float((w * x).sum()), float((w * x * x).sum())
     wx, wy, wxy = w * x, w * y, w * x * y
 
@@ -318,7 +317,7 @@ class CourseTurn:
         """The finder now, for the log."""
         p = self.periodic
         if p is not None and self._fused is not None:
-            turn = self.periodic.rate(t_s + self._tau)
+            turn = p.rate(t_s + self._tau)
             return CourseTurnStatus(t_s, 0.0 - math.degrees(turn), 0.0 - math.degrees(self.fit_rad_s), self.held,
                                     *self._lag, p.period_s, math.degrees(p.amplitude_rad))
         return CourseTurnStatus(t_s, 0.0 - math.degrees(self.turn_rad_s), 0.0 - math.degrees(self.fit_rad_s), self.held,
