@@ -184,6 +184,7 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     assert math.isfinite(along) and math.isfinite(across) and math.hypot(along, across) < 8.0, cells
     assert cells[12].endswith("%") and 0.0 < float(cells[12].rstrip(" %")) <= 100.0, cells
     assert 0.0 <= float(cells[14]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
+    assert cells[15] == "none", cells  # a straight ship: no turn and no periodic course handed on
     # --why-estimate on the same log: its section, and a row for the run only if its estimate fails the bar
     row["switch_time_s"] = 0.0
     (tmp_path / "summary.json").write_text(json.dumps({"rows": [row]}))
@@ -193,6 +194,19 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     rows = [x for x in out.splitlines() if x.startswith("| t |")]
     assert rows == [] and out.rstrip().endswith("none") or \
         len(rows) == 1 and rows[0].split("|")[2].strip() in ("never converged", "over 8 m"), out
+
+
+def test_the_envelope_why_course_model_by_hand():
+    """--why's course-model cell from /fsw/course_turn's last record: a periodic course, a steady turn, none,
+    a log from before the periodic course (no period field), no record."""
+    model = _envelope_tool().course_model
+    nan = math.nan
+    assert model({"t_s": [1.0, 2.0], "period_s": [nan, 59.6], "amplitude_deg": [nan, 20.4],
+                  "turn_rate_deg_s": [0.0, -1.2]}) == "periodic 60 s, 20 deg"
+    assert model({"t_s": [1.0, 2.0], "period_s": [59.6, nan], "amplitude_deg": [20.4, nan],
+                  "turn_rate_deg_s": [0.0, 1.5]}) == "turn +1.50 deg/s"
+    assert model({"t_s": [1.0], "turn_rate_deg_s": [0.0]}) == "none"
+    assert model({"t_s": []}) == "-" and model({}) == "-"
 
 
 def test_the_envelope_line_of_sight_error_by_hand():

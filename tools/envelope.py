@@ -489,6 +489,31 @@ def _aim_line_cell(log) -> str:
     return f"{off:.1f}" if math.isfinite(off) else "-"
 
 
+def course_model(course_turn: dict) -> str:
+    """--why's course-model cell from a log's ``/fsw/course_turn`` table (``controllers.turn_from_course``):
+    what the block handed on at its last fit, which a dive holds: a zigzag's periodic course ("periodic 60 s,
+    20 deg"), a steady turn ("turn +1.50 deg/s", clockwise) or "none"; "-" without a fit."""
+    t = course_turn.get("t_s")
+    if t is None or len(t) == 0:
+        return "-"
+    period = course_turn.get("period_s")  # logs before the periodic course have no such field
+    if period is not None and math.isfinite(float(period[-1])):
+        return f"periodic {float(period[-1]):.0f} s, {float(course_turn['amplitude_deg'][-1]):.0f} deg"
+    rate = float(course_turn["turn_rate_deg_s"][-1])
+    return f"turn {rate:+.2f} deg/s" if rate != 0.0 else "none"
+
+
+def _course_model_cell(log) -> str:
+    """--why's course-model cell for one log ("-" when the block was off or the log predates it)."""
+    from fwsim import topics
+    if topics.FSW_COURSE_TURN not in log.topics:
+        return "-"
+    try:
+        return course_model(log.table(topics.FSW_COURSE_TURN))
+    except (KeyError, ValueError, IndexError):
+        return "-"
+
+
 def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
     """--why's table rows (strings): each run outside 3 m / 3 deg, from its log."""
     from fwsim import topics
@@ -520,8 +545,9 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             share, top = last_detections(fu["t_s"], fu["reason"], end)
             cells += [f"{100 * share:.0f} %" if math.isfinite(share) else "-", top or "-"]
             cells.append(_aim_line_cell(log))
+            cells.append(_course_model_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 4)
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 5)
         table.append(cells)
     return table
 
@@ -607,7 +633,9 @@ def main(argv=None) -> int:
             f"estimate error (along, across the line of sight) {LOS_RANGE_M:g} m out, m",
             f"detections fused, last {WHY_WINDOW_S:g} s (the coast's left out)", "commonest reason for the rest",
             f"the line to the steered-to point passes the aim point by, {AIM_LINE_RANGES_M[1]:g}-"
-            f"{AIM_LINE_RANGES_M[0]:g} m out, m"]
+            f"{AIM_LINE_RANGES_M[0]:g} m out, m",
+            "the course model handed on into the dive (turn_from_course: a zigzag's periodic course, a steady "
+            "turn, none)"]
         for out_dir, these in per_dir:
             print(f"\nRuns outside 3 m / 3 deg in {out_dir} (worst first):\n")
             print("| " + " | ".join(head) + " |")
