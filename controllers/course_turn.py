@@ -235,7 +235,8 @@ class CourseTurn:
                     course = prev + (course - prev + math.pi) % (2.0 * math.pi) - math.pi
                 sig = max(float(vel_std_m_s) / speed, 1e-3) if math.isfinite(vel_std_m_s) else 1.0
                 self._hist.append((t_s, course, 1.0 / (sig * sig)))
-                self._long.append(self._hist[-1])
+                if c.periodic.enabled:
+                    self._long.append(self._hist[-1])
             while self._hist and self._hist[0][0] < t_s - c.window_s:
                 self._hist.popleft()
             while self._long and self._long[0][0] < t_s - c.periodic.window_s:

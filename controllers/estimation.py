@@ -14,8 +14,9 @@ estimates; this block decides when it starts and restarts:
   distrusts would restart it); meanwhile that extrapolated estimate stands in.
 * with ``controllers.turn_from_course`` (on by default) a constant-velocity
   filter's fused estimates feed :class:`controllers.course_turn.CourseTurn`;
-  once it finds a steady turn, the state handed on has the filter's lag in
-  the turn taken out and the turn rate (carried along the turn between
+  once it finds a steady turn (or, with ``periodic``, a zigzag's periodic
+  course), the state handed on has the filter's lag in the turn taken out
+  and the turn rate (carried along the turn or the fitted course between
   fused detections), while ``/fsw/estimate`` stays the filter's own.
 
 Its output, :class:`~controllers.messages.TargetState`, is what the phase

@@ -184,7 +184,8 @@ class BpngTerminal:
         """(the velocity the law extrapolates the ship with, the ship's velocity at impact).
 
         A ship that turns or changes speed (an estimator that estimates it, ``controllers.ct_ukf``, or a steady
-        turn found in the estimate's course, ``controllers.course_turn``) is
+        turn or a zigzag's periodic course found in the estimate's course, ``controllers.course_turn``: the
+        turn rate now, held constant to the time to go) is
         predicted along its turn to the time to go (the law's ``t_go = |r| / |V_p|``), and the law is given
         the chord's velocity, ``(p(t_go) - p) / t_go``: its constant-velocity extrapolation then meets the ship
         where the turn takes it. Without a manoeuvre, the estimated velocity, for both."""

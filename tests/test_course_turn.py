@@ -22,6 +22,7 @@ from controllers.estimation import Estimation
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
 from fwsim import SCENARIO_DIR, topics
 from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+from fwsim.target import Ship, TargetConfig
 
 ON = TurnFromCourseConfig(enabled=True)
 
@@ -133,33 +134,22 @@ def test_a_zigzags_swing_is_not_a_steady_turn():
 
 
 class ZigzagShip(TurningShip):
-    """TurningShip's camera and start, the ship on a zigzag: heading 30 deg + amplitude sin(2 pi t / period)
-    (clockwise, as fwsim.target's zigzag) at constant speed, its track integrated on a 0.01 s grid."""
+    """TurningShip's camera and start, the ship on fwsim.target's zigzag (the truth side's own model): heading
+    30 deg + amplitude sin(2 pi t / period) at constant speed (before t = 0, the start's velocity)."""
 
-    def __init__(self, amplitude_deg: float = 30.0, period_s: float = 60.0, duration_s: float = 400.0, **kw):
+    def __init__(self, amplitude_deg: float = 30.0, period_s: float = 60.0, **kw):
         super().__init__(turn_deg_s=0.0, **kw)
         self.amp, self.om = math.radians(amplitude_deg), 2.0 * math.pi / period_s
-        self.dt = 0.01
-        t = np.arange(0.0, duration_s + 1.0, self.dt)
-        c = self.course(t)
-        v = self.speed * np.stack([np.cos(c), np.sin(c)], axis=1)
-        p = np.zeros_like(v)
-        p[1:] = np.cumsum(0.5 * (v[1:] + v[:-1]) * self.dt, axis=0)  # the trapezoid rule, exact to 1e-6 m
-        self._p = p
-
-    def course(self, t):
-        return self.course0 - self.amp * np.sin(self.om * np.asarray(t))  # ENU: counter-clockwise
+        self._ship = Ship(TargetConfig(
+            heading_deg=math.degrees(math.atan2(self.Vq[0], self.Vq[1])), speed_m_s=self.speed,
+            motion={"model": "zigzag", "amplitude_deg": amplitude_deg, "period_s": period_s}))
 
     def ship(self, t):
-        k = t / self.dt
-        i = min(int(k), len(self._p) - 2)
-        f = k - i
-        p = (1.0 - f) * self._p[i] + f * self._p[i + 1]
-        return np.array([p[0], p[1], 0.0])
+        st = self._ship.state(max(t, 0.0))
+        return st.pos_enu_m + st.vel_enu_m_s * min(t, 0.0)
 
     def ship_vel(self, t):
-        c = float(self.course(t))
-        return self.speed * np.array([math.cos(c), math.sin(c), 0.0])
+        return self._ship.state(max(t, 0.0)).vel_enu_m_s
 
 
 def test_a_periodic_course_is_fitted_exactly():
