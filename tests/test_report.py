@@ -185,6 +185,8 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     assert cells[12].endswith("%") and 0.0 < float(cells[12].rstrip(" %")) <= 100.0, cells
     assert 0.0 <= float(cells[14]) < 8.0, cells  # the aim line 80-50 m out: finite, the dive closed on the ship
     assert cells[15] == "none", cells  # a straight ship: no turn and no periodic course handed on
+    source, err, unit = cells[16].split(" ")[:3]  # a 5 m/s ship: its heading from the estimated course
+    assert source == "course" and unit == "deg" and abs(int(err)) <= 10, cells
     # --why-estimate on the same log: its section, and a row for the run only if its estimate fails the bar
     row["switch_time_s"] = 0.0
     (tmp_path / "summary.json").write_text(json.dumps({"rows": [row]}))
@@ -207,6 +209,21 @@ def test_the_envelope_why_course_model_by_hand():
                   "turn_rate_deg_s": [0.0, 1.5]}) == "turn +1.50 deg/s"
     assert model({"t_s": [1.0], "turn_rate_deg_s": [0.0]}) == "none"
     assert model({"t_s": []}) == "-" and model({}) == "-"
+
+
+def test_the_envelope_why_heading_in_use_by_hand():
+    """--why's heading cell: the status in force at the dive's start (the last at or before it), its heading
+    against the truth's interpolated there (wrapped to +-180 deg across north), from the course when there is
+    one, else from the shapes when they are in use, else unknown; the layout's other end named."""
+    tool = _envelope_tool()
+    nan = math.nan
+    sh = {"t_s": [10.0, 20.0, 30.0], "course_deg": [nan, 5.0, nan], "in_use": [False, False, True],
+          "best_heading_deg": [90.0, 0.0, 178.0], "layout_in_use": ["class", "other_end", "class"]}
+    truth_t, truth_hdg = [0.0, 40.0], [math.radians(350.0), math.radians(370.0)]  # 350 -> 10 deg, across north
+    assert tool.heading_in_use(sh, truth_t, truth_hdg, 15.0) == "unknown"
+    assert tool.heading_in_use(sh, truth_t, truth_hdg, 25.0) == "course +5 deg, other end"  # truth 0 at t = 20
+    assert tool.heading_in_use(sh, truth_t, truth_hdg, 30.0) == "shapes +173 deg"  # truth 5: bow and stern swapped
+    assert tool.heading_in_use(sh, truth_t, truth_hdg, 5.0) == "-"
 
 
 def test_the_envelope_line_of_sight_error_by_hand():

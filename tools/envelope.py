@@ -46,7 +46,10 @@ the horizontal line of sight (a height error of the point the box centre stands 
 what became of the detections of the last 5 s (the share fused and the commonest reason for the rest;
 those of the planned coast of the last ~120 m, ``too_close``, left out). The ship's motion, type and speed
 come from the summary's dispersed columns, and so does the longest stretch without the ship seen after the
-lock (out of view or behind the airframe).
+lock (out of view or behind the airframe). Its last columns name the course model ``turn_from_course`` handed
+on into the dive, and the ship's heading the shape correction used at the dive's start with its error against
+the truth (from the estimated course or, for a slow ship, from the box shapes: an error near 180 deg is the
+bow and stern swapped).
 """
 from __future__ import annotations
 
@@ -503,6 +506,44 @@ def course_model(course_turn: dict) -> str:
     return f"turn {rate:+.2f} deg/s" if rate != 0.0 else "none"
 
 
+def heading_in_use(ship_heading: dict, truth_t_s, truth_heading_ned_rad, at_s: float) -> str:
+    """--why's heading cell from a log's ``/fsw/ship_heading`` table: the ship's heading the shape correction
+    used at ``at_s`` (the dive's start) and its error against the truth (deg, wrapped to +-180: near 180 is the
+    bow and stern swapped), with the layout it used: "course +3 deg", "shapes -172 deg", or "unknown" (the
+    offset averaged over headings: no course and the box shapes not yet trusted); ", other end" when the
+    correction took the superstructure at the other end from the class's; "-" before the first status."""
+    t = np.asarray(ship_heading.get("t_s", ()), dtype=float)
+    k = int(np.searchsorted(t, at_s, side="right")) - 1
+    if k < 0:
+        return "-"
+    truth = math.degrees(float(np.interp(t[k], np.asarray(truth_t_s, dtype=float),
+                                         np.unwrap(np.asarray(truth_heading_ned_rad, dtype=float)))))
+    course = float(ship_heading["course_deg"][k])
+    if math.isfinite(course):
+        source, heading = "course", course
+    elif bool(ship_heading["in_use"][k]):
+        source, heading = "shapes", float(ship_heading["best_heading_deg"][k])
+    else:
+        return "unknown"
+    err = (heading - truth + 180.0) % 360.0 - 180.0
+    layout = ship_heading.get("layout_in_use")
+    other = layout is not None and str(layout[k]) == "other_end"
+    return f"{source} {err:+.0f} deg" + (", other end" if other else "")
+
+
+def _heading_cell(log) -> str:
+    """--why's heading cell for one log, at the dive's start ("-" without a dive or the topics)."""
+    from fwsim import topics
+    if not {topics.FSW_SHIP_HEADING, topics.FSW_BPNG, topics.TARGET_STATE} <= set(log.topics):
+        return "-"
+    try:
+        tru = log.table(topics.TARGET_STATE)
+        return heading_in_use(log.table(topics.FSW_SHIP_HEADING), tru["t_s"], tru["heading_ned_rad"],
+                              float(log.table(topics.FSW_BPNG)["t_s"][0]))
+    except (KeyError, ValueError, IndexError):
+        return "-"
+
+
 def _course_model_cell(log) -> str:
     """--why's course-model cell for one log ("-" when the block was off or the log predates it)."""
     from fwsim import topics
@@ -546,8 +587,9 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             cells += [f"{100 * share:.0f} %" if math.isfinite(share) else "-", top or "-"]
             cells.append(_aim_line_cell(log))
             cells.append(_course_model_cell(log))
+            cells.append(_heading_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 5)
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 6)
         table.append(cells)
     return table
 
@@ -635,7 +677,9 @@ def main(argv=None) -> int:
             f"the line to the steered-to point passes the aim point by, {AIM_LINE_RANGES_M[1]:g}-"
             f"{AIM_LINE_RANGES_M[0]:g} m out, m",
             "the course model handed on into the dive (turn_from_course: a zigzag's periodic course, a steady "
-            "turn, none)"]
+            "turn, none)",
+            "the ship's heading the shape correction used at the dive's start, its error (from the course, from "
+            "the box shapes, or unknown)"]
         for out_dir, these in per_dir:
             print(f"\nRuns outside 3 m / 3 deg in {out_dir} (worst first):\n")
             print("| " + " | ".join(head) + " |")
