@@ -141,7 +141,8 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
     x = t - t_ref
     syy = float((w * y * y).sum())
     sw, swx, swxx = float(w.sum()), float((w * x).sum()), float((w * x * x).sum())
-    wx, wy, wxy = w * x, w * y, w * x * y
+    wx, wy = w * x, w * y
+    swy, swxy = float(wy.sum()), float((w * x * y).sum())
 
     def solve(omegas):
         om = np.asarray(omegas, dtype=float)[:, None] * x[None, :]
@@ -154,7 +155,7 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
         a[:, 1, 0], a[:, 2, 0], a[:, 3, 0], a[:, 2, 1], a[:, 3, 1], a[:, 3, 2] = (
             a[:, 0, 1], a[:, 0, 2], a[:, 0, 3], a[:, 1, 2], a[:, 1, 3], a[:, 2, 3])
         b = np.empty((om.shape[0], 4))
-        b[:, 0], b[:, 1], b[:, 2], b[:, 3] = float(wy.sum()), float(wxy.sum()), cs @ wy, sn @ wy
+        b[:, 0], b[:, 1], b[:, 2], b[:, 3] = swy, swxy, cs @ wy, sn @ wy
         try:
             c = np.linalg.solve(a, b[..., None])[..., 0]
         except np.linalg.LinAlgError:
@@ -162,7 +163,7 @@ def fit_periodic(t, y, w, periods_s) -> PeriodicCourse | None:
         return c, syy - (c * b).sum(axis=1)
 
     a2 = np.array([[sw, swx], [swx, swxx]])
-    b2 = np.array([float(wy.sum()), float(wxy.sum())])
+    b2 = np.array([swy, swxy])
     try:
         ss_line = syy - float(np.linalg.solve(a2, b2) @ b2)
     except np.linalg.LinAlgError:

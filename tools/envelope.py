@@ -475,21 +475,30 @@ def _failed_bar(row: dict) -> str:
     return "distance and angle" if far and off else "distance" if far else "angle"
 
 
+def _log_cell(log, needs: tuple[str, ...], make) -> str:
+    """One --why cell from a log: ``make()`` when the log has the topics ``needs``; "-" without them or when
+    ``make`` cannot read the log (a cell of its own: the row's other cells stay as they are)."""
+    if not set(needs) <= set(log.topics):
+        return "-"
+    try:
+        return make()
+    except (KeyError, ValueError, IndexError):  # ScenarioError is a ValueError
+        return "-"
+
+
 def _aim_line_cell(log) -> str:
     """--why's aim-line cell for one log ("-" without a dive or a readable scenario)."""
     from fwsim import topics
     from fwsim.metrics import LoggedShip
     from fwsim.scenario import parse_scenario
-    if topics.FSW_BPNG not in log.topics or topics.TARGET_STATE not in log.topics:
-        return "-"
-    try:  # a cell of its own: a log it cannot read leaves the row's other cells as they are
+
+    def make() -> str:
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
         b, uav = log.table(topics.FSW_BPNG), log.table(topics.UAV_STATE)
         off = aim_line_offset(b["t_s"], b["aim_enu_m"], b["range_m"], uav["t_s"], uav["pos_enu_m"],
                               LoggedShip(log, scenario).aim_point_enu_m)
-    except (KeyError, ValueError, IndexError):  # ScenarioError is a ValueError
-        return "-"
-    return f"{off:.1f}" if math.isfinite(off) else "-"
+        return f"{off:.1f}" if math.isfinite(off) else "-"
+    return _log_cell(log, (topics.FSW_BPNG, topics.TARGET_STATE), make)
 
 
 def course_model(course_turn: dict) -> str:
@@ -534,25 +543,18 @@ def heading_in_use(ship_heading: dict, truth_t_s, truth_heading_ned_rad, at_s: f
 def _heading_cell(log) -> str:
     """--why's heading cell for one log, at the dive's start ("-" without a dive or the topics)."""
     from fwsim import topics
-    if not {topics.FSW_SHIP_HEADING, topics.FSW_BPNG, topics.TARGET_STATE} <= set(log.topics):
-        return "-"
-    try:
+
+    def make() -> str:
         tru = log.table(topics.TARGET_STATE)
         return heading_in_use(log.table(topics.FSW_SHIP_HEADING), tru["t_s"], tru["heading_ned_rad"],
                               float(log.table(topics.FSW_BPNG)["t_s"][0]))
-    except (KeyError, ValueError, IndexError):
-        return "-"
+    return _log_cell(log, (topics.FSW_SHIP_HEADING, topics.FSW_BPNG, topics.TARGET_STATE), make)
 
 
 def _course_model_cell(log) -> str:
     """--why's course-model cell for one log ("-" when the block was off or the log predates it)."""
     from fwsim import topics
-    if topics.FSW_COURSE_TURN not in log.topics:
-        return "-"
-    try:
-        return course_model(log.table(topics.FSW_COURSE_TURN))
-    except (KeyError, ValueError, IndexError):
-        return "-"
+    return _log_cell(log, (topics.FSW_COURSE_TURN,), lambda: course_model(log.table(topics.FSW_COURSE_TURN)))
 
 
 def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
