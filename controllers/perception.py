@@ -41,7 +41,10 @@ Per tick (:meth:`Perception.step`):
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
-   variance (the log says ``overridden: size_mismatch``), when it cannot be
+   variance, plus (``own_headings_doubt``) the square of that correction's
+   distance from the estimated headings' (the box says the heading is wrong
+   or the ship is not the class, and only the first makes its own headings
+   right; the log says ``overridden: size_mismatch``), when it cannot be
    a box cut short: when it is larger than every estimated heading's (no
    occlusion does that; a turn the estimate missed does), or when the
    estimated ship lies ``airframe_clearance_deg`` below the wing plane (the
@@ -271,7 +274,7 @@ class Perception:
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         single = len(courses) == 1
-        boxes, pred, own_used = None, _NAN4, False
+        boxes, pred, own_used, est = None, _NAN4, False, None
         known = course is not None or self.ship.shape.ready
         if fit_size:
             self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
@@ -321,6 +324,8 @@ class Perception:
                             self._larger_than_any(det, off_against) or clear):
                         own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
                     if own is not None:
+                        if g.own_headings_doubt:  # the estimate's correction, for the doubt below
+                            est = (courses, weights, single, boxes)
                         courses, weights, boxes = own
                         self._taken_off_size = own_used = True
                         single, pred = False, boxes[int(weights.argmax())].copy()
@@ -341,6 +346,16 @@ class Perception:
         off, spread = off
         if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
+            if est is not None:  # and how far the estimated headings' correction lies (one of the two is wrong)
+                e_courses, e_weights, e_single, e_boxes = est
+                off_est = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam,
+                                               ref, float(e_courses[0]) if e_single else None,
+                                               prior.tracked_height_m, tm.headings_when_unknown, boxes_px=e_boxes,
+                                               courses_weights=None if e_single else (e_courses, e_weights),
+                                               scale=scale)
+                if off_est is not None:
+                    d = np.asarray(off_est, dtype=float) - np.asarray(off, dtype=float)
+                    doubt = (doubt[0] + float(d[0]) ** 2, doubt[1] + float(d[1]) ** 2)
         u_fix, v_fix = float(u) - float(off[0]), float(v) - float(off[1])
         share = self._bottom_share()
         if share > 0.0 and not why and np.isfinite(b).all():  # (a box off in size may be cut at its lower edge)
