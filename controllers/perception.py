@@ -41,7 +41,7 @@ Per tick (:meth:`Perception.step`):
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
-   variance, plus (``own_headings_doubt``) the square of that correction's
+   variance, plus (``own_headings_doubt``, an option) the square of that correction's
    distance from the estimated headings' (the box says the heading is wrong
    or the ship is not the class, and only the first makes its own headings
    right; the log says ``overridden: size_mismatch``), when it cannot be

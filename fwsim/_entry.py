@@ -33,9 +33,9 @@ def exit_code(exc: BaseException) -> int:
 
 
 def main() -> int:
-    for sig in STOP_SIGNALS[1:]:
-        signal.signal(sig, _raise)
     try:
+        for sig in STOP_SIGNALS[1:]:  # (inside the try: a signal may land as soon as its handler is in)
+            signal.signal(sig, _raise)
         from fwsim.cli import main as cli_main
 
         return cli_main()

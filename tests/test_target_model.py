@@ -1216,8 +1216,9 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
 
 
 def test_a_box_corrected_over_its_own_headings_doubts_it_by_the_estimates_correction():
-    """``own_headings_doubt`` (the default): a box no estimated heading explains says that the heading is wrong
-    or that the ship is not the class, and its own headings' correction is right only in the first case. So
+    """``own_headings_doubt`` (an option, off by default): a box no estimated heading explains says that the
+    heading is wrong or that the ship is not the class, and its own headings' correction is right only in the
+    first case. So
     the fix (the same either way) carries, besides the own headings' spread, the square of its distance from
     the estimated course's correction in each axis: the filter leans on it as little as that distance says.
     The ship points north while the estimate says east (test_a_box_the_estimated_course_cannot_explain_is_
@@ -1226,7 +1227,7 @@ def test_a_box_corrected_over_its_own_headings_doubts_it_by_the_estimates_correc
     cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
-    assert DetectionGateConfig().own_headings_doubt
+    assert not DetectionGateConfig().own_headings_doubt  # (an option: README, "A fresh seed, 1656")
 
     def perception(doubt: bool) -> Perception:
         p = Perception(DetectionGateConfig(maybe_cut_action="skip", own_headings_doubt=doubt),
