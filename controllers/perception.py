@@ -336,26 +336,16 @@ class Perception:
                         why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
                     else:  # skip, or own_headings with no heading of its own
                         return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-        off = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
-                                   float(courses[0]) if single else None, prior.tracked_height_m,
-                                   tm.headings_when_unknown, boxes_px=boxes,
-                                   courses_weights=None if single else (courses, weights), spread=True,
-                                   scale=scale)
+        off = self._offset(cam, ref, prior, (courses, weights, single, boxes), scale, spread=True)
         if off is None:
             return u, v, pred, why, _ZERO22, doubt
         off, spread = off
         if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
-            if est is not None:  # and how far the estimated headings' correction lies (one of the two is wrong)
-                e_courses, e_weights, e_single, e_boxes = est
-                off_est = box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam,
-                                               ref, float(e_courses[0]) if e_single else None,
-                                               prior.tracked_height_m, tm.headings_when_unknown, boxes_px=e_boxes,
-                                               courses_weights=None if e_single else (e_courses, e_weights),
-                                               scale=scale)
-                if off_est is not None:
-                    d = np.asarray(off_est, dtype=float) - np.asarray(off, dtype=float)
-                    doubt = (doubt[0] + float(d[0]) ** 2, doubt[1] + float(d[1]) ** 2)
+            off_est = None if est is None else self._offset(cam, ref, prior, est, scale)
+            if off_est is not None:  # and how far the estimated headings' correction lies (one of the two is wrong)
+                d = off_est - off
+                doubt = (doubt[0] + float(d[0]) ** 2, doubt[1] + float(d[1]) ** 2)
         u_fix, v_fix = float(u) - float(off[0]), float(v) - float(off[1])
         share = self._bottom_share()
         if share > 0.0 and not why and np.isfinite(b).all():  # (a box off in size may be cut at its lower edge)
@@ -370,6 +360,16 @@ class Perception:
                 u_fix += share * (u_b - u_fix)
                 v_fix += share * (v_b - v_fix)
         return u_fix, v_fix, pred, why, spread, doubt
+
+    def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False):
+        """:func:`~controllers.target_model.box_centre_offset_px` over ``headings`` = (courses, weights, one
+        course, their predicted boxes): the one course's offset, or the weighted mean over the courses."""
+        courses, weights, single, boxes = headings
+        return box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+                                    float(courses[0]) if single else None, prior.tracked_height_m,
+                                    self.ship.cfg.headings_when_unknown, boxes_px=boxes,
+                                    courses_weights=None if single else (courses, weights), spread=spread,
+                                    scale=scale)
 
     def _bottom_share(self) -> float:
         """The share of the hull's lower edge in the fix (``target_model.anchor``), the rest the box centre's."""
