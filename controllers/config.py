@@ -519,6 +519,15 @@ class UkfConfig(StrictModel):
                     "a few px from the real heading's: an error common to every detection until the heading is "
                     "known, which the filter's covariance, fusing detections as independent, does not hold); "
                     "like box_centre_bias_frac it is not fused")
+    consider_update: Literal["latest_view", "gain_weighted"] = Field(
+        "latest_view",
+        description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "
+                    "box_centre_height_std_m) follows the detections: latest_view, that of the last fused box "
+                    "seen from its view alone; gain_weighted, that of the estimate, which is a gain-weighted "
+                    "blend of the boxes it fused: each fused box moves the estimate's systematic error towards "
+                    "its own by the share of the horizontal position variance the update removed, the errors "
+                    "taken as fully correlated from box to box (a box fused with a large doubt barely moves "
+                    "the estimate, nor its error)")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "

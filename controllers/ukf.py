@@ -451,12 +451,14 @@ class _CompiledUpdate:
         K = ca.solve(S.T, Pxz.T).T  # P_xz S^-1 (S symmetric)
         self._fun = Buffered(ca.Function("ukf_update", [X, x, P, z, r, k, R, hc],
                                          [y, nis, x + ca.mtimes(K, y), P - ca.mtimes(ca.mtimes(K, S), K.T),
-                                          a * dd - b * c]))
+                                          a * dd - b * c, K[2:4, 0:2]]))
         self._n = n
 
     def __call__(self, sigmas, x, P, z, r, f_u, f_v, c_u, c_v, R_ec, cam_h, plane_z):
         """(innovation (5,), chi-square over the pixel rows, updated x, updated P, the determinant of the
-        pixel rows' innovation covariance (px^4: with the chi-square, the detection's likelihood))."""
+        pixel rows' innovation covariance (px^4: with the chi-square, the detection's likelihood), the gain's
+        horizontal position rows for the pixel columns (2 x 2, m/px: how far a pixel's error moves the
+        estimate))."""
         # the inputs written into the function's buffers (column-major, as CasADi stores them): one copy each
         fun, n = self._fun, self._n
         X_in, x_in, P_in, z_in, r_in, k, R, hc = fun.inputs
@@ -468,8 +470,9 @@ class _CompiledUpdate:
         k[0], k[1], k[2], k[3] = f_u, f_v, c_u, c_v
         R.reshape(3, 3)[:] = np.asarray(R_ec, dtype=float).T
         hc[0], hc[1] = cam_h, plane_z
-        y, nis, x_new, P_new, det = fun()  # (on the inputs written above)
-        return y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy(), float(det[0])
+        y, nis, x_new, P_new, det, K_h = fun()  # (on the inputs written above)
+        return (y.copy(), float(nis[0]), x_new.copy(), P_new.reshape(n, n).T.copy(), float(det[0]),
+                K_h.reshape(2, 2).T.copy())
 
 
 def _fx_compiled(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
@@ -534,6 +537,40 @@ def _height_cov(d: list, height_std_m: float) -> list[list[float]]:
     g0, g1 = d[0] / nd, d[1] / nd
     s2 = height_std_m * height_std_m
     return [[s2 * (g0 * g0), s2 * (g0 * g1)], [s2 * (g1 * g0), s2 * (g1 * g1)]]
+
+
+_ZERO23 = np.zeros((2, 3))
+_ZERO23.flags.writeable = False
+
+
+def _sqrt_spd2(a: float, b: float, c: float) -> tuple[float, float, float]:
+    """The symmetric square root (its entries (0, 0), (0, 1), (1, 1)) of the symmetric positive
+    semi-definite 2 x 2 matrix [[a, b], [b, c]]: ``(A + sqrt(det) I) / sqrt(trace + 2 sqrt(det))``."""
+    sd = math.sqrt(max(a * c - b * b, 0.0))
+    t = a + c + 2.0 * sd
+    if not t > 0.0:
+        return 0.0, 0.0, 0.0
+    n = 1.0 / math.sqrt(t)
+    return (a + sd) * n, b * n, (c + sd) * n
+
+
+def _consider_blend(prev: np.ndarray, box: np.ndarray, K_h: np.ndarray, J) -> np.ndarray:
+    """The estimate's systematic error factor after fusing a box whose own factor is ``box`` (both 2 x 3, m),
+    the errors fully correlated from box to box. The state carries the pixel error ``J^-1 prev`` of the boxes
+    before; the new box's is ``J^-1 box``; the update moves the estimate by the gain's horizontal position rows
+    for the pixel columns (``K_h``, m/px) times their difference: ``prev + G (box - prev)``, ``G = K_h J^-1``
+    (``J`` the box's view's pixel-to-plane Jacobian, m/px). ``box`` alone before any error is carried
+    (``prev`` zero), or without a view (``J`` None) or a finite ``G``."""
+    if J is None or not prev.any():
+        return box
+    (a, b), (c, d) = J
+    det = a * d - b * c
+    if not (math.isfinite(det) and abs(det) > 0.0):
+        return box
+    G = K_h @ (np.array([[d, -b], [-c, a]]) / det)
+    if not np.all(np.isfinite(G)):
+        return box
+    return prev + G @ (box - prev)
 
 
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
@@ -603,6 +640,7 @@ class UkfTargetEstimator:
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
         self._consider = np.zeros((2, 2))  # horizontal covariance of the box centre's systematic error (m^2)
+        self._consider_factor = _ZERO23  # its factor F (2 x 3, m): the covariance is F F^T
         self.rejected_updates = 0  # detections not used (ray misses the plane, non-finite pixels)
         self.divergence_resets = 0  # non-finite state: the filter de-initialised itself
         self.gated_updates = 0  # detections rejected by the innovation gate
@@ -688,6 +726,7 @@ class UkfTargetEstimator:
         """Forget the target: the next valid detection initialises again."""
         self._initialised = False
         self._consider = np.zeros((2, 2))
+        self._consider_factor = _ZERO23
         self._motion = None
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
@@ -721,7 +760,7 @@ class UkfTargetEstimator:
         self._innov_t = math.nan
         self._rejects_in_a_row = 0
         self._initialised = True
-        self._consider = self._box_bias_cov(fix, motion)
+        self._set_consider(self._box_bias_factor(fix, motion)[0])
 
     def predict(self, t_s: float, motion: CameraMotion) -> None:
         """Propagate to t_s (no-op before initialisation or if t_s is not later than the filter's time)."""
@@ -781,7 +820,7 @@ class UkfTargetEstimator:
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
         core = self._core
         try:
-            y, nis, x_new, P_new, det = self._update(core.current_sigma_points(), core._x, core._P, z, r, cam.fx,
+            y, nis, x_new, P_new, det, K_h = self._update(core.current_sigma_points(), core._x, core._P, z, r, cam.fx,
                                                      cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
                                                      c.target_plane_height_m)
             core.last_nis = nis
@@ -804,7 +843,10 @@ class UkfTargetEstimator:
         self._innov = y[:2].copy()
         self._innov_t = self._t
         self._motion = motion
-        self._consider = self._box_bias_cov(fix, motion)
+        box, J = self._box_bias_factor(fix, motion)
+        if c.consider_update == "gain_weighted":
+            box = _consider_blend(self._consider_factor, box, K_h, J)
+        self._set_consider(box)
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
 
@@ -819,16 +861,27 @@ class UkfTargetEstimator:
         rg[0] += (k * float(b[2] - b[0])) ** 2
         rg[1] += (k * float(b[3] - b[1])) ** 2
         cam = self.camera
-        _, nis, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy,
+        _, nis, _, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy,
                                        cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
                                        self.cfg.target_plane_height_m)
         return float(nis)
 
-    def _box_bias_cov(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:
-        """Horizontal covariance (2 x 2, m^2) on the target plane of a systematic box-centre error of
-        ``box_centre_bias_frac`` of the box's width and height, plus (``consider_heading_spread``) the shape
-        correction's spread over the headings the ship may have (``fix.offset_spread_px2``), seen from this
-        detection's view (zero without a box or where the ray misses the plane)."""
+    def _set_consider(self, factor: np.ndarray) -> None:
+        """The reported std's systematic part from its factor (2 x 3, m)."""
+        self._consider_factor = factor
+        self._consider = factor @ factor.T
+
+    def _box_bias_factor(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:
+        """The factor ``F`` (2 x 3, m) of the horizontal covariance ``F F^T`` (m^2) on the target plane of a
+        systematic box-centre error of ``box_centre_bias_frac`` of the box's width and height, plus
+        (``consider_heading_spread``) the shape correction's spread over the headings the ship may have
+        (``fix.offset_spread_px2``), plus (``box_centre_height_std_m``) the tracked point's height error, seen
+        from this detection's view (zero without a box or where the ray misses the plane): ``[J S^(1/2), s_h g]``, ``J`` the view's
+        pixel-to-plane Jacobian (horizontal rows), ``S`` the box centre's systematic pixel covariance
+        (``diag(s^2)`` plus the heading spread; its symmetric square root, so that factors of consecutive
+        boxes blend without sign flips), ``g`` the plane's displacement of a point seen 1 m higher
+        (:func:`height_consider_cov`) and ``s_h`` ``box_centre_height_std_m``; with ``J`` (nested tuples; None
+        where the factor is zero for want of a view)."""
         cfg = self.cfg
         k, b = cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
         spread = np.asarray(fix.offset_spread_px2, dtype=float) if cfg.consider_heading_spread else None
@@ -837,7 +890,7 @@ class UkfTargetEstimator:
         sh = cfg.box_centre_height_std_m
         box = b.tolist() if b.shape == (4,) else None
         if (k <= 0.0 and spread is None and sh <= 0.0) or box is None or not all(map(math.isfinite, box)):
-            return np.zeros((2, 2))
+            return _ZERO23, None
         # the view's geometry as ground_from_pixel_jacobian (horizontal rows) and height_consider_cov, from
         # one ray, on Python floats
         cam = self.camera
@@ -846,21 +899,20 @@ class UkfTargetEstimator:
         d = (R @ np.array([x1, x2, 1.0])).tolist()
         h = motion.height_m - cfg.target_plane_height_m
         if not (d[2] < -1e-9 and h > 0.0):  # the ray does not come down to the plane
-            return np.zeros((2, 2))
+            return _ZERO23, None
         J = _ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
         (j00, j01), (j10, j11) = J
         if not (math.isfinite(j00) and math.isfinite(j01) and math.isfinite(j10) and math.isfinite(j11)):
-            return np.zeros((2, 2))
+            return _ZERO23, None
         s0, s1 = k * (box[2] - box[0]), k * (box[3] - box[1])
-        s00, s11 = s0 * s0, s1 * s1
-        J = np.array(J)
         if spread is None:
-            cov = np.array([[j00 * s00, j01 * s11], [j10 * s00, j11 * s11]]) @ J.T  # (J diag(s^2)) J^T
+            a, b, c = abs(s0), 0.0, abs(s1)  # diag(s)
         else:
-            cov = J @ (np.array([[s00, 0.0], [0.0, s11]]) + spread) @ J.T
-        if sh > 0.0:
-            cov += _height_cov(d, sh)
-        return cov
+            a, b, c = _sqrt_spd2(s0 * s0 + float(spread[0, 0]), float(spread[0, 1]), s1 * s1 + float(spread[1, 1]))
+        nd = -d[2]
+        g0, g1 = sh * d[0] / nd, sh * d[1] / nd  # (zero without a height error)
+        return (np.array([[j00 * a + j01 * b, j00 * b + j01 * c, g0], [j10 * a + j11 * b, j10 * b + j11 * c, g1]]),
+                ((j00, j01), (j10, j11)))
 
     def status(self, t_s: float) -> EstimatorStatus:
         """The counters since the start, as the log's ``/fsw/estimator_status``."""

@@ -357,7 +357,8 @@ def test_the_compiled_process_model_equals_the_numpy_one(dt, omega):
 def test_the_compiled_update_equals_the_numpy_one():
     """The UKF's measurement update is one CasADi function: the same innovation, chi-square statistic, state and
     covariance as UnscentedCore.update with the batched pinhole + flat-sea measurement model in numpy, to
-    rounding, and the determinant of the pixel rows' innovation covariance."""
+    rounding, the determinant of the pixel rows' innovation covariance, and the gain's horizontal position rows
+    for the pixel columns (the state's move per pixel of the detection)."""
     from controllers.ukf import _CompiledUpdate, _hx_batch
     x = np.array([0.05, -0.02, 100.0, 40.0, 3.75, 2.0, 1.0, 0.0])
     # a covariance as the filter has them (the pixel and r_c rows of S are nearly dependent: S's condition
@@ -374,7 +375,11 @@ def test_the_compiled_update_equals_the_numpy_one():
     core = UnscentedCore(8, 5, 1.0, 2.0, 0.0)
     core.set_state(x, P)
     sigmas = core.current_sigma_points()
-    y, nis, x_new, P_new, det = _CompiledUpdate.for_core(core)(sigmas, x, core.P, z, r, **args)
+    upd = _CompiledUpdate.for_core(core)
+    y, nis, x_new, P_new, det, K_h = upd(sigmas, x, core.P, z, r, **args)
+    for i in (0, 1):  # the gain's position rows for a pixel column: the update is linear in z
+        x_i = upd(sigmas, x, core.P, z + np.eye(5)[i], r, **args)[2]
+        np.testing.assert_allclose(K_h[:, i], (x_i - x_new)[2:4], rtol=1e-6, atol=1e-9)
     S = core.moments(sigmas, x, _hx_batch(sigmas, **args))[1] + np.diag(r)  # the innovation covariance
     assert det == pytest.approx(np.linalg.det(S[:2, :2]), rel=1e-10)  # its pixel rows' (the likelihood's)
     np.testing.assert_allclose(y, y_ref, rtol=1e-10, atol=1e-9)
@@ -513,3 +518,68 @@ def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only
     C = J @ (np.diag(np.array([8.0, 3.0]) ** 2) + S) @ J.T
     np.testing.assert_allclose(e1.pos_std_m[:2] ** 2, np.diag(P0)[2:4] + np.diag(C), rtol=1e-9)
     assert e1.pos_std_m[2] == e0.pos_std_m[2] and np.all(e1.pos_std_m[:2] > e0.pos_std_m[:2])
+
+
+def test_the_symmetric_square_root_of_a_2x2_covariance():
+    """_sqrt_spd2: the symmetric root squares back to the matrix, for full-rank, singular and zero ones."""
+    from controllers.ukf import _sqrt_spd2
+    for a, b, c in ((9.0, 2.0, 16.0), (64.0, 0.0, 9.0), (4.0, 6.0, 9.0), (1e-6, 0.0, 5e3), (0.0, 0.0, 0.0)):
+        r00, r01, r11 = _sqrt_spd2(a, b, c)
+        S = np.array([[r00, r01], [r01, r11]])
+        np.testing.assert_allclose(S @ S, [[a, b], [b, c]], rtol=1e-9, atol=1e-9)
+        assert np.all(np.linalg.eigvalsh(S) >= -1e-12)
+
+
+def _fly_with_a_systematic_centre_error(update: str, beta: tuple[float, float]):
+    """90 frames of the orbit (seed 11), 80 x 30 px boxes whose centres are off by ``beta`` times
+    box_centre_bias_frac (0.1) of the box's size, the same ``beta`` every frame (a fully correlated error),
+    then one frame with a box ten times larger off by ten times as much and fused with that much doubt
+    (``centre_noise_px2``). (estimator, its state after frame 90, after the last frame)."""
+    from controllers.ukf import fix_from_measurements
+    truth, rng = OrbitTruth(), np.random.default_rng(11)
+    ukf = UkfTargetEstimator(CAM, UkfConfig(box_centre_bias_frac=0.1, box_centre_height_std_m=0.0,
+                                            consider_update=update))
+    states = []
+    for i in range(91):
+        big = 10.0 if i == 90 else 1.0
+        meas = truth.sample(i / 30.0, rng)
+        du, dv = beta[0] * 8.0 * big, beta[1] * 3.0 * big  # 0.1 of the box's width and height
+        u, v = meas.det_u_px + du, meas.det_v_px + dv
+        meas = dataclasses.replace(meas, det_u_px=u, det_v_px=v, det_bbox_px=np.array(
+            [u - 40.0 * big, v - 15.0 * big, u + 40.0 * big, v + 15.0 * big]))
+        motion = CameraMotion.from_measurements(meas, MOUNT)
+        fix = fix_from_measurements(meas)
+        if i == 0:
+            ukf.initialise(fix, motion)
+        else:
+            noise = ((80.0 * big) ** 2, (30.0 * big) ** 2) if i == 90 else (0.0, 0.0)
+            ukf.update(dataclasses.replace(fix, centre_noise_px2=noise), motion)
+        if i >= 89:
+            states.append((ukf.x.copy(), ukf.cov.copy(), ukf._consider_factor.copy(), ukf.estimate()))
+    return ukf, states[0], states[1]
+
+
+def test_the_gain_weighted_consider_is_the_estimates_own_systematic_error():
+    """consider_update: gain_weighted. Detections off by the same ``beta`` standard deviations of the box centre's
+    systematic error in every frame move the estimate by what the consider factor says, ``F beta`` (against the
+    same flight without the error, within 15 %), as latest_view's does while the boxes stay alike. A box ten
+    times larger and ten times as far off, fused with that much doubt, barely moves the estimate: the
+    gain-weighted factor still says where it is, latest_view's (that box's view alone) says ten times more. The
+    state and the filter's covariance are latest_view's: only the reported std differs."""
+    beta = np.array([1.0, -1.0, 0.0])
+    runs = {(up, b): _fly_with_a_systematic_centre_error(up, b)
+            for up in ("latest_view", "gain_weighted") for b in ((0.0, 0.0), (1.0, -1.0))}
+    for k in (1, 2):  # after frame 90, after the big doubtful box
+        for b in ((0.0, 0.0), (1.0, -1.0)):
+            sl, sg = runs["latest_view", b][k], runs["gain_weighted", b][k]
+            assert np.array_equal(sl[0], sg[0]) and np.array_equal(sl[1], sg[1])
+        off = runs["gain_weighted", (1.0, -1.0)][k][0][2:4] - runs["gain_weighted", (0.0, 0.0)][k][0][2:4]
+        assert np.linalg.norm(off) > 1.0  # metres: the error is there to be predicted
+        for up in ("latest_view", "gain_weighted"):
+            said = runs[up, (1.0, -1.0)][k][2] @ beta
+            if k == 1 or up == "gain_weighted":
+                assert np.linalg.norm(said - off) < 0.15 * np.linalg.norm(off), (up, k, said, off)
+            else:  # the big box's own view: ten times the error the estimate has
+                assert np.linalg.norm(said) > 5.0 * np.linalg.norm(off), (said, off)
+    e_l, e_g = runs["latest_view", (1.0, -1.0)][2][3], runs["gain_weighted", (1.0, -1.0)][2][3]
+    assert np.all(e_g.pos_std_m[:2] < 0.5 * e_l.pos_std_m[:2])
