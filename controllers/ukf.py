@@ -45,7 +45,17 @@ class's): a point seen higher or lower meets the target plane displaced along
 the line of sight by its height error over tan of the elevation, so far out
 at a shallow elevation it dominates (``box_centre_height_std_m``:
 :func:`height_consider_cov`). The state and the filter's covariance (``cov``)
-are unchanged by any of them.
+are unchanged by any of them. With ``consider_update: latest_view`` the
+three are those of the latest fused box's view alone, so one box fused with a
+large doubt sets the std, though it barely moved the estimate. With
+``gain_weighted`` the std carries the estimate's own systematic error as a
+factor ``F`` (2 x 3, m; the covariance ``F F^T``) over three fixed unit errors
+(the box centre's two pixel axes, the height): each fused box moves ``F``
+towards its own factor by ``G = K_h J^-1`` (``K_h`` the gain's horizontal
+position rows for the pixel columns, ``J`` the view's pixel-to-plane
+Jacobian), the move the update gives the estimate for the difference between
+the box's error and the one the state carries, errors being fully correlated
+from box to box (:func:`_consider_blend`).
 
 Interfaces: :class:`UkfTargetEstimator` implements the flight software's
 estimator Protocol (``controllers.blocks.TargetEstimator``), so a second filter
