@@ -519,11 +519,13 @@ class UkfConfig(StrictModel):
                     "a few px from the real heading's: an error common to every detection until the heading is "
                     "known, which the filter's covariance, fusing detections as independent, does not hold); "
                     "like box_centre_bias_frac it is not fused")
-    consider_update: Literal["latest_view", "gain_weighted"] = Field(
+    consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
         "latest_view",
         description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "
                     "box_centre_height_std_m) follows the detections: latest_view, that of the last fused box "
-                    "seen from its view alone; gain_weighted, that of the estimate, which is a gain-weighted "
+                    "seen from its view alone; latest_undoubted, that of the last box fused without a doubt "
+                    "(a box the perception hands over with centre noise, fused as noise, barely moves the "
+                    "estimate); gain_weighted, that of the estimate, which is a gain-weighted "
                     "blend of the boxes it fused: each fused box moves the estimate's systematic error towards "
                     "its own by the share of the horizontal position variance the update removed, the errors "
                     "taken as fully correlated from box to box (a box fused with a large doubt barely moves "

@@ -47,7 +47,9 @@ at a shallow elevation it dominates (``box_centre_height_std_m``:
 :func:`height_consider_cov`). The state and the filter's covariance (``cov``)
 are unchanged by any of them. With ``consider_update: latest_view`` the
 three are those of the latest fused box's view alone, so one box fused with a
-large doubt sets the std, though it barely moved the estimate. With
+large doubt sets the std, though it barely moved the estimate;
+``latest_undoubted`` takes them from the latest box fused without a doubt
+(``DetectionFix.centre_noise_px2`` zero). With
 ``gain_weighted`` the std carries the estimate's own systematic error as a
 factor ``F`` (2 x 3, m; the covariance ``F F^T``) over three fixed unit errors
 (the box centre's two pixel axes, the height): each fused box moves ``F``
@@ -856,6 +858,8 @@ class UkfTargetEstimator:
         box, J = self._box_bias_factor(fix, motion)
         if c.consider_update == "gain_weighted":
             box = _consider_blend(self._consider_factor, box, K_h, J)
+        elif c.consider_update == "latest_undoubted" and (extra_u or extra_v) and self._consider_factor.any():
+            box = self._consider_factor  # a box fused with its doubt as noise: the estimate's error stays
         self._set_consider(box)
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
@@ -881,17 +885,17 @@ class UkfTargetEstimator:
         self._consider_factor = factor
         self._consider = factor @ factor.T
 
-    def _box_bias_factor(self, fix: DetectionFix, motion: CameraMotion) -> np.ndarray:
-        """The factor ``F`` (2 x 3, m) of the horizontal covariance ``F F^T`` (m^2) on the target plane of a
+    def _box_bias_factor(self, fix: DetectionFix, motion: CameraMotion) -> tuple[np.ndarray, tuple | None]:
+        """(The factor ``F`` (2 x 3, m) of the horizontal covariance ``F F^T`` (m^2) on the target plane of a
         systematic box-centre error of ``box_centre_bias_frac`` of the box's width and height, plus
         (``consider_heading_spread``) the shape correction's spread over the headings the ship may have
         (``fix.offset_spread_px2``), plus (``box_centre_height_std_m``) the tracked point's height error, seen
-        from this detection's view (zero without a box or where the ray misses the plane): ``[J S^(1/2), s_h g]``, ``J`` the view's
-        pixel-to-plane Jacobian (horizontal rows), ``S`` the box centre's systematic pixel covariance
+        from this detection's view (zero without a box or where the ray misses the plane); ``J``). ``F`` is
+        ``[J S^(1/2), s_h g]``: ``J`` the view's pixel-to-plane Jacobian (horizontal rows; nested tuples, None
+        where ``F`` is zero for want of a view), ``S`` the box centre's systematic pixel covariance
         (``diag(s^2)`` plus the heading spread; its symmetric square root, so that factors of consecutive
         boxes blend without sign flips), ``g`` the plane's displacement of a point seen 1 m higher
-        (:func:`height_consider_cov`) and ``s_h`` ``box_centre_height_std_m``; with ``J`` (nested tuples; None
-        where the factor is zero for want of a view)."""
+        (:func:`height_consider_cov`) and ``s_h`` ``box_centre_height_std_m``."""
         cfg = self.cfg
         k, b = cfg.box_centre_bias_frac, np.asarray(fix.bbox_px, dtype=float)
         spread = np.asarray(fix.offset_spread_px2, dtype=float) if cfg.consider_heading_spread else None

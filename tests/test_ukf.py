@@ -559,27 +559,32 @@ def _fly_with_a_systematic_centre_error(update: str, beta: tuple[float, float]):
     return ukf, states[0], states[1]
 
 
-def test_the_gain_weighted_consider_is_the_estimates_own_systematic_error():
-    """consider_update: gain_weighted. Detections off by the same ``beta`` standard deviations of the box centre's
-    systematic error in every frame move the estimate by what the consider factor says, ``F beta`` (against the
-    same flight without the error, within 15 %), as latest_view's does while the boxes stay alike. A box ten
-    times larger and ten times as far off, fused with that much doubt, barely moves the estimate: the
-    gain-weighted factor still says where it is, latest_view's (that box's view alone) says ten times more. The
-    state and the filter's covariance are latest_view's: only the reported std differs."""
+def test_the_consider_update_modes_against_the_estimates_own_systematic_error():
+    """consider_update. Detections off by the same ``beta`` standard deviations of the box centre's systematic
+    error in every frame move the estimate by what the consider factor says, ``F beta`` (against the same
+    flight without the error, within 15 %), in every mode while the boxes stay alike. A box ten times larger
+    and ten times as far off, fused with that much doubt, barely moves the estimate: gain_weighted's factor
+    still says where it is, latest_undoubted keeps the factor of the box before, latest_view's (that box's view
+    alone) says ten times more. The state and the filter's covariance are the same in every mode: only the
+    reported std differs."""
     beta = np.array([1.0, -1.0, 0.0])
-    runs = {(up, b): _fly_with_a_systematic_centre_error(up, b)
-            for up in ("latest_view", "gain_weighted") for b in ((0.0, 0.0), (1.0, -1.0))}
+    modes = ("latest_view", "latest_undoubted", "gain_weighted")
+    runs = {(up, b): _fly_with_a_systematic_centre_error(up, b) for up in modes for b in ((0.0, 0.0), (1.0, -1.0))}
     for k in (1, 2):  # after frame 90, after the big doubtful box
         for b in ((0.0, 0.0), (1.0, -1.0)):
-            sl, sg = runs["latest_view", b][k], runs["gain_weighted", b][k]
-            assert np.array_equal(sl[0], sg[0]) and np.array_equal(sl[1], sg[1])
+            sl = runs["latest_view", b][k]
+            for up in modes[1:]:
+                assert np.array_equal(sl[0], runs[up, b][k][0]) and np.array_equal(sl[1], runs[up, b][k][1])
         off = runs["gain_weighted", (1.0, -1.0)][k][0][2:4] - runs["gain_weighted", (0.0, 0.0)][k][0][2:4]
         assert np.linalg.norm(off) > 1.0  # metres: the error is there to be predicted
-        for up in ("latest_view", "gain_weighted"):
+        for up in modes:
             said = runs[up, (1.0, -1.0)][k][2] @ beta
-            if k == 1 or up == "gain_weighted":
+            if k == 1 or up != "latest_view":
                 assert np.linalg.norm(said - off) < 0.15 * np.linalg.norm(off), (up, k, said, off)
             else:  # the big box's own view: ten times the error the estimate has
                 assert np.linalg.norm(said) > 5.0 * np.linalg.norm(off), (said, off)
-    e_l, e_g = runs["latest_view", (1.0, -1.0)][2][3], runs["gain_weighted", (1.0, -1.0)][2][3]
-    assert np.all(e_g.pos_std_m[:2] < 0.5 * e_l.pos_std_m[:2])
+    np.testing.assert_array_equal(runs["latest_undoubted", (1.0, -1.0)][1][2],
+                                  runs["latest_undoubted", (1.0, -1.0)][2][2])
+    e_l = runs["latest_view", (1.0, -1.0)][2][3]
+    for up in modes[1:]:
+        assert np.all(runs[up, (1.0, -1.0)][2][3].pos_std_m[:2] < 0.5 * e_l.pos_std_m[:2])
