@@ -525,11 +525,11 @@ class UkfConfig(StrictModel):
                     "box_centre_height_std_m) follows the detections: latest_view, that of the last fused box "
                     "seen from its view alone; latest_undoubted, that of the last box fused without a doubt "
                     "(a box the perception hands over with centre noise, fused as noise, barely moves the "
-                    "estimate); gain_weighted, that of the estimate, which is a gain-weighted "
-                    "blend of the boxes it fused: each fused box moves the estimate's systematic error towards "
-                    "its own by the share of the horizontal position variance the update removed, the errors "
-                    "taken as fully correlated from box to box (a box fused with a large doubt barely moves "
-                    "the estimate, nor its error)")
+                    "estimate); gain_weighted, that of the estimate, a gain-weighted blend of the boxes it "
+                    "fused: each fused box moves the estimate's systematic error by the update's gain times the "
+                    "difference between the box's error and the one the estimate carries, the errors taken as "
+                    "fully correlated from box to box (a box fused with a large doubt barely moves the "
+                    "estimate, nor its error)")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "

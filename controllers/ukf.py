@@ -832,9 +832,9 @@ class UkfTargetEstimator:
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
         core = self._core
         try:
-            y, nis, x_new, P_new, det, K_h = self._update(core.current_sigma_points(), core._x, core._P, z, r, cam.fx,
-                                                     cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
-                                                     c.target_plane_height_m)
+            y, nis, x_new, P_new, det, K_h = self._update(core.current_sigma_points(), core._x, core._P, z, r,
+                                                          cam.fx, cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam,
+                                                          motion.height_m, c.target_plane_height_m)
             core.last_nis = nis
             self._last_nis_det = (nis, det)
             rejected = gating and nis > c.innovation_gate
@@ -876,8 +876,8 @@ class UkfTargetEstimator:
         rg[1] += (k * float(b[3] - b[1])) ** 2
         cam = self.camera
         _, nis, _, _, _, _ = self._update(core.current_sigma_points(), core._x, core._P, z, rg, cam.fx, cam.fy,
-                                       cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
-                                       self.cfg.target_plane_height_m)
+                                          cam.cx, cam.cy, motion.R_enu_from_cam, motion.height_m,
+                                          self.cfg.target_plane_height_m)
         return float(nis)
 
     def _set_consider(self, factor: np.ndarray) -> None:
