@@ -293,7 +293,7 @@ class ShapeHeadingConfig(StrictModel):
                     "and so the velocity itself, which a still ship's then follows (over the envelope's slow ships "
                     "it did harm at 0.25 and 0.5); read from the box centres, it turned bridge-forward ships, whose "
                     "shapes' reversed end was the right superstructure for the class's outline, end for end "
-                    "(README, 'The bow from a slow ship's velocity')")
+                    "(docs/ENVELOPE.md, 'The bow from a slow ship's velocity')")
     end_velocity_source: Literal["estimate", "box_centres"] = Field(
         "box_centres",
         description="the velocity end_from_velocity_std_floor_m_s reads: the estimator's (which the corrected "
@@ -328,7 +328,7 @@ class ShapeHeadingConfig(StrictModel):
                     "s: a ship that turns otherwise than at one of turn_rates_deg_s (a zigzag) is then weighed "
                     "at the heading it has had lately, not at all it had. 120 s: at 30 s a still ship's bow "
                     "and stern, which the box shapes tell only weakly, came and went with the last boxes "
-                    "(README, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
+                    "(docs/ENVELOPE.md, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
     turn_rate_switch_s: float | None = Field(
         None, gt=0, le=100000,
         description="while the course is not followed, the ship's turn rate may change (a zigzag's turn reverses, "
@@ -338,8 +338,8 @@ class ShapeHeadingConfig(StrictModel):
                     "from the first box on, and the boxes' evidence for the bow stays with the heading as it "
                     "turns. Seconds a rate is expected to hold (20: offline, a +-30 deg / 90 s zigzag's heading "
                     "to 11 deg at p90, not 38, and no longer toward the stern; 60 did about as well; in flight "
-                    "not better at the bars, so off by default: README, 'Switching turn rates for a slow ship's "
-                    "heading'); None: each rate holds for good. Nothing to switch with one rate")
+                    "not better at the bars, so off by default: docs/ENVELOPE.md, 'Switching turn rates for a "
+                    "slow ship's heading'); None: each rate holds for good. Nothing to switch with one rate")
 
     @field_validator("turn_rates_deg_s")
     @classmethod
@@ -464,8 +464,8 @@ class ShipModelConfig(StrictModel):
                     "the hull's size), blend (the mean of the two fixes; a box off in size, which may be cut at "
                     "its lower edge, keeps box_centre's); *_in_dive: box_centre until the terminal switch (in "
                     "the loiter a wrong superstructure's error averages out as the view goes round the ship, "
-                    "in the dive it does not). README, envelope section: blend_in_dive gained at its tuning "
-                    "seed, not at two fresh ones")
+                    "in the dive it does not). docs/ENVELOPE.md, 'The hull's lower edge as the fix': blend_in_dive "
+                    "gained at its tuning seed, not at two fresh ones")
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
     size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
     layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig)
@@ -541,7 +541,7 @@ class UkfConfig(StrictModel):
                     "puts its corrected centre tens of pixels off, and the gate, allowing for noise alone, turns "
                     "the right boxes away. Only the test changes (the update weighs the box as before). False: "
                     "the gate allows for the pixel noise alone (scenarios/paper_mission.yaml, whose ship is the "
-                    "class exactly; README 'The gate that allows for the box centre's systematic error')")
+                    "class exactly; docs/ENVELOPE.md, 'The gate that allows for the box centre's systematic error')")
     innovation_gate_max_rejects: int = Field(
         15, ge=1, le=100000, description="after this many rejections in a row the next detection is used anyway "
                                          "(the estimate, not the detections, may be wrong)")
@@ -574,7 +574,7 @@ class CtUkfConfig(StrictModel):
                     "30 and 60 s track a +-30 deg, 60 s zigzag alike, 60 s keeps a held turn's rate through the "
                     "dive; 300 s follows a steady turn better and a zigzag worse: the envelope at two seeds, "
                     "turning ships within 3 m / 3 deg 11 -> 14 of 17 and 18 -> 21 of 26, zigzags 9 -> 8 and "
-                    "14 -> 10, README 'A fresh seed, 1648')")
+                    "14 -> 10, docs/ENVELOPE.md, 'A fresh seed, 1648')")
     accel_std_m_s2: float = Field(
         0.3, gt=0, le=10,
         description="along-track acceleration std of the Gauss-Markov model (long run, and at the start), m/s^2; "
@@ -940,7 +940,7 @@ class BpngConfig(StrictModel):
                     "the velocity toward the line of sight at this rate or more, the bias term scaled down where "
                     "it would take that away, deg/s. From a loiter round a fast ship the LOS rate can be so low "
                     "that the bias cancels PN and the UAV flies on beside the ship, its range held (the "
-                    "go-around's stall; README, envelope section: 'Dives that hold their range'); none: the "
+                    "go-around's stall; docs/ENVELOPE.md, 'Dives that hold their range'); none: the "
                     "law as printed")
     capture_look_deg: float = Field(
         60.0, ge=0, le=180, description="the look angle (between the velocity and the line of sight) above which "
@@ -1129,7 +1129,7 @@ class AirframeConfig(StrictModel):
         True, description="predict the ship's box with the part the airframe hides removed when the detected "
                           "box touches the airframe's silhouette (the box-centre correction then subtracts the "
                           "centre of the box a detector sees); false: the whole ship's box, as if the airframe "
-                          "were not there (the default before 2026-11-26). README, \"The airframe's cut, "
+                          "were not there (the default before 2026-11-26). docs/ENVELOPE.md, \"The airframe's cut, "
                           "predicted\"")
     fuselage_x_m: list[float] = Field(
         default_factory=lambda: [-0.65, 0.35], min_length=2, max_length=2,

@@ -39,7 +39,7 @@ Kirubarajan, "Estimation with Applications to Tracking and Navigation":
   as the UKF does. :class:`ImmEstimate` adds the manoeuvring model's
   probability, logged on ``/fsw/estimate`` (``manoeuvre_probability``).
 
-Over the envelope (README, "A fresh seed, 1649; an interacting multiple
+Over the envelope (docs/ENVELOPE.md, "A fresh seed, 1649; an interacting multiple
 model") its loiter is the better of the two models' or close to it for each
 motion, but it lands no more runs within 3 m / 3 deg than the UKF: the last
 150 m are set by the box centres' errors up close, not by the ship's motion.

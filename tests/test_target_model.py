@@ -1227,7 +1227,7 @@ def test_a_box_corrected_over_its_own_headings_doubts_it_by_the_estimates_correc
     cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
-    assert not DetectionGateConfig().own_headings_doubt  # (an option: README, "A fresh seed, 1656")
+    assert not DetectionGateConfig().own_headings_doubt  # (an option: docs/ENVELOPE.md, "A fresh seed, 1656")
 
     def perception(doubt: bool) -> Perception:
         p = Perception(DetectionGateConfig(maybe_cut_action="skip", own_headings_doubt=doubt),
