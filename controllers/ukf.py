@@ -855,12 +855,13 @@ class UkfTargetEstimator:
         self._innov = y[:2].copy()
         self._innov_t = self._t
         self._motion = motion
-        box, J = self._box_bias_factor(fix, motion)
-        if c.consider_update == "gain_weighted":
-            box = _consider_blend(self._consider_factor, box, K_h, J)
-        elif c.consider_update == "latest_undoubted" and (extra_u or extra_v) and self._consider_factor.any():
-            box = self._consider_factor  # a box fused with its doubt as noise: the estimate's error stays
-        self._set_consider(box)
+        # latest_undoubted keeps the factor it has through a box fused with its doubt as noise (the estimate's
+        # error stays); otherwise the factor is this box's, or (gain_weighted) the estimate's blend with it
+        if not (c.consider_update == "latest_undoubted" and (extra_u or extra_v) and self._consider_factor.any()):
+            box, J = self._box_bias_factor(fix, motion)
+            if c.consider_update == "gain_weighted":
+                box = _consider_blend(self._consider_factor, box, K_h, J)
+            self._set_consider(box)
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
 
