@@ -142,6 +142,19 @@ class DetectionGateConfig(StrictModel):
                     "min_range_m 0 turns both off")
     moving_speed_m_s: float = Field(
         2.0, ge=0, le=50, description="see moving_min_range_m: the estimated horizontal speed, m/s")
+    slow_coast_velocity: Literal["latest", "dive_start"] = Field(
+        "latest",
+        description="the velocity a slow ship's estimate coasts on after the dive's last fused box (the "
+                    "coast of the last min_range_m): latest, the estimator's own (the velocity of its last "
+                    "update); dive_start, the velocity estimated when the dive began, when it and the last "
+                    "update's are both under moving_speed_m_s and no turn is handed on "
+                    "(controllers.turn_from_course). The dive's boxes carry box-centre errors that change with "
+                    "the closing range and elevation, which a constant-velocity filter reads as velocity: a "
+                    "slow ship's estimated velocity, often 0.04-0.10 m/s off at the dive's start, is 0.4-1.4 m/s "
+                    "off at its last box (docs/ENVELOPE.md, seed 1658), and the 1.4-3.4 s coast flies that. The "
+                    "position at the last box is kept; /fsw/estimate stays the filter's own. Not the default: "
+                    "at 1658 and 1659 it moved 11 misses, 7 down and 4 up (a slow zigzag's own turn in the "
+                    "dive, 2.77 -> 5.18 m), no bar")
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
