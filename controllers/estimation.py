@@ -108,6 +108,8 @@ class Estimation:
             self._observe_turn(t, cam, est)
         if self.slow_coast_speed_m_s is not None and self.in_dive and est is not None:
             self._follow_coast(t, fix, result, est)
+        elif not self.in_dive and self._dive_vel is not None:  # a dive given up (a go-around): a new start
+            self._dive_vel, self._fused, self._coasting = None, None, False
         state, est = self._state(t, est)
         if est is not None:
             self._last = (t, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))

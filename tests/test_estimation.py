@@ -102,6 +102,24 @@ def test_otherwise_the_coast_is_the_filters_own(limit, v0, v1):
                                                                                  filt.vel_enu_m_s)
 
 
+def test_a_dive_given_up_forgets_its_starting_velocity():
+    f = _Scripted()
+    est = Estimation(f, 120.0, 5, _Recorder(), None, 2.0)
+    nav, cam = _Nav(0.0), object()
+    est.predict(nav, cam)
+    est.update(nav, cam, dataclasses.replace(_FIX, lock_now=True))
+    f.vel = np.array([0.5, 0.0, 0.0])
+    est.in_dive = True
+    est.update(_Nav(1.0), cam, _FIX)
+    assert np.allclose(est._dive_vel, [0.5, 0.0, 0.0])
+    est.in_dive = False  # a go-around
+    est.update(_Nav(2.0), cam, _FIX)
+    f.vel = np.array([1.2, 0.3, 0.0])
+    est.in_dive = True
+    est.update(_Nav(3.0), cam, _FIX)
+    assert np.allclose(est._dive_vel, [1.2, 0.3, 0.0])
+
+
 def test_the_scenario_sets_it():
     from controllers.mission import FlightSoftware
     default, _ = load_scenario(SCENARIO_DIR / "paper_mission.yaml")
