@@ -144,10 +144,9 @@ class Estimation:
             self._coasting = True
 
     def _slow_coast(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """(position, velocity) of a slow ship's coast on the dive's starting velocity, or None when it does
-        not apply (off, not coasting, either velocity at or over ``slow_coast_speed_m_s``)."""
-        if self.slow_coast_speed_m_s is None or not self._coasting or self._dive_vel is None:
-            return None
+        """(position, velocity) of a slow ship's coast on the dive's starting velocity, or None when either
+        velocity is at or over ``slow_coast_speed_m_s``. Called only while ``_coasting`` (which only the
+        option sets, with the dive's starting velocity and its last fused box kept)."""
         t0, pos, vel = self._fused
         v = self._dive_vel
         slow = self.slow_coast_speed_m_s
@@ -197,7 +196,7 @@ class Estimation:
             turned = self.turn.state(t_s) if self.turn is not None else None
             if turned is not None:  # the turn found in the course, the filter's lag taken out
                 return TargetState(t_s, "estimator", turned[0], turned[1], vel_std, h, turned[2], 0.0), est
-            coast = self._slow_coast(t_s)
+            coast = self._slow_coast(t_s) if self._coasting else None
             if coast is not None and turn == 0.0 and accel == 0.0:  # a slow ship's coast (the module text)
                 return TargetState(t_s, "estimator", coast[0], coast[1], vel_std, h), est
             return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,

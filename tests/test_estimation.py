@@ -5,19 +5,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from test_course_turn import _Recorder
 
 from controllers.estimation import Estimation
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult, TargetEstimate
 from fwsim import SCENARIO_DIR
 from fwsim.scenario import load_scenario
-
-
-class _Recorder:
-    def log(self, topic, msg):
-        pass
-
-    def event(self, text):
-        pass
 
 
 class _Scripted:
