@@ -249,7 +249,9 @@ def test_the_envelope_why_estimate_by_hand():
     a std under 5 m from t = 3 s and one error of 9 m at t = 5 s: over 8 m 2 s after convergence, in the
     loiter (the dive starts at 8 s), for one estimate's spacing; the same run with the std over 5 m again from
     t = 8 s never converged, its std last under 5 m 3 s before the end, its largest error from the dive's start
-    2 m; an error of 8 m at most: it meets the bar."""
+    2 m; with boxes fused up to t = 8 s its std at the last fused box is the 6 m it went over with, 2 s before
+    the end (with boxes fused to t = 7 s only: 3 m, 3 s before, the std's rise came in the coast); an error of
+    8 m at most: it meets the bar."""
     import numpy as np
     tool = _envelope_tool()
     t = np.arange(0.0, 11.0)
@@ -266,6 +268,10 @@ def test_the_envelope_why_estimate_by_hand():
     g = tool.estimate_failure(t, est, std_late, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0)
     assert g["kind"] == "never converged" and math.isnan(g["converged_s"]) and g["std_end_m"] == 6.0
     assert g["under_last_s_before_end"] == 3.0 and g["err_max_dive_m"] == pytest.approx(2.0)
+    assert math.isnan(g["std_last_box_m"]) and math.isnan(g["last_box_s_before_end"])  # no fused mask given
+    for last_box, std_there, before in ((8.0, 6.0, 2.0), (7.0, 3.0, 3.0)):
+        h = tool.estimate_failure(t, est, std_late, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0, fused=t <= last_box)
+        assert h["std_last_box_m"] == std_there and h["last_box_s_before_end"] == before
     est[5, 0] = 8.0
     assert tool.estimate_failure(t, est, stds, truth_t, truth, lock_t_s=0.0, switch_t_s=8.0) is None
 

@@ -24,8 +24,9 @@ it (about 86 % or more for a consistent filter). The statistics are fwsim report
 Exit code 0 when every group meets every bar.
 
 ``--why-estimate`` adds, for each run failing the estimate bar, whether it never converged (its std at the
-end, and the largest error from the dive's start: what the bar would have counted had the std fallen under
-5 m there) or went over 8 m after converging (how long after, in the loiter or the dive, the std then, and
+end and at the last fused box, which tells whether the std went over 5 m with the dive's boxes or in the coast
+after them, and the largest error from the dive's start: what the bar would have counted had the std fallen
+under 5 m there) or went over 8 m after converging (how long after, in the loiter or the dive, the std then, and
 for how long), with a tally: an excursion within 5 s of convergence came as the std crossed 5 m, the error
 then near twice it or more.
 
@@ -212,7 +213,7 @@ def aim_line_offset(t_s, aim_enu_m, range_m, uav_t_s, uav_pos_enu_m, truth_aim_a
 
 
 def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, switch_t_s: float,
-                     bar_m: float = ESTIMATE_BAR_M) -> dict | None:
+                     bar_m: float = ESTIMATE_BAR_M, fused=None) -> dict | None:
     """Why a run's estimate fails the estimate bar (fwsim.metrics' definitions: the horizontal error, the
     larger horizontal std, convergence from :func:`fwsim.metrics.convergence_index`), or None when it meets
     it. ``est_xy`` / ``std_xy``: the estimate's east, north and their stds; the truth interpolated to the
@@ -224,7 +225,10 @@ def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, 
     convergence (``over_s``: the estimates' spacing summed); for a run that never converged, the std at the end
     (``std_end_m``), the last time it was under CONVERGED_STD_M before the end (``under_last_s_before_end``,
     NaN: never after the lock), and the largest error from the dive's start (``err_max_dive_m``): what the bar
-    would have counted had the std been under the threshold in the dive."""
+    would have counted had the std been under the threshold in the dive; with ``fused`` (per estimate: it fused
+    a box), also the std at the last fused box (``std_last_box_m``) and how long before the end that box came
+    (``last_box_s_before_end``), NaN without: a std already over the threshold there went over it with the
+    boxes, not in the coast after them."""
     from fwsim.metrics import CONVERGED_STD_M, convergence_index, estimate_errors_m
     ok, err, std = estimate_errors_m(t_s, est_xy, std_xy, truth_t_s, truth_xy)
     if not ok.any():
@@ -235,9 +239,12 @@ def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, 
     dt = np.diff(t, append=t[-1])
     if k >= t.size:
         under = np.flatnonzero((std < CONVERGED_STD_M) & (t >= lock_t_s))
+        boxes = np.flatnonzero(np.asarray(fused, dtype=bool)[ok]) if fused is not None else np.zeros(0, dtype=int)
         return {"kind": "never converged", "converged_s": math.nan, "std_end_m": float(std[-1]),
                 "under_last_s_before_end": float(t[-1] - t[under[-1]]) if under.size else math.nan,
-                "err_max_dive_m": float(np.max(err[dive])) if dive.any() else math.nan}
+                "err_max_dive_m": float(np.max(err[dive])) if dive.any() else math.nan,
+                "std_last_box_m": float(std[boxes[-1]]) if boxes.size else math.nan,
+                "last_box_s_before_end": float(t[-1] - t[boxes[-1]]) if boxes.size else math.nan}
     after = err[k:]
     i = k + int(np.argmax(after))
     if not err[i] > bar_m:
@@ -271,18 +278,21 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
     """--why-estimate's table rows (strings), each run failing the estimate bar, from its log; and a tally:
     runs that never converged (and how many of them kept the error within the bar from the dive's start), and
     runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
+    from fwsim.metrics import CONVERGED_STD_M
     table, tally = [], defaultdict(int)
     for r, got in _estimates(out_dir, rows):
         f = got  # the log's exception, or the run's failure (None: it meets the bar)
         if not isinstance(got, BaseException):
             est, tru, lock_t, switch_t = got
             try:
+                inn = est.get("innovation_px")  # a fused box's innovation; NaN on a tick without one
+                fused = None if inn is None else np.all(np.isfinite(np.asarray(inn, dtype=float)), axis=1)
                 f = estimate_failure(est["t_s"], est["pos_enu_m"][:, :2], est["pos_std_m"][:, :2], tru["t_s"],
-                                     tru["pos_enu_m"][:, :2], lock_t, switch_t)
+                                     tru["pos_enu_m"][:, :2], lock_t, switch_t, fused=fused)
             except (KeyError, ValueError, IndexError) as exc:
                 f = exc
         if isinstance(f, BaseException):
-            table.append([str(r.get("id", "?")), f"(log: {type(f).__name__})"] + ["-"] * 9)
+            table.append([str(r.get("id", "?")), f"(log: {type(f).__name__})"] + ["-"] * 10)
             continue
         if f is None:
             continue
@@ -293,8 +303,12 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
         if f["kind"] == "never converged":
             tally["never converged"] += 1
             tally["never converged, within the bar from the dive's start"] += f["err_max_dive_m"] <= ESTIMATE_BAR_M
+            tally["never converged, the std over the threshold at the last fused box"] += \
+                f["std_last_box_m"] >= CONVERGED_STD_M
             cells += ["-", "-", "-", f"{f['std_end_m']:.1f}",
                       f"{f['under_last_s_before_end']:.0f}" if math.isfinite(f["under_last_s_before_end"]) else "-",
+                      f"{f['std_last_box_m']:.1f} ({f['last_box_s_before_end']:.1f} s before the end)"
+                      if math.isfinite(f["std_last_box_m"]) else "-",
                       f"{f['err_max_dive_m']:.1f}" if math.isfinite(f["err_max_dive_m"]) else "-"]
         else:
             tally["over the bar"] += 1
@@ -303,7 +317,7 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
             tally["over the bar, in the dive"] += f["phase"] == "dive"
             cells += [f"{f['converged_s']:.0f}",
                       f"{f['err_max_m']:.1f} ({f['err_max_after_s']:.0f} s after, {f['phase']}, std "
-                      f"{f['std_then_m']:.1f})", f"{f['over_s']:.1f}", "-", "-", "-"]
+                      f"{f['std_then_m']:.1f})", f"{f['over_s']:.1f}", "-", "-", "-", "-"]
         table.append(cells)
     return table, dict(tally)
 
@@ -692,7 +706,7 @@ def main(argv=None) -> int:
         head = ["run", "fails by", "ship", "speed, m/s", "theta_f, deg", "converged, s after lock",
                 "largest error after it, m (when, phase, the std then)", f"time over {ESTIMATE_BAR_M:g} m, s",
                 "std at the end, m", "std last under 5 m, s before the end",
-                "largest error from the dive's start, m"]
+                "std at the last fused box, m (when)", "largest error from the dive's start, m"]
         for out_dir, these in per_dir:
             table, tally = why_estimate(out_dir, these)
             print(f"\nRuns failing the estimate bar in {out_dir}:\n")
