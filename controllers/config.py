@@ -262,6 +262,18 @@ class ShapeHeadingConfig(StrictModel):
                           "which shows in the box heights, most of all as the view steepens in the dive); "
                           "false: a heading and its opposite count alike (the fore-aft part of the offset is "
                           "then not removed)")
+    ends_unsure_flips: int = Field(
+        0, ge=0, le=1000,
+        description="a per-ship tell_bow_from_stern: once the shapes' likeliest heading has turned end for end "
+                    "(jumped by over 135 deg from one box taken to the next) this many times within "
+                    "ends_unsure_window_s, the shapes are taken not to tell this ship's bow from its stern, for "
+                    "the rest of the flight: while the course is unknown a heading and its opposite then count "
+                    "alike (the fore-aft part of the offset is not removed). A ship unlike the class, read with "
+                    "the class's outline, can fit either end and its shapes' best end comes and goes; one whose "
+                    "ends the shapes tell keeps it. A known course, the layout fit and the log's best heading "
+                    "are untouched. 0: off (the default; docs/ENVELOPE.md, 'Fresh seed 1660')")
+    ends_unsure_window_s: float = Field(
+        120.0, gt=0, le=100000, description="the window ends_unsure_flips counts the end-for-end turns in, s")
     fuse_with_course: bool = Field(
         True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
                           "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")

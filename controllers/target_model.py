@@ -57,6 +57,7 @@ here reads the simulated ship (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -1222,6 +1223,7 @@ class ShipHeadingStatus:
     layout_in_use: str  # the layout the correction uses: "class" or "other_end"
     turn_rate_deg_s: float  # the most likely of heading_from_shape.turn_rates_deg_s (clockwise seen from above)
     layout_shape_log_odds: float  # the box shapes' part of layout_other_end's log-odds (LayoutFit.shape_evidence)
+    ends_unsure: bool  # the shapes' best end has come and gone (ends_unsure_flips): bow and stern count alike
 
 
 class ShipModel:
@@ -1243,6 +1245,11 @@ class ShipModel:
         self._course_known_since = math.nan  # since when the course has been known without a break
         self._now = math.nan  # the time of the latest box (observe_box)
         self._held = (math.nan, math.nan)  # the course last followed and when (held_course_spread_deg_s)
+        # the shapes' likeliest heading (grid index) at the last box they took, the times it turned end for end
+        # within ends_unsure_window_s, and whether the shapes are taken not to tell bow from stern (latched)
+        self._last_best: int | None = None
+        self._flips: deque[float] = deque()
+        self.ends_unsure = False
         sh = cfg.heading_from_shape
         # the plain box centres' velocity (end_velocity_source: box_centres), for which end of the axis is the bow
         self.track = BoxCentreTrack(camera, sh.end_velocity_window_s, sh.rate_hz, edge_px) \
@@ -1297,13 +1304,16 @@ class ShipModel:
             return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), course)
         held = self._held_course_weights()
         ends = self._velocity_end_weights(vel_enu, vel_std_m_s)
-        if held is not None or ends is not None:
-            # the shapes' headings weighed by the course last followed and by which end the velocity moves
+        if held is not None or ends is not None or (self.ends_unsure and self.shape.ready):
+            # the shapes' headings weighed by the course last followed and by which end the velocity moves, a
+            # heading and its opposite alike once the shapes are taken not to tell them apart
             w = self.shape.heading_weights()
             if held is not None:
                 w = w * held
             if ends is not None:
                 w = w * ends
+            if self.ends_unsure and len(w) % 2 == 0:
+                w = w + np.roll(w, len(w) // 2)
             if w.sum() > 0.0:
                 return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), None)
         shaped = self.shape.headings()
@@ -1385,6 +1395,7 @@ class ShipModel:
             return None
         w = sh.weights()
         k = int(np.argmax(w))
+        self._count_end_flip(float(t_s), k, len(w))
         course = self.course(vel_enu, vel_std_m_s)
         sz = self.size
         return ShipHeadingStatus(t_s, heading_deg_from_course_enu(float(sh.courses_enu_rad[k])), float(w[k]),
@@ -1393,7 +1404,25 @@ class ShipModel:
                                  np.exp(sz.theta), sz.updates, sz.scale is not None, self.layout.p_other_end,
                                  "other_end" if self.layout.other_end else "class",
                                  float(sh.cfg.turn_rates_deg_s[int(np.argmax(sh.rate_weights()))]),
-                                 self.layout.shape_evidence())
+                                 self.layout.shape_evidence(), self.ends_unsure)
+
+    def _count_end_flip(self, t_s: float, best: int, n: int) -> None:
+        """Count the shapes' likeliest heading (grid index ``best`` of ``n``) turning end for end since the last
+        box they took (a jump of over 135 deg; counted once the shapes are ready), and latch
+        :attr:`ends_unsure` at ``ends_unsure_flips`` such turns within ``ends_unsure_window_s``."""
+        sh = self.cfg.heading_from_shape
+        if sh.ends_unsure_flips <= 0 or self.ends_unsure:
+            return
+        if not self.shape.ready:
+            self._last_best = best
+            return
+        last, self._last_best = self._last_best, best
+        if last is None or min((best - last) % n, (last - best) % n) * 360.0 / n <= 135.0:
+            return
+        self._flips.append(t_s)
+        while self._flips and self._flips[0] <= t_s - sh.ends_unsure_window_s:
+            self._flips.popleft()
+        self.ends_unsure = len(self._flips) >= sh.ends_unsure_flips
 
     def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
         """The estimated velocity's course when the box shapes' posterior may follow it

@@ -1565,3 +1565,41 @@ def test_the_layout_fit_weighs_the_box_shapes_evidence_too():
         assert fit.shape_evidence() == pytest.approx(want)
         assert logit(fit.p_other_end) - logit(prior) == pytest.approx(want, abs=0.05), (ratio, fit.p_other_end)
     assert fit_with(4.0).other_end  # the default weight 1: -1.39 + 4 > logit(0.9) = 2.2
+
+
+def test_a_ship_whose_shapes_turn_end_for_end_gets_bow_and_stern_alike():
+    """ends_unsure_flips: boxes of the class's ship at 30 deg from North, then at 210 (as a ship the class's
+    outline reads either way round looks: its shapes' best end comes and goes). The shapes' likeliest heading
+    turns end for end as the evidence changes sides; at the third such turn within the window the model takes
+    the shapes not to tell this ship's ends apart, for good, and while the course is unknown a heading and its
+    opposite then weigh alike (the axis stays the shapes'). With the boxes of one end only, or the option off
+    (0), or a window too short to hold three turns, the ends stay the shapes' own."""
+    from controllers.config import ShapeHeadingConfig
+    a = list(ring_views(30.0, range(0, 360, 20)))
+    b = list(ring_views(210.0, range(0, 360, 20)))
+
+    def fly(blocks, flips=3, window_s=120.0):
+        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(
+            ends_unsure_flips=flips, ends_unsure_window_s=window_s, held_course_spread_deg_s=0.0))
+        ship = ShipModel(cfg, PinholeCamera.from_config(CAM_CFG))
+        t, status = 0.0, None
+        for views_ in blocks:
+            for cp, Rc, box in views_:
+                status = ship.observe_box(t, cp, Rc, np.zeros(3), box, np.zeros(3), 0.1) or status
+                t += 0.4
+        return ship, status
+
+    def weight_at(ship, course_deg):
+        courses, weights = ship.headings(np.zeros(3))
+        near = [w for c, w in zip(np.degrees(courses), weights) if _deg_off(c, course_deg) < 1.0]
+        return near[0] if near else 0.0
+
+    ship, status = fly([a, b, a])
+    assert ship.ends_unsure and status.ends_unsure
+    assert status.best_heading_deg == pytest.approx(30.0)  # the log's best heading is the shapes' own
+    w60, w240 = weight_at(ship, 60.0), weight_at(ship, 240.0)  # 30 and 210 deg from North, ENU
+    assert w60 > 0.1 and w60 == pytest.approx(w240)
+    for blocks, kw in (([a, a, a], {}), ([a, b, a], {"flips": 0}), ([a, b, a], {"window_s": 0.5})):
+        ship, status = fly(blocks, **kw)
+        assert not ship.ends_unsure and not status.ends_unsure
+        assert weight_at(ship, 60.0) > weight_at(ship, 240.0) + 0.1  # the shapes' own end (the last boxes')
