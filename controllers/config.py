@@ -271,7 +271,10 @@ class ShapeHeadingConfig(StrictModel):
                     "alike (the fore-aft part of the offset is not removed). A ship unlike the class, read with "
                     "the class's outline, can fit either end and its shapes' best end comes and goes; one whose "
                     "ends the shapes tell keeps it. A known course, the layout fit and the log's best heading "
-                    "are untouched. 0: off (the default; docs/ENVELOPE.md, 'Fresh seed 1660')")
+                    "are untouched. 0: off (the default: at 1660 and 1661, 3 brought the worst slow ships "
+                    "nearer but moved no bar at the fresh seed, and it latches in the first seconds for many "
+                    "ships, the class's own still ship too, which then lands 1-2 m off; docs/ENVELOPE.md, "
+                    "'Fresh seeds 1660 and 1661')")
     ends_unsure_window_s: float = Field(
         120.0, gt=0, le=100000, description="the window ends_unsure_flips counts the end-for-end turns in, s")
     fuse_with_course: bool = Field(
