@@ -270,7 +270,7 @@ class ShapeHeadingConfig(StrictModel):
                     "the rest of the flight: while the course is unknown a heading and its opposite then count "
                     "alike (the fore-aft part of the offset is not removed). A ship unlike the class, read with "
                     "the class's outline, can fit either end and its shapes' best end comes and goes; one whose "
-                    "ends the shapes tell keeps it. A known course, the layout fit and the log's best heading "
+                    "ends the shapes tell should keep it. A known course, the layout fit and the log's best heading "
                     "are untouched. 0: off (the default: at 1660 and 1661, 3 brought the worst slow ships "
                     "nearer but moved no bar at the fresh seed, and it latches in the first seconds for many "
                     "ships, the class's own still ship too, which then lands 1-2 m off; docs/ENVELOPE.md, "
