@@ -588,7 +588,7 @@ class ShapeHeading:
         w = w / np.sum(w)
         n = len(w)
         if not self.cfg.tell_bow_from_stern and n % 2 == 0:
-            w = 0.5 * (w + np.roll(w, n // 2))
+            w = 0.5 * _with_opposite(w)
         return w
 
     def axis_enu_rad(self) -> float:
@@ -597,7 +597,7 @@ class ShapeHeading:
         if self._weights is None or self._axis is None:
             w = self.weights()
             n = len(w)
-            k = int(np.argmax(w[: n // 2] + np.roll(w, n // 2)[: n // 2])) if n % 2 == 0 else int(np.argmax(w))
+            k = int(np.argmax(_with_opposite(w)[: n // 2])) if n % 2 == 0 else int(np.argmax(w))
             self._axis = float(self.courses_enu_rad[k]) % math.pi
         return self._axis
 
@@ -684,6 +684,12 @@ def _course_likelihood(courses: np.ndarray, course: float, sig_rad: float) -> np
     the difference taken round the circle."""
     d = (courses - course + math.pi) % (2.0 * math.pi) - math.pi
     return np.exp(-0.5 * (d / sig_rad) ** 2)
+
+
+def _with_opposite(w: np.ndarray) -> np.ndarray:
+    """Each heading's weight plus its opposite's (bow and stern swapped), on a grid of an even count of headings
+    all round."""
+    return w + np.roll(w, len(w) // 2)
 
 
 def _plausible(courses: np.ndarray, w: np.ndarray, min_weight: float) -> tuple[np.ndarray, np.ndarray]:
@@ -1313,7 +1319,7 @@ class ShipModel:
             if ends is not None:
                 w = w * ends
             if self.ends_unsure and len(w) % 2 == 0:
-                w = w + np.roll(w, len(w) // 2)
+                w = _with_opposite(w)
             if w.sum() > 0.0:
                 return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), None)
         shaped = self.shape.headings()
