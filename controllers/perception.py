@@ -277,7 +277,8 @@ class Perception:
         boxes, pred, own_used, est = None, _NAN4, False, None
         known = course is not None or self.ship.shape.ready
         if fit_size:
-            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
+            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s,
+                                 course is not None)
         scale = self.ship.size.scale
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,

@@ -1365,15 +1365,18 @@ class ShipModel:
         return scipy.special.ndtr(along / math.hypot(vel_std_m_s, floor))
 
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
-                   t_s: float | None = None) -> bool:
+                   t_s: float | None = None, course_known: bool = True) -> bool:
         """Feed one detected box to the size fit (:class:`ShipSize`) at the weighted circular mean of the
         headings ``courses`` (weights ``weights``, :meth:`headings_and_course`; finer than their 5-deg grid)
         when the heading is sure: the box
         shapes' posterior (with a known course fused in) concentrated to a mean resultant length of at least
         ``_SIZE_FIT_MIN_RESULTANT``. Never a course alone: a still ship's estimated velocity gives one for
-        seconds after the lock, any way round. True when the box moved the fit."""
+        seconds after the lock, any way round. ``course_known``: the ship's course is known (with
+        ``size_fit.course_unknown: hold`` the fit takes no box while it is not). True when the box moved the fit."""
         if not self.shape.ready or len(courses) == 1 or not self.size.takes_boxes(t_s):
             return False  # (the rate first: the heading's concentration is not worked out for nothing)
+        if not course_known and self.cfg.size_fit.course_unknown == "hold":
+            return False
         resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
