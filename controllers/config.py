@@ -413,14 +413,18 @@ class SizeFitConfig(StrictModel):
         description="boxes weighed per second at most: consecutive frames carry nearly the same information, "
                     "which the fit, taking each box as independent, would count again and again (and it is "
                     "the perception's costliest step, five outline projections a box)")
-    course_unknown: Literal["learn", "hold"] = Field(
+    course_unknown: Literal["learn", "hold", "doubt"] = Field(
         "learn",
         description="while the ship's course is unknown (a slow ship: its heading from the box shapes alone): "
                     "learn, the fit takes boxes at the shapes' heading when that is sure (the default); hold, it "
                     "takes none and keeps what it has (the class's sizes, or what it learnt while the course was "
-                    "known). A slow ship's shapes can be sure of a heading 30-60 deg off its axis (a ship unlike "
-                    "the class, a zigzag), and the fit then reads the box's extent along the wrong axis as "
-                    "height: docs/ENVELOPE.md, seed 1662")
+                    "known); doubt, it takes them with the sizes predicted at that heading +- "
+                    "course_unknown_heading_std_deg in each box's noise (a view whose box changes little with the "
+                    "heading still teaches the size; one that changes much teaches little). A slow ship's shapes "
+                    "can be sure of a heading 30-60 deg off its axis (a ship unlike the class, a zigzag), and the "
+                    "fit then reads the box's extent along the wrong axis as height: docs/ENVELOPE.md, seed 1662")
+    course_unknown_heading_std_deg: float = Field(
+        30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
     hold_in_terminal: bool = Field(
         False, description="the fit stops learning when the terminal dive starts and keeps what the loiter taught "
                            "it: in the dive the UAV may bank past 90 deg and its own airframe cut the boxes for "

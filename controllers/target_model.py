@@ -874,10 +874,12 @@ class ShipSize:
         return np.exp(self.x[:3])
 
     def update(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad: float, box_px,
-               t_s: float | None = None) -> bool:
+               t_s: float | None = None, heading_std_rad: float = 0.0) -> bool:
         """Take one detected box seen with the ship on ``course_enu_rad`` (its waterline centre ``ref_enu_m``,
         estimated) at ``t_s`` (None: whenever, no rate limit); True when it moved the fit. A box within
-        ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at."""
+        ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at. ``heading_std_rad`` > 0: the
+        heading is that unsure, and the log sizes predicted at it +- that angle (their mean square difference
+        from the heading's own) are added to the box's noise."""
         cfg = self.cfg
         if not self.takes_boxes(t_s):
             return False
@@ -914,6 +916,13 @@ class ShipSize:
         y = np.log(det_size) - logs[0] - mast
         Rn = np.diag(cfg.box_std ** 2 + (cfg.box_px_std / det_size) ** 2)  # small far boxes weigh less
         Rn = Rn + np.outer(mast, mast)
+        if heading_std_rad > 0.0:
+            for c in (course_enu_rad - heading_std_rad, course_enu_rad + heading_std_rad):
+                pb = predicted_box_px(self.outline.body, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, c, s0)
+                if pb is None or not np.isfinite(pb).all() or (pb[2:4] - pb[0:2] <= 1.0).any():
+                    return False
+                d = np.log((pb[2:4] - pb[0:2]) * cfg.box_scale) - logs[0]
+                Rn = Rn + 0.5 * np.outer(d, d)
         S = J @ self.P @ J.T + Rn
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         if not det > 0.0:
@@ -1375,13 +1384,16 @@ class ShipModel:
         ``size_fit.course_unknown: hold`` the fit takes no box while it is not). True when the box moved the fit."""
         if not self.shape.ready or len(courses) == 1 or not self.size.takes_boxes(t_s):
             return False  # (the rate first: the heading's concentration is not worked out for nothing)
-        if not course_known and self.cfg.size_fit.course_unknown == "hold":
+        sf = self.cfg.size_fit
+        if not course_known and sf.course_unknown == "hold":
             return False
         resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
+        doubt = math.radians(sf.course_unknown_heading_std_deg) \
+            if not course_known and sf.course_unknown == "doubt" else 0.0
         return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, math.atan2(resultant.imag, resultant.real),
-                                box_px, t_s)
+                                box_px, t_s, doubt)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float, tracked_height_m: float = 0.0) -> ShipHeadingStatus | None:

@@ -1605,20 +1605,25 @@ def test_a_ship_whose_shapes_turn_end_for_end_gets_bow_and_stern_alike():
         assert weight_at(ship, 60.0) > weight_at(ship, 240.0) + 0.1  # the shapes' own end (the last boxes')
 
 
-def test_a_size_fit_held_while_the_course_is_unknown_learns_only_with_a_course():
-    """``size_fit.course_unknown: hold``: round a still ship (no course; the heading from its box shapes alone)
-    the fit takes no box, where with ``learn`` it takes them at the shapes' heading; round the same ship on a
-    3 m/s course both take the same boxes."""
+def test_a_size_fit_held_or_in_doubt_while_the_course_is_unknown():
+    """``size_fit.course_unknown``: round a still ship (no course; the heading from its box shapes alone) with
+    ``hold`` the fit takes no box, where with ``learn`` it takes them at the shapes' heading; with ``doubt`` it
+    takes them too, but each with the sizes at the heading +- 30 deg in its noise, and ends less sure. Round the
+    same ship on a 3 m/s course all three fit alike."""
     cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
-    updates = {}
+    fits = {}
     for moving in (False, True):
         prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel if moving else np.zeros(3), 0.1, h)
-        for mode in ("learn", "hold"):
+        for mode in ("learn", "hold", "doubt"):
             perc = _perception(ShipModel(ShipModelConfig(size_fit=SizeFitConfig(course_unknown=mode)), fsw_cam))
             for k, az in enumerate(list(range(0, 360, 5)) * 2):
                 t = 0.5 * k
                 meas, motion, cp, Rc = _ring_detection(cam, pose, t, az)
                 perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
-            updates[moving, mode] = perc.ship.size.updates
-    assert updates[False, "learn"] > 30 and updates[False, "hold"] == 0, updates
-    assert updates[True, "hold"] == updates[True, "learn"] > 30, updates
+            fits[moving, mode] = perc.ship.size
+    learn, hold, doubt = (fits[False, m] for m in ("learn", "hold", "doubt"))
+    assert learn.updates > 30 and hold.updates == 0 and doubt.updates > 30, (learn.updates, doubt.updates)
+    assert np.trace(doubt.P) > 1.5 * np.trace(learn.P), (np.diag(doubt.P), np.diag(learn.P))
+    for mode in ("hold", "doubt"):
+        assert fits[True, mode].updates == fits[True, "learn"].updates > 30
+        assert np.array_equal(fits[True, mode].x, fits[True, "learn"].x)
