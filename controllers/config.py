@@ -425,6 +425,15 @@ class SizeFitConfig(StrictModel):
                     "fit then reads the box's extent along the wrong axis as height: docs/ENVELOPE.md, seed 1662")
     course_unknown_heading_std_deg: float = Field(
         30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
+    course_unknown_steady_s: float = Field(
+        0.0, ge=0, le=600,
+        description="with course_unknown: learn, while the course is unknown the fit takes a box only when the "
+                    "box shapes' axis (their headings' mean axis, bow and stern alike) has stayed within "
+                    "course_unknown_steady_deg of its present direction for this long (0: off, the default). A "
+                    "slow ship's shapes swing 30-60 deg off its axis for tens of seconds at a time (a zigzag, a "
+                    "ship unlike the class), and a fit fed meanwhile reads the wrong axis's extent as height")
+    course_unknown_steady_deg: float = Field(
+        10.0, gt=0, le=90, description="see course_unknown_steady_s, deg")
     hold_in_terminal: bool = Field(
         False, description="the fit stops learning when the terminal dive starts and keeps what the loiter taught "
                            "it: in the dive the UAV may bank past 90 deg and its own airframe cut the boxes for "

@@ -1264,6 +1264,7 @@ class ShipModel:
         # within ends_unsure_window_s, and whether the shapes are taken not to tell bow from stern (latched)
         self._last_best: int | None = None
         self._flips: deque[float] = deque()
+        self._axes: deque[tuple[float, float]] = deque()  # (t, the shapes' axis) at the size fit's boxes
         self.ends_unsure = False
         sh = cfg.heading_from_shape
         # the plain box centres' velocity (end_velocity_source: box_centres), for which end of the axis is the bow
@@ -1387,6 +1388,9 @@ class ShipModel:
         sf = self.cfg.size_fit
         if not course_known and sf.course_unknown == "hold":
             return False
+        if not course_known and sf.course_unknown_steady_s > 0.0 and t_s is not None and \
+                not self._axis_steady(float(t_s), courses, weights):
+            return False
         resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
@@ -1394,6 +1398,22 @@ class ShipModel:
             if not course_known and sf.course_unknown == "doubt" else 0.0
         return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, math.atan2(resultant.imag, resultant.real),
                                 box_px, t_s, doubt)
+
+    def _axis_steady(self, t_s: float, courses, weights) -> bool:
+        """Record the shapes' axis now (the headings' mean axis: bow and stern alike) and say whether it has
+        stayed within ``size_fit.course_unknown_steady_deg`` of it for ``course_unknown_steady_s``
+        (:meth:`learn_size`, while the course is unknown)."""
+        sf = self.cfg.size_fit
+        axis = 0.5 * float(np.angle(np.dot(weights, np.exp(2j * np.asarray(courses)))))
+        hist = self._axes
+        hist.append((t_s, axis))
+        while hist and hist[0][0] < t_s - sf.course_unknown_steady_s - 5.0:
+            hist.popleft()
+        tol = math.radians(sf.course_unknown_steady_deg)
+        recent = [a for t, a in hist if t >= t_s - sf.course_unknown_steady_s]
+        if hist[0][0] > t_s - sf.course_unknown_steady_s:
+            return False  # not watched for long enough yet
+        return all(abs((a - axis + 0.5 * math.pi) % math.pi - 0.5 * math.pi) <= tol for a in recent)
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float, tracked_height_m: float = 0.0) -> ShipHeadingStatus | None:

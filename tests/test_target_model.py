@@ -1627,3 +1627,39 @@ def test_a_size_fit_held_or_in_doubt_while_the_course_is_unknown():
     for mode in ("hold", "doubt"):
         assert fits[True, mode].updates == fits[True, "learn"].updates > 30
         assert np.array_equal(fits[True, mode].x, fits[True, "learn"].x)
+
+
+def test_the_size_fit_waits_for_a_steady_axis_while_the_course_is_unknown():
+    """``size_fit.course_unknown_steady_s``: the shapes' axis (bow and stern alike) must have stayed within
+    ``course_unknown_steady_deg`` for that long. Watched for less: not steady; a heading turned end for end:
+    still steady; a swing of 30 deg: not steady until the window has passed it."""
+    cfg = ShipModelConfig(size_fit=SizeFitConfig(course_unknown_steady_s=20.0, course_unknown_steady_deg=10.0))
+    ship = ShipModel(cfg, PinholeCamera.from_config(CAM_CFG))
+    courses = np.radians(np.arange(0.0, 360.0, 5.0))
+
+    def weights_at(deg):
+        w = np.exp(-0.5 * ((np.degrees(courses) - deg + 180.0) % 360.0 - 180.0) ** 2 / 4.0 ** 2)
+        return w / w.sum()
+
+    steady = {t: ship._axis_steady(t, courses, weights_at(40.0 if t % 2 else 220.0)) for t in range(0, 30)}
+    assert not any(steady[t] for t in range(20)) and all(steady[t] for t in range(20, 30)), steady
+    swung = {t: ship._axis_steady(t, courses, weights_at(70.0)) for t in range(30, 60)}
+    assert not any(swung[t] for t in range(30, 50)) and all(swung[t] for t in range(50, 60)), swung
+
+
+def test_a_still_ship_s_size_fit_with_a_steady_axis_still_learns():
+    """Round a still ship of the class's layout (its shapes' axis steady) the size fit with
+    course_unknown_steady_s takes boxes once the axis has held for that long: fewer than without (23 of the
+    60 here), but it learns."""
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
+    updates = {}
+    for steady_s in (0.0, 20.0):
+        sf = SizeFitConfig(course_unknown_steady_s=steady_s)
+        perc = _perception(ShipModel(ShipModelConfig(size_fit=sf), fsw_cam))
+        for k, az in enumerate(list(range(0, 360, 5)) * 2):
+            t = 0.5 * k
+            meas, motion, cp, Rc = _ring_detection(cam, pose, t, az)
+            perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
+        updates[steady_s] = perc.ship.size.updates
+    assert updates[0.0] > updates[20.0] > 10, updates
