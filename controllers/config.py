@@ -422,7 +422,9 @@ class SizeFitConfig(StrictModel):
                     "course_unknown_heading_std_deg in each box's noise (a view whose box changes little with the "
                     "heading still teaches the size; one that changes much teaches little). A slow ship's shapes "
                     "can be sure of a heading 30-60 deg off its axis (a ship unlike the class, a zigzag), and the "
-                    "fit then reads the box's extent along the wrong axis as height: docs/ENVELOPE.md, seed 1662")
+                    "fit then reads the box's extent along the wrong axis as height. hold and doubt were "
+                    "measured on the slow ships of two seeds and are not the default: at the fresh one neither "
+                    "brought a run within 3 m / 3 deg (docs/ENVELOPE.md, seed 1662)")
     course_unknown_heading_std_deg: float = Field(
         30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
     course_unknown_steady_s: float = Field(
@@ -431,7 +433,9 @@ class SizeFitConfig(StrictModel):
                     "box shapes' axis (their headings' mean axis, bow and stern alike) has stayed within "
                     "course_unknown_steady_deg of its present direction for this long (0: off, the default). A "
                     "slow ship's shapes swing 30-60 deg off its axis for tens of seconds at a time (a zigzag, a "
-                    "ship unlike the class), and a fit fed meanwhile reads the wrong axis's extent as height")
+                    "ship unlike the class), and a fit fed meanwhile reads the wrong axis's extent as height. 20 s "
+                    "was measured and is not the default: it held good fits as often as bad ones "
+                    "(docs/ENVELOPE.md, seed 1662)")
     course_unknown_steady_deg: float = Field(
         10.0, gt=0, le=90, description="see course_unknown_steady_s, deg")
     hold_in_terminal: bool = Field(
