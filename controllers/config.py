@@ -424,7 +424,7 @@ class SizeFitConfig(StrictModel):
                     "can be sure of a heading 30-60 deg off its axis (a ship unlike the class, a zigzag), and the "
                     "fit then reads the box's extent along the wrong axis as height. hold and doubt were "
                     "measured on the slow ships of two seeds and are not the default: at the fresh one neither "
-                    "brought a run within 3 m / 3 deg (docs/ENVELOPE.md, seed 1662)")
+                    "raised the count within 3 m / 3 deg (docs/ENVELOPE.md, seed 1662)")
     course_unknown_heading_std_deg: float = Field(
         30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
     course_unknown_steady_s: float = Field(
