@@ -226,6 +226,18 @@ def test_the_envelope_why_heading_in_use_by_hand():
     assert tool.heading_in_use(sh, truth_t, truth_hdg, 5.0) == "-"
 
 
+def test_the_envelope_why_size_by_hand():
+    """--why's size cell: the status in force at the dive's start, the fitted scales times the class's sizes over
+    the ship's own; the class's sizes over the ship's while the fit is not in use; "-" before any status."""
+    tool = _envelope_tool()
+    sh = {"t_s": [10.0, 20.0], "size_in_use": [False, True],
+          "size_scale": [[1.3, 0.9, 1.1], [1.1, 0.8, 1.6]]}
+    cls, ship = (55.0, 25.0, 25.0), (55.0, 20.0, 20.0)
+    assert tool.size_over_ship(sh, 15.0, cls, ship) == "1.00, 1.25, 1.25 (the class's)"
+    assert tool.size_over_ship(sh, 25.0, cls, ship) == "1.10, 1.00, 2.00"
+    assert tool.size_over_ship(sh, 5.0, cls, ship) == "-"
+
+
 def test_the_envelope_line_of_sight_error_by_hand():
     """--why's line-of-sight split: a UAV flying east along y = 0 towards a ship at (200, 0, 0) is last 150 m
     or more from it at x = 50 (t = 5); the estimate then, (203, 1), is 3 m beyond the ship along the line of

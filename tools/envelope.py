@@ -50,7 +50,9 @@ come from the summary's dispersed columns, and so does the longest stretch witho
 lock (out of view or behind the airframe). Its last columns name the course model ``turn_from_course`` handed
 on into the dive, and the ship's heading the shape correction used at the dive's start with its error against
 the truth (from the estimated course or, for a slow ship, from the box shapes: an error near 180 deg is the
-bow and stern swapped).
+bow and stern swapped), and the ship's length, beam and height as the size fit had them at the dive's start,
+over the ship's own (a height read 1.5 times the ship's puts the estimate along the line of sight in a
+dive).
 """
 from __future__ import annotations
 
@@ -554,6 +556,35 @@ def heading_in_use(ship_heading: dict, truth_t_s, truth_heading_ned_rad, at_s: f
     return f"{source} {err:+.0f} deg" + (", other end" if other else "")
 
 
+def size_over_ship(ship_heading: dict, at_s: float, class_dims_m, ship_dims_m) -> str:
+    """--why's size cell from a log's ``/fsw/ship_heading`` table: the length, beam and height the correction
+    used at ``at_s`` (the dive's start: the size fit's once in use, else the class's) over the ship's own
+    (``ship_dims_m``, the truth), "1.02, 0.72, 1.71"; " (the class's)" when the fit was not in use; "-" before
+    the first status."""
+    t = np.asarray(ship_heading.get("t_s", ()), dtype=float)
+    k = int(np.searchsorted(t, at_s, side="right")) - 1
+    if k < 0:
+        return "-"
+    fitted = bool(ship_heading["size_in_use"][k])
+    scale = np.asarray(ship_heading["size_scale"][k], dtype=float) if fitted else np.ones(3)
+    ratio = scale * np.asarray(class_dims_m, dtype=float) / np.asarray(ship_dims_m, dtype=float)
+    return ", ".join(f"{x:.2f}" for x in ratio) + ("" if fitted else " (the class's)")
+
+
+def _size_cell(log) -> str:
+    """--why's size cell for one log, at the dive's start ("-" without a dive, the topics or the scenario)."""
+    from fwsim import topics
+    from fwsim.scenario import parse_scenario
+
+    def make() -> str:
+        sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+        tm = sc.controllers.target_model
+        return size_over_ship(log.table(topics.FSW_SHIP_HEADING), float(log.table(topics.FSW_BPNG)["t_s"][0]),
+                              (tm.length_m, tm.width_m, tm.height_m),
+                              (sc.target.length_m, sc.target.width_m, sc.target.height_m))
+    return _log_cell(log, (topics.FSW_SHIP_HEADING, topics.FSW_BPNG), make)
+
+
 def _heading_cell(log) -> str:
     """--why's heading cell for one log, at the dive's start ("-" without a dive or the topics)."""
     from fwsim import topics
@@ -604,8 +635,9 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             cells.append(_aim_line_cell(log))
             cells.append(_course_model_cell(log))
             cells.append(_heading_cell(log))
+            cells.append(_size_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 6)
+            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 7)
         table.append(cells)
     return table
 
@@ -695,7 +727,9 @@ def main(argv=None) -> int:
             "the course model handed on into the dive (turn_from_course: a zigzag's periodic course, a steady "
             "turn, none)",
             "the ship's heading the shape correction used at the dive's start, its error (from the course, from "
-            "the box shapes, or unknown)"]
+            "the box shapes, or unknown)",
+            "the length, beam and height the correction used at the dive's start, over the ship's own (the size "
+            "fit's, or the class's)"]
         for out_dir, these in per_dir:
             print(f"\nRuns outside 3 m / 3 deg in {out_dir} (worst first):\n")
             print("| " + " | ".join(head) + " |")
