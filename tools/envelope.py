@@ -531,17 +531,22 @@ def course_model(course_turn: dict) -> str:
     return f"turn {rate:+.2f} deg/s" if rate != 0.0 else "none"
 
 
+def _status_index(table: dict, at_s: float) -> int:
+    """The row of a status table (its ``t_s``) in force at ``at_s``: the last at or before it; -1 before the
+    first."""
+    return int(np.searchsorted(np.asarray(table.get("t_s", ()), dtype=float), at_s, side="right")) - 1
+
+
 def heading_in_use(ship_heading: dict, truth_t_s, truth_heading_ned_rad, at_s: float) -> str:
     """--why's heading cell from a log's ``/fsw/ship_heading`` table: the ship's heading the shape correction
     used at ``at_s`` (the dive's start) and its error against the truth (deg, wrapped to +-180: near 180 is the
     bow and stern swapped), with the layout it used: "course +3 deg", "shapes -172 deg", or "unknown" (the
     offset averaged over headings: no course and the box shapes not yet trusted); ", other end" when the
     correction took the superstructure at the other end from the class's; "-" before the first status."""
-    t = np.asarray(ship_heading.get("t_s", ()), dtype=float)
-    k = int(np.searchsorted(t, at_s, side="right")) - 1
+    k = _status_index(ship_heading, at_s)
     if k < 0:
         return "-"
-    truth = math.degrees(float(np.interp(t[k], np.asarray(truth_t_s, dtype=float),
+    truth = math.degrees(float(np.interp(float(ship_heading["t_s"][k]), np.asarray(truth_t_s, dtype=float),
                                          np.unwrap(np.asarray(truth_heading_ned_rad, dtype=float)))))
     course = float(ship_heading["course_deg"][k])
     if math.isfinite(course):
@@ -561,8 +566,7 @@ def size_over_ship(ship_heading: dict, at_s: float, class_dims_m, ship_dims_m) -
     used at ``at_s`` (the dive's start: the size fit's once in use, else the class's) over the ship's own
     (``ship_dims_m``, the truth), "1.02, 0.72, 1.71"; " (the class's)" when the fit was not in use; "-" before
     the first status."""
-    t = np.asarray(ship_heading.get("t_s", ()), dtype=float)
-    k = int(np.searchsorted(t, at_s, side="right")) - 1
+    k = _status_index(ship_heading, at_s)
     if k < 0:
         return "-"
     fitted = bool(ship_heading["size_in_use"][k])
