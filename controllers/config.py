@@ -486,6 +486,14 @@ class LayoutFitConfig(StrictModel):
     shape_clip: float = Field(
         5.0, gt=0, le=50, description="each box's shape log ratio is clipped to +- this before the window's mean "
                                       "(the shapes' posterior is sure of itself far beyond what it knows)")
+    correction: Literal["switch", "mixture"] = Field(
+        "switch",
+        description="how the box-centre correction uses the two layouts: switch, the one in use alone (the class's "
+                    "until the other end's probability reaches switch_probability); mixture, both, weighted by "
+                    "their probabilities, and the spread between their offsets (p (1 - p) times their "
+                    "difference squared) added to the heading spread the reported std carries: a ship the box "
+                    "centres tell neither way (its superstructure amidships, or along most of its length) is "
+                    "corrected part way, and the estimate says how far off that may be")
 
 
 class ShipModelConfig(StrictModel):

@@ -341,6 +341,23 @@ class Perception:
         if off is None:
             return u, v, pred, why, _ZERO22, doubt
         off, spread = off
+        q = self._other_layout_share()
+        if q > 0.0:  # layout_fit.correction: mixture, the other layout's offset at its probability
+            other = self.ship.outlines[0] if self.ship.layout.other_end else self.ship.outlines[1]
+            ob = None
+            if boxes is not None:
+                ob = predicted_boxes_px(other, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, scale)
+                if cut_by_airframe is not None and np.isfinite(ob).all():
+                    ob, _ = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, ob,
+                                                  course_known=course is not None, outline=other)
+                if not np.isfinite(ob).all():
+                    ob = None
+            if boxes is None or ob is not None:
+                o2 = self._offset(cam, ref, prior, (courses, weights, single, ob), scale, spread=True, outline=other)
+                if o2 is not None:
+                    d = o2[0] - off
+                    off = off + q * d
+                    spread = (1.0 - q) * spread + q * o2[1] + q * (1.0 - q) * np.outer(d, d)
         if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
             off_est = None if est is None else self._offset(cam, ref, prior, est, scale)
@@ -362,15 +379,27 @@ class Perception:
                 v_fix += share * (v_b - v_fix)
         return u_fix, v_fix, pred, why, spread, doubt
 
-    def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False):
+    def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False,
+                outline=None):
         """:func:`~controllers.target_model.box_centre_offset_px` over ``headings`` = (courses, weights, one
-        course, their predicted boxes): the one course's offset, or the weighted mean over the courses."""
+        course, their predicted boxes): the one course's offset, or the weighted mean over the courses.
+        ``outline``: the layout's (None: the one in use)."""
         courses, weights, single, boxes = headings
-        return box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+        return box_centre_offset_px(self.ship.outline if outline is None else outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                     float(courses[0]) if single else None, prior.tracked_height_m,
                                     self.ship.cfg.headings_when_unknown, boxes_px=boxes,
                                     courses_weights=None if single else (courses, weights), spread=spread,
                                     scale=scale)
+
+    def _other_layout_share(self) -> float:
+        """The weight of the layout not in use in the correction (``layout_fit.correction: mixture``; its
+        probability, :class:`~controllers.target_model.LayoutFit`), 0 with ``switch`` or the fit off."""
+        lf = self.ship.cfg.layout_fit
+        if lf.correction != "mixture" or not lf.enabled:
+            return 0.0
+        p = self.ship.layout.p_other_end
+        q = 1.0 - p if self.ship.layout.other_end else p
+        return q if math.isfinite(q) and 0.0 < q < 1.0 else 0.0
 
     def _bottom_share(self) -> float:
         """The share of the hull's lower edge in the fix (``target_model.anchor``), the rest the box centre's."""
@@ -388,12 +417,13 @@ class Perception:
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
     def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
-                         scale, boxes: np.ndarray, course_known: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                         scale, boxes: np.ndarray, course_known: bool = True,
+                         outline=None) -> tuple[np.ndarray, np.ndarray]:
         """(The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
         the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see; the share
         of each course's ship hidden, 0 where its box is kept whole). A course whose whole ship the airframe
         would hide keeps its box (the detection says the ship is not where that predicts). ``R``: the
-        camera's rotation in the body frame."""
+        camera's rotation in the body frame. ``outline``: the layout's (None: the one in use)."""
         air = self.airframe
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height
@@ -404,7 +434,7 @@ class Perception:
         if not aligned and not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
             return boxes, hidden
         out = boxes.copy()
-        outline = self.ship.outline
+        outline = self.ship.outline if outline is None else outline
         several = len(boxes) > 1
         for i, course in enumerate(np.asarray(courses, dtype=float).tolist()):
             if several and not aligned and not air.may_hide(R, boxes[i]):

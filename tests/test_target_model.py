@@ -1391,6 +1391,38 @@ def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
     assert fit_err < 0.8 * class_err, (fit_err, class_err)
 
 
+def test_the_mixture_of_layouts_corrects_part_way_and_says_how_far_off_that_may_be():
+    """``layout_fit.correction: mixture``: the box centre is corrected by the two layouts' offsets weighted by
+    their probabilities, and the spread between them (``q (1 - q) d d^T``) goes into the fix's offset spread,
+    which the reported std carries. With the other end at probability 0.35 the fix lies 0.35 of the way from
+    the class's correction to the other end's; with ``switch`` it is the class's alone, its spread zero (one
+    known course)."""
+    from controllers.config import LayoutFitConfig
+    heading = 40.0
+    ship = Ship(TargetConfig(type="patrol_boat", heading_deg=heading))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    fsw_cam = PinholeCamera.from_config(CAM_CFG)
+    h = UkfConfig().target_plane_height_m
+    course = math.radians(90.0 - heading)
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]),
+                        3.0 * np.array([math.cos(course), math.sin(course), 0.0]), 0.1, h)
+    meas, motion, cp, Rc = _ring_detection(cam, pose, 0.0, 70.0, rng_m=600.0, elevation_deg=35.0)
+    fixes, models = {}, {}
+    for mode in ("switch", "mixture"):
+        models[mode] = ShipModel(ShipModelConfig(layout_fit=LayoutFitConfig(correction=mode)), fsw_cam)
+        models[mode].layout.p_other_end = 0.35
+        fixes[mode] = _perception(models[mode]).step(meas, motion, prior)
+    outlines = models["switch"].outlines
+    o_class, o_other = (box_centre_offset_px(o, fsw_cam, cp, Rc, np.zeros(3), course, h) for o in outlines)
+    d = o_other - o_class
+    sw, mx = fixes["switch"], fixes["mixture"]
+    assert np.allclose([sw.u_px - mx.u_px, sw.v_px - mx.v_px], 0.35 * d, atol=1e-6), (sw, mx, d)
+    assert np.linalg.norm(d) > 3.0  # (the two layouts' corrections differ here by pixels)
+    assert np.array_equal(sw.offset_spread_px2, np.zeros((2, 2)))
+    assert np.allclose(mx.offset_spread_px2, 0.35 * 0.65 * np.outer(d, d), atol=1e-9)
+
+
 def test_the_hull_s_lower_edge_offset_is_the_hull_box_s_bottom():
     """``anchor="bottom"``: the u offset is the box centre's, the v offset the box's lower edge's, both against
     the tracked point's image; for one course and averaged over several."""
