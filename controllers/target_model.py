@@ -827,7 +827,8 @@ class ShipSize:
     and a fresh start from the prior when it has turned ``max_gated_in_a_row`` boxes away in a row (then the
     fit is off, not the boxes); a box's noise grows as it gets small (``box_px_std`` over its size); a box at
     the image's edge is not taken at all. After ``min_updates`` boxes the perception corrects with the fitted
-    outline (:attr:`scale`, the whole outline scaled); before, with the class's. With ``hold_in_terminal``
+    outline (:attr:`scale`, the whole outline scaled); before, with the class's, and for good once the fit has
+    started again ``class_after_restarts`` times (:attr:`retired`). With ``hold_in_terminal``
     the fit is held from the terminal dive on (:meth:`hold`).
 
     The ranges come from the estimate, so the fitted scale carries its range error (1 % at 500 m for 5 m):
@@ -849,6 +850,7 @@ class ShipSize:
         self.gated_in_a_row = 0
         self.restarts = 0
         self.held = False  # learning stopped (:meth:`hold`)
+        self.retired = False  # the class's outline for good (class_after_restarts)
         self._last_t = -math.inf  # when the last box was weighed
 
     def hold(self) -> None:
@@ -856,9 +858,9 @@ class ShipSize:
         self.held = True
 
     def takes_boxes(self, t_s: float | None = None) -> bool:
-        """Whether a box at ``t_s`` would be looked at: the fit on, not held, ``1 / rate_hz`` after the last
-        box weighed (None: no rate limit)."""
-        return self.cfg.enabled and not self.held and (
+        """Whether a box at ``t_s`` would be looked at: the fit on, not held nor retired, ``1 / rate_hz`` after
+        the last box weighed (None: no rate limit)."""
+        return self.cfg.enabled and not self.held and not self.retired and (
             t_s is None or t_s - self._last_t >= 1.0 / self.cfg.rate_hz - 1e-9)
 
     @property
@@ -869,7 +871,7 @@ class ShipSize:
     @property
     def scale(self) -> np.ndarray | None:
         """The fitted (length, beam, height) multipliers once in use, else None (the class's outline)."""
-        if not self.cfg.enabled or self.updates < self.cfg.min_updates:
+        if not self.cfg.enabled or self.retired or self.updates < self.cfg.min_updates:
             return None
         return np.exp(self.x[:3])
 
@@ -939,6 +941,7 @@ class ShipSize:
                 self.updates = 0
                 self.gated_in_a_row = 0
                 self.restarts += 1
+                self.retired = 0 < cfg.class_after_restarts <= self.restarts
             return False
         self.gated_in_a_row = 0
         K = self.P @ J.T @ Si

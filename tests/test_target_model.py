@@ -933,6 +933,33 @@ def test_a_size_fit_gone_wrong_starts_again():
     assert abs(fit.scale[2] * 25.0 / 32.0 - 1.0) < 0.1, fit.scale
 
 
+def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_restarts():
+    """``class_after_restarts: 1``: the same fit gone wrong, once it starts again, takes no more boxes and the
+    correction keeps the class's outline (``scale`` None) for good; with 2 it learns again after the first
+    restart, as with the default 0."""
+    from controllers.target_model import ShipSize
+    ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
+    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
+    pose = Pose(*reversed(ship.pose(0.0)))
+    fits = {}
+    for n in (0, 1, 2):
+        fit = ShipSize(SizeFitConfig(enabled=True, min_updates=0, max_gated_in_a_row=10, class_after_restarts=n),
+                       ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
+        fit.x = np.log(np.array([1.6, 1.6, 0.6]))
+        fit.P = np.eye(3) * 1e-6
+        assert fit.scale is not None
+        taken = []
+        for az in range(0, 360, 3):
+            cp, Rc, frame = _look_from(cam, pose, 700.0, 35.0, az)
+            taken.append(fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px))
+        fits[n] = (fit, taken)
+    fit, taken = fits[1]
+    assert fit.restarts == 1 and fit.retired and not any(taken) and fit.scale is None and not fit.takes_boxes()
+    for n in (0, 2):
+        fit, taken = fits[n]
+        assert fit.restarts == 1 and not fit.retired and all(taken[10:]) and fit.scale is not None
+
+
 def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading_deg: float = 40.0):
     """A ship of that size on a 3 m/s course, its ray-cast camera and the flight software's: (camera, ship pose,
     flight software camera, tracked height, the prior's velocity)."""
