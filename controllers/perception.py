@@ -385,7 +385,8 @@ class Perception:
         course, their predicted boxes): the one course's offset, or the weighted mean over the courses.
         ``outline``: the layout's (None: the one in use)."""
         courses, weights, single, boxes = headings
-        return box_centre_offset_px(self.ship.outline if outline is None else outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+        outline = self.ship.outline if outline is None else outline
+        return box_centre_offset_px(outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                     float(courses[0]) if single else None, prior.tracked_height_m,
                                     self.ship.cfg.headings_when_unknown, boxes_px=boxes,
                                     courses_weights=None if single else (courses, weights), spread=spread,
