@@ -405,12 +405,15 @@ class SizeFitConfig(StrictModel):
     min_updates: int = Field(30, ge=0, le=100000,
                              description="boxes taken before the fitted outline replaces the class's")
     class_after_restarts: int = Field(
-        0, ge=0, le=100000,
+        1, ge=0, le=100000,
         description="once the fit has started again this many times (max_gated_in_a_row boxes turned away in a "
                     "row: the fit was off, not the boxes), the correction keeps the class's outline for good and "
-                    "the fit takes no more boxes; 0: never (it learns again from the prior). A fit that went wrong "
-                    "once at a ship (boxes read at a wrong heading, a layout unlike the class's) may go wrong again, "
-                    "and a wrong height lands along the line of sight in the dive")
+                    "the fit takes no more boxes; 0: never (it learns again from the prior, the default before "
+                    "2026-11-29). A fit that went wrong once at a ship (boxes read at a wrong heading, a layout "
+                    "unlike the class's) may go wrong again, and a wrong height lands along the line of sight in "
+                    "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
+                    "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
+                    "starts again flies differently (2 of 128 at 1663-1664; docs/ENVELOPE.md)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "

@@ -915,13 +915,13 @@ def test_the_size_fit_weighs_boxes_at_its_rate():
 
 def test_a_size_fit_gone_wrong_starts_again():
     """A fit sure of a wrong size turns every box away; after max_gated_in_a_row of them it starts again from
-    the prior and learns the ship."""
+    the prior and (``class_after_restarts: 0``) learns the ship."""
     from controllers.target_model import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
-    fit = ShipSize(SizeFitConfig(enabled=True, min_updates=0, max_gated_in_a_row=10), ShipOutline(ShipModelConfig()),
-                   PinholeCamera.from_config(CAM_CFG))
+    fit = ShipSize(SizeFitConfig(enabled=True, min_updates=0, max_gated_in_a_row=10, class_after_restarts=0),
+                   ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
     fit.x = np.log(np.array([1.6, 1.6, 0.6]))
     fit.P = np.eye(3) * 1e-6
     course = math.radians(50.0)
@@ -934,9 +934,9 @@ def test_a_size_fit_gone_wrong_starts_again():
 
 
 def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_restarts():
-    """``class_after_restarts: 1``: the same fit gone wrong, once it starts again, takes no more boxes and the
-    correction keeps the class's outline (``scale`` None) for good; with 2 it learns again after the first
-    restart, as with the default 0."""
+    """``class_after_restarts: 1`` (the default): the same fit gone wrong, once it starts again, takes no more
+    boxes and the correction keeps the class's outline (``scale`` None) for good; with 2 it learns again after
+    the first restart, as with 0."""
     from controllers.target_model import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
@@ -953,6 +953,7 @@ def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_r
             cp, Rc, frame = _look_from(cam, pose, 700.0, 35.0, az)
             taken.append(fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px))
         fits[n] = (fit, taken)
+    assert SizeFitConfig().class_after_restarts == 1
     fit, taken = fits[1]
     assert fit.restarts == 1 and fit.retired and not any(taken) and fit.scale is None and not fit.takes_boxes()
     for n in (0, 2):
