@@ -961,10 +961,12 @@ def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_r
         assert fit.restarts == 1 and not fit.retired and all(taken[10:]) and fit.scale is not None
 
 
-def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading_deg: float = 40.0):
-    """A ship of that size on a 3 m/s course, its ray-cast camera and the flight software's: (camera, ship pose,
-    flight software camera, tracked height, the prior's velocity)."""
-    ship = Ship(TargetConfig(heading_deg=heading_deg, length_m=length_m, width_m=width_m, height_m=height_m))
+def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading_deg: float = 40.0,
+                       ship_type: str = "bridge_aft"):
+    """A ship of that size (and type) on a 3 m/s course, its ray-cast camera and the flight software's: (camera,
+    ship pose, flight software camera, tracked height, the prior's velocity)."""
+    ship = Ship(TargetConfig(type=ship_type, heading_deg=heading_deg, length_m=length_m, width_m=width_m,
+                             height_m=height_m))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     course = math.radians(90.0 - heading_deg)
     return (cam, Pose(*reversed(ship.pose(0.0))), PinholeCamera.from_config(CAM_CFG),
@@ -1426,15 +1428,9 @@ def test_the_mixture_of_layouts_corrects_part_way_and_says_how_far_off_that_may_
     the class's correction to the other end's; with ``switch`` it is the class's alone, its spread zero (one
     known course)."""
     from controllers.config import LayoutFitConfig
-    heading = 40.0
-    ship = Ship(TargetConfig(type="patrol_boat", heading_deg=heading))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    pose = Pose(*reversed(ship.pose(0.0)))
-    fsw_cam = PinholeCamera.from_config(CAM_CFG)
-    h = UkfConfig().target_plane_height_m
-    course = math.radians(90.0 - heading)
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]),
-                        3.0 * np.array([math.cos(course), math.sin(course), 0.0]), 0.1, h)
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 25.0, 40.0, "patrol_boat")
+    course = math.radians(90.0 - 40.0)
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
     meas, motion, cp, Rc = _ring_detection(cam, pose, 0.0, 70.0, rng_m=600.0, elevation_deg=35.0)
     fixes, models = {}, {}
     for mode in ("switch", "mixture"):
