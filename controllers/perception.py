@@ -277,8 +277,14 @@ class Perception:
         boxes, pred, own_used, est = None, _NAN4, False, None
         known = course is not None or self.ship.shape.ready
         if fit_size:
+            restarts = self.ship.size.restarts
             self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s,
                                  course is not None)
+            if self.ship.size.restarts != restarts:
+                sf = self.ship.cfg.size_fit
+                self._event(f"perception: the size fit turned {sf.max_gated_in_a_row} boxes away in a row and "
+                            + ("keeps the class's outline from now on (size_fit.class_after_restarts)"
+                               if self.ship.size.retired else "starts again from the class's outline"))
         scale = self.ship.size.scale
         if known and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,

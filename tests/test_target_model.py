@@ -1017,6 +1017,36 @@ def test_the_perception_corrects_with_the_fitted_size():
     assert fit_err < 0.6 * class_err, (fit_err, class_err)
 
 
+def test_the_perception_says_when_its_size_fit_gives_way_to_the_class():
+    """A size fit sure of a wrong size, fed by the perception round the ring, turns the boxes away, starts again
+    and (``class_after_restarts: 1``, the default) keeps the class's outline: an event says so, once."""
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
+
+    class Events:
+        def __init__(self):
+            self.texts = []
+
+        def event(self, text):
+            self.texts.append(text)
+
+        def log(self, *_):
+            pass
+
+    ship = ShipModel(ShipModelConfig(size_fit=SizeFitConfig(min_updates=0, max_gated_in_a_row=10)), fsw_cam)
+    ship.size.x = np.log(np.array([1.6, 1.6, 0.6]))
+    ship.size.P = np.eye(3) * 1e-6
+    perc = Perception(DetectionGateConfig(size_mismatch_action="skip"), AcquisitionConfig(lock_detections=1), ship,
+                      fsw_cam, Events())
+    perc.lock.locked = True
+    for k, az in enumerate(range(0, 360, 5)):
+        meas, motion, _, _ = _ring_detection(cam, pose, 0.5 * k, az)
+        perc.step(meas, motion, dataclasses.replace(prior, t_s=0.5 * k))
+    assert ship.size.restarts == 1 and ship.size.retired and ship.size.scale is None
+    said = [e for e in perc._record.texts if "size fit" in e]
+    assert len(said) == 1 and "keeps the class's outline" in said[0], said
+
+
 def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     """With the size fit off, a ship 40 % bigger than the class makes most boxes disagree with the class's
     predicted size: after class_check_window boxes the perception says so (an event) and, with the default
