@@ -413,7 +413,7 @@ class SizeFitConfig(StrictModel):
                     "unlike the class's) may go wrong again, and a wrong height lands along the line of sight in "
                     "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
                     "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
-                    "starts again flies differently (2 of 128 at 1663-1664; docs/ENVELOPE.md)")
+                    "starts again flies differently (2 of 192 at 1663-1665; docs/ENVELOPE.md)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "
