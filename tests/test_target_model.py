@@ -961,6 +961,19 @@ def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_r
         assert fit.restarts == 1 and not fit.retired and all(taken[10:]) and fit.scale is not None
 
 
+class _Events:
+    """The perception's event and log sink in these tests: the events' texts, in order."""
+
+    def __init__(self):
+        self.texts = []
+
+    def event(self, text):
+        self.texts.append(text)
+
+    def log(self, *_):
+        pass
+
+
 def _moving_ship_scene(length_m: float, width_m: float, height_m: float, heading_deg: float = 40.0,
                        ship_type: str = "bridge_aft"):
     """A ship of that size (and type) on a 3 m/s course, its ray-cast camera and the flight software's: (camera,
@@ -1023,21 +1036,11 @@ def test_the_perception_says_when_its_size_fit_gives_way_to_the_class():
     cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
 
-    class Events:
-        def __init__(self):
-            self.texts = []
-
-        def event(self, text):
-            self.texts.append(text)
-
-        def log(self, *_):
-            pass
-
     ship = ShipModel(ShipModelConfig(size_fit=SizeFitConfig(min_updates=0, max_gated_in_a_row=10)), fsw_cam)
     ship.size.x = np.log(np.array([1.6, 1.6, 0.6]))
     ship.size.P = np.eye(3) * 1e-6
     perc = Perception(DetectionGateConfig(size_mismatch_action="skip"), AcquisitionConfig(lock_detections=1), ship,
-                      fsw_cam, Events())
+                      fsw_cam, _Events())
     perc.lock.locked = True
     for k, az in enumerate(range(0, 360, 5)):
         meas, motion, _, _ = _ring_detection(cam, pose, 0.5 * k, az)
@@ -1051,18 +1054,8 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
     """With the size fit off, a ship 40 % bigger than the class makes most boxes disagree with the class's
     predicted size: after class_check_window boxes the perception says so (an event) and, with the default
     action, stops skipping boxes for their size."""
-    class Recorder:
-        def __init__(self):
-            self.events = []
-
-        def event(self, text):
-            self.events.append(text)
-
-        def log(self, topic, msg):
-            pass
-
     cam, pose, fsw_cam, h, vel = _moving_ship_scene(77.0, 35.0, 35.0)
-    rec = Recorder()
+    rec = _Events()
     gate = DetectionGateConfig()
     perc = Perception(gate, AcquisitionConfig(lock_detections=1),
                       ShipModel(ShipModelConfig(size_fit=SizeFitConfig(enabled=False)), fsw_cam), fsw_cam, rec)
@@ -1075,7 +1068,7 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
         fix = perc.step(meas, motion, prior)
         reasons.append(fix.reason or fix.overridden)
     n = gate.class_check_window
-    assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.events), rec.events
+    assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.texts), rec.texts
     assert perc.ship.shape.class_doubted  # the centre fit is off from then on
     assert reasons[:n].count(FusionReason.SIZE_MISMATCH) > n // 2  # skipped for their size until then
     assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
@@ -1417,21 +1410,11 @@ def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
     vel = 3.0 * np.array([math.cos(course), math.sin(course), 0.0])
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)  # (the ship held still here)
 
-    class Events:
-        def __init__(self):
-            self.texts = []
-
-        def event(self, text):
-            self.texts.append(text)
-
-        def log(self, *_):
-            pass
-
     percs = {}
     for on in (False, True):
         cfg = ShipModelConfig(layout_fit=LayoutFitConfig(enabled=on))
         percs[on] = Perception(DetectionGateConfig(), AcquisitionConfig(lock_detections=1),
-                               ShipModel(cfg, fsw_cam), fsw_cam, Events())
+                               ShipModel(cfg, fsw_cam), fsw_cam, _Events())
         percs[on].lock.locked = True
     errs = {False: [], True: []}
     for k, az in enumerate(list(range(0, 360, 2)) * 2):
