@@ -414,6 +414,16 @@ class SizeFitConfig(StrictModel):
                     "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
                     "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
                     "starts again flies differently (2 of 192 at 1663-1665; docs/ENVELOPE.md)")
+    per_layout: bool = Field(
+        False,
+        description="fit the sizes twice, side by side on the same boxes: once with the class's layout and once "
+                    "with its superstructure at the other end (controllers.target_model.LayoutFit); the "
+                    "correction uses the fit of the layout in use, and the layout fit weighs each layout at its "
+                    "own sizes. False: one fit, which goes on with the layout in use from where it stands (sizes "
+                    "learnt with one layout then correct with the other: over half the envelope's runs switch "
+                    "layout in the loiter, most after 100-800 boxes fitted with the class's; offline, a ferry's "
+                    "corrected centres 3.6-5.3 m RMS with its own layout's fit, 5.8-8.2 m with the other's; "
+                    "docs/ENVELOPE.md, seed 1666)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "

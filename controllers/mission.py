@@ -122,7 +122,7 @@ class FlightSoftware:
         self.perception.in_dive = self.estimation.in_dive = self.phase.phase == 3
         if events and self.phase.phase == 3:
             if self.cfg.target_model.size_fit.hold_in_terminal:
-                self.perception.ship.size.hold()
+                self.perception.ship.hold_size()
             self.perception.ship.layout.hold()  # (the airframe starts to cut the boxes)
 
     def _output(self, nav: Measurements, est: TargetState, fix: DetectionFix, guide: Guidance,

@@ -1011,7 +1011,8 @@ class LayoutFit:
         None when unknown, or a function that gives it, asked only when the box is taken; its estimated
         velocity ``vel_enu``, which the ground points are taken relative to; ``shape_log_ratio``: a function of
         the course that gives the box shapes' log ratio for the other end, or None, :meth:`ShapeHeading.
-        reverse_log_ratio`); True when the layout in use changed."""
+        reverse_log_ratio`); ``scale``: the sizes both layouts are projected at (None: the class's), or a tuple
+        of each layout's own (``size_fit.per_layout``); True when the layout in use changed."""
         c = self.cfg
         if vel_enu is not None and c.enabled and not self.held:
             ve, vn = float(vel_enu[0]), float(vel_enu[1])
@@ -1038,15 +1039,16 @@ class LayoutFit:
         det = np.array([b[2] - b[0], b[3] - b[1]])
         plane = float(ref[2]) + tracked_height_m
         points = []
-        for outline in self.outlines:
-            box = predicted_boxes_px(outline, cam, cam_pos, R, ref, [course_enu_rad], scale)[0]
+        scales = scale if isinstance(scale, tuple) else (scale, scale)
+        for outline, sc in zip(self.outlines, scales):
+            box = predicted_boxes_px(outline, cam, cam_pos, R, ref, [course_enu_rad], sc)[0]
             if not np.isfinite(box).all():
                 return False
             size = box[2:4] - box[0:2]
             if not ((det > 0.5 * size).all() and (det < 2.0 * size).all()):  # cut short, or not this ship
                 return False
             off = box_centre_offset_px(outline, cam, cam_pos, R, ref, course_enu_rad, tracked_height_m,
-                                       boxes_px=box[None, :], scale=scale)
+                                       boxes_px=box[None, :], scale=sc)
             if off is None:
                 return False
             g = self._ground(uv - off, cam_pos, R, plane)
@@ -1258,7 +1260,10 @@ class ShipModel:
         self.cfg = cfg
         self.outlines = (ShipOutline(cfg), ShipOutline(cfg, other_end=True))  # the class's layout, the other end
         self.shape = ShapeHeading(cfg.heading_from_shape, self.outlines[0], camera, edge_px)
-        self.size = ShipSize(cfg.size_fit, self.outlines[0], camera, edge_px)
+        #: the size fits: one, which goes on with the layout in use, or one per layout (size_fit.per_layout)
+        self.sizes = tuple(ShipSize(cfg.size_fit, o, camera, edge_px)
+                           for o in (self.outlines if cfg.size_fit.per_layout else self.outlines[:1]))
+        self.size = self.sizes[0]  # the fit the correction uses (the layout in use's)
         self.layout = LayoutFit(cfg.layout_fit, self.outlines, camera, cfg.layout_fit.pixel_noise_px, edge_px)
         self._course_known_since = math.nan  # since when the course has been known without a break
         self._now = math.nan  # the time of the latest box (observe_box)
@@ -1399,8 +1404,30 @@ class ShipModel:
             return False
         doubt = math.radians(sf.course_unknown_heading_std_deg) \
             if not course_known and sf.course_unknown == "doubt" else 0.0
-        return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, math.atan2(resultant.imag, resultant.real),
-                                box_px, t_s, doubt)
+        course = math.atan2(resultant.imag, resultant.real)
+        moved = [fit.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course, box_px, t_s, doubt)
+                 for fit in self.sizes]
+        return moved[self.sizes.index(self.size)]
+
+    def _layout_scales(self):
+        """The sizes the layout fit weighs the layouts at: the one fit's for both, or each layout's own
+        (``size_fit.per_layout``)."""
+        if len(self.sizes) == 1:
+            return self.size.scale
+        return tuple(fit.scale for fit in self.sizes)
+
+    def follow_layout(self) -> None:
+        """After the layout in use has changed: the one size fit goes on with it from where it stands, or (with
+        ``size_fit.per_layout``) the correction takes that layout's own fit."""
+        if len(self.sizes) == 1:
+            self.size.outline = self.outline
+        else:
+            self.size = self.sizes[1 if self.layout.other_end else 0]
+
+    def hold_size(self) -> None:
+        """Stop every size fit learning (``size_fit.hold_in_terminal``)."""
+        for fit in self.sizes:
+            fit.hold()
 
     def _axis_steady(self, t_s: float, courses, weights) -> bool:
         """Record the shapes' axis now (the headings' mean axis: bow and stern alike) and say whether it has
@@ -1425,8 +1452,8 @@ class ShipModel:
         for the log when the shapes took the box, else None."""
         if self.cfg.enabled and self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
                                                     lambda: self.course(vel_enu, vel_std_m_s), tracked_height_m,
-                                                    self.size.scale, vel_enu, self.shape.reverse_log_ratio):
-            self.size.outline = self.outline  # the size fit goes on with the layout in use
+                                                    self._layout_scales(), vel_enu, self.shape.reverse_log_ratio):
+            self.follow_layout()
         if self.track is not None:
             self.track.observe(t_s, cam_pos_enu_m, R_enu_from_cam, float(np.asarray(ref_enu_m)[2]) + tracked_height_m,
                                box_px)

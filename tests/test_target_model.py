@@ -1030,6 +1030,40 @@ def test_the_perception_corrects_with_the_fitted_size():
     assert fit_err < 0.6 * class_err, (fit_err, class_err)
 
 
+def test_per_layout_size_fits_learn_side_by_side_and_the_correction_takes_the_layouts_own():
+    """``size_fit.per_layout``: round a bridge-forward ship (the other end's layout) 28 % taller than the class,
+    a fit with each layout learns from the same boxes, each at its own outline, so their sizes differ, and the
+    correction uses the fit of the layout in use; when that layout changes the correction takes the other
+    layout's fit as it stands. With one fit (the default) the change hands the same fit the other outline."""
+    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 32.0, ship_type="bridge_forward")
+    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
+    ships = {per: ShipModel(ShipModelConfig(size_fit=SizeFitConfig(per_layout=per, min_updates=0)), fsw_cam)
+             for per in (False, True)}
+    percs = {per: _perception(ship) for per, ship in ships.items()}
+    for k, az in enumerate(list(range(0, 360, 5)) * 2):
+        t = 0.5 * k
+        meas, motion, _, _ = _ring_detection(cam, pose, t, az)
+        for perc in percs.values():
+            perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
+    one, two = ships[False], ships[True]
+    assert len(one.sizes) == 1 and len(two.sizes) == 2
+    cls, other = two.sizes
+    assert cls.outline is two.outlines[0] and other.outline is two.outlines[1]
+    assert cls.updates == other.updates >= 8, (cls.updates, other.updates)  # both took the same boxes
+    assert two.size is two.sizes[1 if two.layout.other_end else 0]
+    weighed = two._layout_scales()  # the layout fit weighs each layout at its own fit's sizes
+    assert np.array_equal(weighed[0], cls.scale) and np.array_equal(weighed[1], other.scale)
+    # each layout reads the boxes its own way: the heights differ
+    assert abs(math.log(other.scale[2] / cls.scale[2])) > 0.03, (cls.scale, other.scale)
+    for ship in (one, two):
+        ship.layout.other_end = not ship.layout.other_end
+        ship.follow_layout()
+        ship.layout.other_end = True
+        ship.follow_layout()
+    assert two.size is other and np.array_equal(two.size.scale, other.scale)
+    assert one.size is one.sizes[0] and one.size.outline is one.outlines[1]
+
+
 def test_the_perception_says_when_its_size_fit_gives_way_to_the_class():
     """A size fit sure of a wrong size, fed by the perception round the ring, turns the boxes away, starts again
     and (``class_after_restarts: 1``, the default) keeps the class's outline: an event says so, once."""
