@@ -1055,13 +1055,12 @@ def test_per_layout_size_fits_learn_side_by_side_and_the_correction_takes_the_la
     assert np.array_equal(weighed[0], cls.scale) and np.array_equal(weighed[1], other.scale)
     # each layout reads the boxes its own way: the heights differ
     assert abs(math.log(other.scale[2] / cls.scale[2])) > 0.03, (cls.scale, other.scale)
-    for ship in (one, two):
-        ship.layout.other_end = not ship.layout.other_end
-        ship.follow_layout()
-        ship.layout.other_end = True
-        ship.follow_layout()
-    assert two.size is other and np.array_equal(two.size.scale, other.scale)
-    assert one.size is one.sizes[0] and one.size.outline is one.outlines[1]
+    for end, fit in ((False, cls), (True, other)):  # the layout fit's choice, either way
+        for ship in (one, two):
+            ship.layout.other_end = end
+            ship.follow_layout()
+        assert two.size is fit and np.array_equal(two.size.scale, fit.scale)
+        assert one.size is one.sizes[0] and one.size.outline is one.outlines[int(end)]
 
 
 def test_the_perception_says_when_its_size_fit_gives_way_to_the_class():
