@@ -421,7 +421,7 @@ class SizeFitConfig(StrictModel):
                     "unlike the class's) may go wrong again, and a wrong height lands along the line of sight in "
                     "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
                     "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
-                    "starts again flies differently (3 of 320 at 1663-1667; docs/ENVELOPE.md)")
+                    "starts again flies differently (3 of 384 at 1663-1668; docs/ENVELOPE.md)")
     per_layout: bool = Field(
         False,
         description="fit the sizes twice, side by side on the same boxes: once with the class's layout and once "
@@ -433,7 +433,8 @@ class SizeFitConfig(StrictModel):
                     "corrected centres 3.6-5.3 m RMS with its own layout's fit, 5.8-8.2 m with the other's). "
                     "Not the default: at 1666, the seed it came from, within 3 m / 3 deg 49 -> 51 and the "
                     "estimate bar 43 -> 48, but one hit lost (a ferry whose layout changed back 13 s before the "
-                    "dive, 5.46 -> 8.83 m); docs/ENVELOPE.md, seed 1666")
+                    "dive, 5.46 -> 8.83 m); at the fresh 1668 within 42 -> 43, the estimate bar 45 -> 42, CEP50 "
+                    "1.80 -> 2.07 m (docs/ENVELOPE.md, seeds 1666 and 1668)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "
