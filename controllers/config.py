@@ -297,14 +297,6 @@ class ShapeHeadingConfig(StrictModel):
         3.0, gt=0, le=90,
         description="the posterior turns at most this fast, deg/s: a ship turns slower (the estimate's jumps "
                     "are not turns)")
-    follow_course_turn: Literal["interpolate", "grid"] = Field(
-        "interpolate",
-        description="how the posterior turns with the course: interpolate, each turn spread between the grid's "
-                    "neighbours (linear interpolation of the log-likelihood), which at the course's small steps "
-                    "(a fraction of the grid's step at each box, hundreds of times over a loiter) blurs the "
-                    "evidence, a sharp peak decaying against a broad one; grid, the turns summed and the evidence "
-                    "moved by whole grid steps (to the nearest, as the turn-rate hypotheses move theirs), so that "
-                    "it keeps its shape, at most half a step off")
     held_course_spread_deg_s: float = Field(
         1.5, ge=0, le=90,
         description="once the course has been followed and then is lost (the estimated speed dips under "

@@ -396,7 +396,6 @@ class ShapeHeading:
         self._weights = None  # weights() of the current loglik (it is asked for several times per detection)
         self._axis = None  # axis_enu_rad() of the current loglik
         self._course = None  # the estimated course at the last used detection (None: not followed then)
-        self._turn_rest = 0.0  # the turn not yet applied, grid steps (follow_course_turn: grid)
 
     def update(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
                course_enu_rad: float | None = None) -> bool:
@@ -527,21 +526,12 @@ class ShapeHeading:
 
     def turn(self, angle_rad: float) -> None:
         """The ship has turned by ``angle_rad`` (counter-clockwise): the evidence for each heading moves to the
-        heading that much further round (linear interpolation between the grid's neighbours; with
-        ``follow_course_turn: grid``, by whole grid steps, the rest carried over to the next turn)."""
+        heading that much further round (linear interpolation between the grid's neighbours)."""
         s = float(angle_rad) / (2.0 * math.pi / self.cfg.headings)
         if not s:
             return
-        if self.cfg.follow_course_turn == "grid":  # whole steps only, the rest carried to the next turn
-            s += self._turn_rest
-            i = round(s)
-            self._turn_rest = s - i
-            if not i:
-                return
-            f = 0.0
-        else:
-            i = math.floor(s)
-            f = s - i
+        i = math.floor(s)
+        f = s - i
         # evidence that was at heading k - s now belongs to heading k
         for j, lb in enumerate(self._loglik_bias):
             a = _roll_headings(lb, i)

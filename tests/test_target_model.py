@@ -531,23 +531,6 @@ def test_the_shape_posterior_turns_by_the_courses_change():
     assert int(np.argmax(sh.weights())) == int(np.argmax(w0))
 
 
-def test_small_course_steps_blur_the_interpolated_posterior_and_not_the_grid_ones():
-    # a ship followed through a steady turn: its course moves a fraction of the 5-deg grid at each box. Spread
-    # between neighbours, 300 such steps blur the evidence; summed and moved by whole steps, they leave it as
-    # it was, rolled by the turn (to the nearest step)
-    views = list(ring_views(37.0, range(0, 360, 10)))
-    for mode in ("interpolate", "grid"):
-        sh = _shape_from(views, ShapeHeadingConfig(follow_course_turn=mode))
-        w0 = sh.weights()
-        for _ in range(300):
-            sh.turn(math.radians(0.3))  # 90 deg in all: 18 steps
-        if mode == "grid":
-            np.testing.assert_allclose(sh.weights(), np.roll(w0, 18), atol=1e-12)
-        else:
-            assert int(np.argmax(sh.weights())) == (int(np.argmax(w0)) + 18) % 72
-            assert sh.weights().max() < 0.8 * w0.max()  # the same turn, the peak worn down
-
-
 def test_shape_heading_skips_border_boxes_and_keeps_its_rate():
     sh = ShapeHeading(ShapeHeadingConfig(rate_hz=2.0), ShipOutline(ShipModelConfig()),
                       PinholeCamera.from_config(CAM_CFG))
