@@ -413,7 +413,7 @@ class SizeFitConfig(StrictModel):
                     "unlike the class's) may go wrong again, and a wrong height lands along the line of sight in "
                     "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
                     "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
-                    "starts again flies differently (3 of 384 at 1663-1668; docs/ENVELOPE.md)")
+                    "starts again flies differently (3 of 448 at 1663-1669; docs/ENVELOPE.md)")
     per_layout: bool = Field(
         False,
         description="fit the sizes twice, side by side on the same boxes: once with the class's layout and once "
