@@ -607,6 +607,15 @@ class UkfConfig(StrictModel):
                     "a few px from the real heading's: an error common to every detection until the heading is "
                     "known, which the filter's covariance, fusing detections as independent, does not hold); "
                     "like box_centre_bias_frac it is not fused")
+    dive_los_velocity_hold_m: float = Field(
+        0.0, ge=0, le=5000,
+        description="in the terminal dive, from this range (m, camera to estimate) in, the boxes no longer move "
+                    "the ship's velocity along the horizontal line of sight: a Schmidt (consider) update, the "
+                    "gain's component along it zeroed and the covariance updated for the gain used; the position "
+                    "and the velocity across the line of sight learn as before. Close in, a ship unlike the "
+                    "class's corrected box centres drift along the line of sight as the view steepens, and the "
+                    "filter reads the drift as velocity, which the coast of the last metres flies "
+                    "(docs/ENVELOPE.md, 'The velocity along the line of sight held close in'); 0: off")
     consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
         "latest_view",
         description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "

@@ -585,6 +585,29 @@ def _consider_blend(prev: np.ndarray, box: np.ndarray, K_h: np.ndarray, J) -> np
     return prev + G @ (box - prev)
 
 
+def _los_velocity_axis(rel: np.ndarray, n: int) -> np.ndarray:
+    """The unit state direction (n,) of the target's velocity along the horizontal line of sight ``rel`` (camera
+    to target, ENU); zeros when the line of sight is vertical."""
+    e = np.zeros(n)
+    h = math.hypot(float(rel[0]), float(rel[1]))
+    if h > 1e-6:
+        e[5], e[6] = float(rel[0]) / h, float(rel[1]) / h
+    return e
+
+
+def _hold_component(x: np.ndarray, P: np.ndarray, x_opt: np.ndarray, P_opt: np.ndarray,
+                    e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A Schmidt (consider) update from an optimal one: the gain ``K`` with its component along the unit state
+    direction ``e`` removed, ``K' = M K``, ``M = I - e e^T``. With ``A = K S K^T = P - P_opt``, the covariance
+    for that gain, ``P - K' P_xz^T - P_xz K'^T + K' S K'^T`` (``P_xz = K S``), is ``P - M A - A M^T + M A
+    M^T``; the state moves by ``M (x_opt - x)``. With ``e`` zero it is the optimal update."""
+    M = np.eye(len(x)) - np.outer(e, e)
+    A = P - P_opt
+    MA = M @ A
+    P_new = P - MA - MA.T + MA @ M.T
+    return x + M @ (x_opt - x), 0.5 * (P_new + P_new.T)
+
+
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
     """:func:`controllers.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the plane)."""
     R = R_enu_from_cam
@@ -660,6 +683,7 @@ class UkfTargetEstimator:
         self.updates = 0
         self.initialisations = 0
         self._last_nis_det = (math.nan, math.nan)  # the last update's chi-square and pixel-rows determinant
+        self.in_dive = False  # the terminal phase (the estimation block passes the mission's word on)
 
     # ------------------------------------------------------------ properties
     @property
@@ -841,6 +865,8 @@ class UkfTargetEstimator:
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
             if not rejected:
+                if self.in_dive and rng <= c.dive_los_velocity_hold_m:
+                    x_new, P_new = _hold_component(core._x, core._P, x_new, P_new, _los_velocity_axis(rel, len(x_new)))
                 core.set_posterior(x_new, P_new)
         except FloatingPointError:
             self.divergence_resets += 1

@@ -588,3 +588,35 @@ def test_the_consider_update_modes_against_the_estimates_own_systematic_error():
     e_l = runs["latest_view", (1.0, -1.0)][2][3]
     for up in modes[1:]:
         assert np.all(runs[up, (1.0, -1.0)][2][3].pos_std_m[:2] < 0.5 * e_l.pos_std_m[:2])
+
+
+def test_held_component_is_the_joseph_update_for_the_gain_used():
+    """``dive_los_velocity_hold_m``'s Schmidt update: against a linear Kalman update with the gain's component
+    along a state direction removed, the state and the Joseph-form covariance for that gain; that component of
+    the state does not move; with the direction zero it is the optimal update."""
+    from controllers.ukf import _hold_component, _los_velocity_axis
+
+    rng = np.random.default_rng(3)
+    n, m = 8, 3
+    L = rng.normal(size=(n, n))
+    P = L @ L.T + n * np.eye(n)
+    H = rng.normal(size=(m, n))
+    R = np.diag([0.5, 1.0, 2.0])
+    x = rng.normal(size=n)
+    y = rng.normal(size=m)
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    x_opt, P_opt = x + K @ y, P - K @ S @ K.T
+    e = _los_velocity_axis(np.array([30.0, -40.0, -60.0]), n)
+    assert e[5:7] == pytest.approx([0.6, -0.8]) and np.count_nonzero(e) == 2
+    x_h, P_h = _hold_component(x, P, x_opt, P_opt, e)
+    Km = (np.eye(n) - np.outer(e, e)) @ K
+    IKH = np.eye(n) - Km @ H
+    assert x_h == pytest.approx(x + Km @ y)
+    assert P_h == pytest.approx(IKH @ P @ IKH.T + Km @ R @ Km.T)
+    assert float(e @ x_h) == pytest.approx(float(e @ x))  # the held component did not move
+    assert np.linalg.eigvalsh(P_h).min() > 0.0
+    assert float(e @ P_h @ e) > float(e @ P_opt @ e)  # and keeps more of its variance than the optimal update
+    x0, P0 = _hold_component(x, P, x_opt, P_opt, np.zeros(n))
+    assert x0 == pytest.approx(x_opt) and P0 == pytest.approx(P_opt)
+    assert not _los_velocity_axis(np.array([0.0, 0.0, -50.0]), n).any()  # straight down: nothing held
