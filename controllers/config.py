@@ -612,7 +612,8 @@ class UkfConfig(StrictModel):
         description="in the terminal dive, from this range (m, camera to estimate) in, the boxes no longer move "
                     "the ship's velocity along the horizontal line of sight: a Schmidt (consider) update, the "
                     "gain's component along it zeroed and the covariance updated for the gain used; the position "
-                    "and the velocity across the line of sight learn as before. Close in, a ship unlike the "
+                    "and the velocity across the line of sight learn as before, and so does all of it while "
+                    "turn_from_course hands on a turn or a periodic course. Close in, a ship unlike the "
                     "class's corrected box centres drift along the line of sight as the view steepens, and the "
                     "filter reads the drift as velocity, which the coast of the last metres flies "
                     "(docs/ENVELOPE.md, 'The velocity along the line of sight held close in'); 0: off")

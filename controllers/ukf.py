@@ -683,7 +683,9 @@ class UkfTargetEstimator:
         self.updates = 0
         self.initialisations = 0
         self._last_nis_det = (math.nan, math.nan)  # the last update's chi-square and pixel-rows determinant
-        self.in_dive = False  # the terminal phase (the estimation block passes the mission's word on)
+        # dive_los_velocity_hold_m may act: the estimation block sets it in the terminal dive while no turn or
+        # periodic course is handed on (a ship seen to manoeuvre keeps learning its velocity)
+        self.los_velocity_hold = False
 
     # ------------------------------------------------------------ properties
     @property
@@ -865,7 +867,7 @@ class UkfTargetEstimator:
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
             if not rejected:
-                if self.in_dive and rng <= c.dive_los_velocity_hold_m:
+                if self.los_velocity_hold and rng <= c.dive_los_velocity_hold_m:
                     x_new, P_new = _hold_component(core._x, core._P, x_new, P_new, _los_velocity_axis(rel, len(x_new)))
                 core.set_posterior(x_new, P_new)
         except FloatingPointError:

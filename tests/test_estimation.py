@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -121,3 +122,37 @@ def test_the_scenario_sets_it():
     assert FlightSoftware(on.controllers, on.initial, on.camera).estimation.slow_coast_speed_m_s == 2.0
     default_fsw = FlightSoftware(default.controllers, default.initial, default.camera)
     assert default_fsw.estimation.slow_coast_speed_m_s is None
+
+
+class _Turning:
+    """A course-turn finder stand-in: a turn handed on from ``from_s``."""
+
+    def __init__(self, from_s):
+        self.from_s = from_s
+
+    fitted = False
+
+    def state(self, t_s):
+        return (np.zeros(3), np.zeros(3), 0.01) if t_s >= self.from_s else None
+
+    def observe(self, *args):
+        pass
+
+
+def test_the_velocity_along_the_line_of_sight_is_held_only_in_the_dive_with_no_turn_handed_on():
+    """``ukf.dive_los_velocity_hold_m``: the block tells the filter when the hold may act."""
+    f = _Scripted()
+    f.los_velocity_hold = None
+    est = Estimation(f, 120.0, 5, _Recorder(), None)
+    cam = types.SimpleNamespace(pos_enu_m=np.array([0.0, 0.0, 300.0]), vel_enu_m_s=np.array([20.0, 0.0, 0.0]))
+    est.predict(_Nav(0.0), cam)
+    est.update(_Nav(0.0), cam, dataclasses.replace(_FIX, lock_now=True))
+    seen = []
+    for t, dive, turn_from in ((1.0, False, None), (2.0, True, None), (3.0, True, 5.0), (5.0, True, 5.0),
+                               (6.0, False, 5.0)):
+        est.turn = _Turning(turn_from) if turn_from is not None else None
+        est.in_dive = dive
+        est.predict(_Nav(t), cam)
+        est.update(_Nav(t), cam, dataclasses.replace(_FIX, t_s=t))
+        seen.append(f.los_velocity_hold)
+    assert seen == [False, True, True, False, False]

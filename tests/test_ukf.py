@@ -620,3 +620,44 @@ def test_held_component_is_the_joseph_update_for_the_gain_used():
     x0, P0 = _hold_component(x, P, x_opt, P_opt, np.zeros(n))
     assert x0 == pytest.approx(x_opt) and P0 == pytest.approx(P_opt)
     assert not _los_velocity_axis(np.array([0.0, 0.0, -50.0]), n).any()  # straight down: nothing held
+
+
+def _velocity_through_a_drift(hold_m: float, allowed: bool):
+    """The orbit (seed 5) to 45 s, then 3 s of box centres drifting 4 px/s right and down (their ground points
+    sliding along and across the line of sight), the hold allowed or not: the velocity's change over the drift
+    along and across the horizontal line of sight (camera to ship at the drift's start), and the estimator."""
+    truth, rng = OrbitTruth(), np.random.default_rng(5)
+    ukf = UkfTargetEstimator(CAM, UkfConfig(dive_los_velocity_hold_m=hold_m))
+    v0 = los = None
+    for k in range(int(48.0 * 30) + 1):
+        t = k / 30.0
+        if k % 3 == 0:
+            gnss_err = rng.normal(0, 0.5, 3)
+        meas = truth.sample(t, rng, gnss_err=gnss_err)
+        if t > 45.0:
+            d = 4.0 * (t - 45.0)
+            meas = dataclasses.replace(meas, det_u_px=meas.det_u_px + d, det_v_px=meas.det_v_px + d)
+        if k == 45 * 30:
+            v0 = ukf.vel_enu_m_s.copy()
+            rel = ukf.pos_enu_m - meas.cam_pos_enu_m
+            los = rel[:2] / np.linalg.norm(rel[:2])
+            ukf.los_velocity_hold = allowed
+        ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))
+    dv = ukf.vel_enu_m_s[:2] - v0[:2]
+    return float(dv @ los), float(dv @ np.array([-los[1], los[0]])), ukf
+
+
+def test_the_dive_hold_leaves_the_velocity_along_the_line_of_sight_inside_its_range():
+    """``dive_los_velocity_hold_m``: with the hold allowed (the estimation block: in the dive, no turn handed
+    on) and the camera inside the range, drifting boxes no longer move the velocity along the line of sight
+    (it still turns a little with the line of sight as the orbit goes round), while across it they move it as
+    before; outside the range, or not allowed, the filter is the paper's."""
+    free_along, free_across, free = _velocity_through_a_drift(0.0, True)
+    held_along, held_across, held = _velocity_through_a_drift(2000.0, True)
+    assert abs(free_along) > 0.3  # the drift, read as velocity (the orbit's slant range is about 700 m)
+    assert abs(held_along) < 0.2 * abs(free_along)
+    assert abs(held_across) == pytest.approx(abs(free_across), rel=0.5, abs=0.1)
+    assert held.numerical_resets == 0 and np.linalg.eigvalsh(held.cov).min() > 0.0
+    for hold_m, allowed in ((300.0, True), (2000.0, False)):  # out of range (700 m), or not allowed
+        along, across, ukf = _velocity_through_a_drift(hold_m, allowed)
+        assert (along, across) == (free_along, free_across) and np.array_equal(ukf.x, free.x)
