@@ -616,7 +616,7 @@ class UkfConfig(StrictModel):
                     "turn_from_course hands on a turn or a periodic course. Close in, a ship unlike the "
                     "class's corrected box centres drift along the line of sight as the view steepens, and the "
                     "filter reads the drift as velocity, which the coast of the last metres flies "
-                    "(docs/ENVELOPE.md, 'The velocity along the line of sight held close in'); 0: off")
+                    "(docs/ENVELOPE.md, 'Fresh seeds 1670 and 1671': measured, not adopted); 0: off")
     consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
         "latest_view",
         description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "
