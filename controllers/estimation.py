@@ -97,7 +97,7 @@ class Estimation:
             result = FusionResult(not why, FusionReason.NOT_INITIALISED if why else FusionReason.INITIALISED)
         elif self._running:
             if fix.new:
-                if hasattr(self.filter, "los_velocity_hold"):  # (ukf.dive_los_velocity_hold_m)
+                if getattr(self.filter, "los_velocity_hold", None) is not None:  # (ukf.dive_los_velocity_hold_m)
                     self.filter.los_velocity_hold = self.in_dive and (self.turn is None or self.turn.state(t) is None)
                 result = self.filter.update(fix, cam) if fix.use else FusionResult(False, fix.reason)
             if not self.filter.initialised:

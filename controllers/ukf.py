@@ -684,8 +684,9 @@ class UkfTargetEstimator:
         self.initialisations = 0
         self._last_nis_det = (math.nan, math.nan)  # the last update's chi-square and pixel-rows determinant
         # dive_los_velocity_hold_m may act: the estimation block sets it in the terminal dive while no turn or
-        # periodic course is handed on (a ship seen to manoeuvre keeps learning its velocity)
-        self.los_velocity_hold = False
+        # periodic course is handed on (a ship seen to manoeuvre keeps learning its velocity); None while the
+        # option is off, so that the block has nothing to work out
+        self.los_velocity_hold: bool | None = False if c.dive_los_velocity_hold_m > 0.0 else None
 
     # ------------------------------------------------------------ properties
     @property

@@ -142,7 +142,7 @@ class _Turning:
 def test_the_velocity_along_the_line_of_sight_is_held_only_in_the_dive_with_no_turn_handed_on():
     """``ukf.dive_los_velocity_hold_m``: the block tells the filter when the hold may act."""
     f = _Scripted()
-    f.los_velocity_hold = None
+    f.los_velocity_hold = False  # (a filter with the option on)
     est = Estimation(f, 120.0, 5, _Recorder(), None)
     cam = types.SimpleNamespace(pos_enu_m=np.array([0.0, 0.0, 300.0]), vel_enu_m_s=np.array([20.0, 0.0, 0.0]))
     est.predict(_Nav(0.0), cam)
@@ -156,3 +156,16 @@ def test_the_velocity_along_the_line_of_sight_is_held_only_in_the_dive_with_no_t
         est.update(_Nav(t), cam, dataclasses.replace(_FIX, t_s=t))
         seen.append(f.los_velocity_hold)
     assert seen == [False, True, True, False, False]
+
+
+def test_a_filter_with_the_hold_off_is_left_alone():
+    f = _Scripted()
+    f.los_velocity_hold = None  # (the UKF with dive_los_velocity_hold_m 0)
+    est = Estimation(f, 120.0, 5, _Recorder(), None)
+    cam = types.SimpleNamespace(pos_enu_m=np.array([0.0, 0.0, 300.0]), vel_enu_m_s=np.array([20.0, 0.0, 0.0]))
+    est.predict(_Nav(0.0), cam)
+    est.update(_Nav(0.0), cam, dataclasses.replace(_FIX, lock_now=True))
+    est.in_dive = True
+    est.predict(_Nav(1.0), cam)
+    est.update(_Nav(1.0), cam, dataclasses.replace(_FIX, t_s=1.0))
+    assert f.los_velocity_hold is None
