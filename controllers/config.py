@@ -617,6 +617,17 @@ class UkfConfig(StrictModel):
                     "class's corrected box centres drift along the line of sight as the view steepens, and the "
                     "filter reads the drift as velocity, which the coast of the last metres flies "
                     "(docs/ENVELOPE.md, 'Fresh seeds 1670 and 1671': measured, not adopted); 0: off")
+    dive_los_velocity_hold_max_spread_m_s: float = Field(
+        0.0, ge=0, le=50,
+        description="dive_los_velocity_hold_m acts only for a ship whose estimated velocity held steady before "
+                    "it: the RMS of the horizontal velocity's deviation from its mean over the fused boxes of "
+                    "the last dive_los_velocity_hold_window_s outside the hold's range at or under this (m/s). "
+                    "A ship that turns, zigzags or changes speed shows it there, and in the last seconds its "
+                    "velocity changes for real, which the hold cannot follow; 0: no such condition")
+    dive_los_velocity_hold_window_s: float = Field(
+        60.0, gt=0, le=600,
+        description="the window of dive_los_velocity_hold_max_spread_m_s (s): the estimated velocity's history "
+                    "before the hold's range")
     consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
         "latest_view",
         description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "

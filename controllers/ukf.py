@@ -79,6 +79,7 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf as _dpotrf
@@ -595,6 +596,12 @@ def _los_velocity_axis(rel: np.ndarray, n: int) -> np.ndarray:
     return e
 
 
+def velocity_spread_m_s(history) -> float:
+    """The RMS of horizontal velocities' deviation from their mean (m/s); ``history``: (t, east, north) rows."""
+    v = np.asarray(history, dtype=float)[:, 1:3]
+    return float(np.sqrt(np.mean(np.sum((v - v.mean(axis=0)) ** 2, axis=1))))
+
+
 def _hold_component(x: np.ndarray, P: np.ndarray, x_opt: np.ndarray, P_opt: np.ndarray,
                     e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A Schmidt (consider) update from an optimal one: the gain ``K`` with its component along the unit state
@@ -687,6 +694,11 @@ class UkfTargetEstimator:
         # periodic course is handed on (a ship seen to manoeuvre keeps learning its velocity); None while the
         # option is off, so that the block has nothing to work out
         self.los_velocity_hold: bool | None = False if c.dive_los_velocity_hold_m > 0.0 else None
+        # (t, east, north velocity) after each update outside the hold's range, over its window: the hold acts
+        # only for a ship whose velocity held steady there (dive_los_velocity_hold_max_spread_m_s); None: no
+        # such condition
+        self._vel_hist: deque[tuple[float, float, float]] | None = \
+            deque() if c.dive_los_velocity_hold_m > 0.0 and c.dive_los_velocity_hold_max_spread_m_s > 0.0 else None
 
     # ------------------------------------------------------------ properties
     @property
@@ -769,6 +781,8 @@ class UkfTargetEstimator:
         self._motion = None
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
+        if self._vel_hist is not None:
+            self._vel_hist.clear()
 
     def initialise(self, fix: DetectionFix, motion: CameraMotion) -> None:
         """Start from one detection (its box centre ``u_px, v_px``): r_q on the plane along its ray, V_q = 0
@@ -868,9 +882,11 @@ class UkfTargetEstimator:
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
             if not rejected:
-                if self.los_velocity_hold and rng <= c.dive_los_velocity_hold_m:
+                if self.los_velocity_hold and rng <= c.dive_los_velocity_hold_m and self._steady_before_hold():
                     x_new, P_new = _hold_component(core._x, core._P, x_new, P_new, _los_velocity_axis(rel, len(x_new)))
                 core.set_posterior(x_new, P_new)
+                if self._vel_hist is not None and rng > c.dive_los_velocity_hold_m:
+                    self._remember_velocity(float(x_new[5]), float(x_new[6]))
         except FloatingPointError:
             self.divergence_resets += 1
             self.reset()
@@ -893,6 +909,23 @@ class UkfTargetEstimator:
             self._set_consider(box)
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
+
+    def _remember_velocity(self, ve: float, vn: float) -> None:
+        """Keep this update's horizontal velocity in the history of dive_los_velocity_hold_window_s."""
+        h = self._vel_hist
+        h.append((self._t, ve, vn))
+        while h and h[0][0] < self._t - self.cfg.dive_los_velocity_hold_window_s:
+            h.popleft()
+
+    def _steady_before_hold(self) -> bool:
+        """The ship's estimated velocity held steady before the hold's range: the RMS of the history's
+        deviation from its mean at or under dive_los_velocity_hold_max_spread_m_s (True with no such condition;
+        False with fewer than two velocities remembered)."""
+        if self._vel_hist is None:
+            return True
+        if len(self._vel_hist) < 2:
+            return False
+        return velocity_spread_m_s(self._vel_hist) <= self.cfg.dive_los_velocity_hold_max_spread_m_s
 
     def _gate_box_bias_nis(self, fix: DetectionFix, core, z, r, motion: CameraMotion) -> float:
         """The normalised innovation squared with the box centre's systematic error (``box_centre_bias_frac``

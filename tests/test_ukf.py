@@ -622,12 +622,14 @@ def test_held_component_is_the_joseph_update_for_the_gain_used():
     assert not _los_velocity_axis(np.array([0.0, 0.0, -50.0]), n).any()  # straight down: nothing held
 
 
-def _velocity_through_a_drift(hold_m: float, allowed: bool):
+def _velocity_through_a_drift(hold_m: float, allowed: bool, closing_to_m: float | None = None, **cfg):
     """The orbit (seed 5) to 45 s, then 3 s of box centres drifting 4 px/s right and down (their ground points
     sliding along and across the line of sight), the hold allowed or not: the velocity's change over the drift
-    along and across the horizontal line of sight (camera to ship at the drift's start), and the estimator."""
+    along and across the horizontal line of sight (camera to ship at the drift's start), and the estimator.
+    ``closing_to_m``: the hold's range becomes this at the drift's start (as if the camera had closed in from
+    outside it); ``cfg``: more of the UKF's configuration."""
     truth, rng = OrbitTruth(), np.random.default_rng(5)
-    ukf = UkfTargetEstimator(CAM, UkfConfig(dive_los_velocity_hold_m=hold_m))
+    ukf = UkfTargetEstimator(CAM, UkfConfig(dive_los_velocity_hold_m=hold_m, **cfg))
     v0 = los = None
     for k in range(int(48.0 * 30) + 1):
         t = k / 30.0
@@ -642,6 +644,8 @@ def _velocity_through_a_drift(hold_m: float, allowed: bool):
             rel = ukf.pos_enu_m - meas.cam_pos_enu_m
             los = rel[:2] / np.linalg.norm(rel[:2])
             ukf.los_velocity_hold = allowed
+            if closing_to_m is not None:
+                ukf.cfg = ukf.cfg.model_copy(update={"dive_los_velocity_hold_m": closing_to_m})
         ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))
     dv = ukf.vel_enu_m_s[:2] - v0[:2]
     return float(dv @ los), float(dv @ np.array([-los[1], los[0]])), ukf
@@ -661,3 +665,32 @@ def test_the_dive_hold_leaves_the_velocity_along_the_line_of_sight_inside_its_ra
     for hold_m, allowed in ((300.0, True), (2000.0, False)):  # out of range (700 m), or not allowed
         along, across, ukf = _velocity_through_a_drift(hold_m, allowed)
         assert (along, across) == (free_along, free_across) and np.array_equal(ukf.x, free.x)
+
+
+def test_the_dive_hold_acts_only_for_a_ship_whose_velocity_held_steady_before_it():
+    """``dive_los_velocity_hold_max_spread_m_s``: the hold acts once the camera is inside its range only when
+    the estimated velocity over the window before that stayed within the spread (the orbit's straight ship,
+    its velocity settled over the 25 s before the drift); with a spread under the one it had, or a window
+    reaching back into the filter's first seconds (its velocity learnt from zero), the filter is the paper's.
+    With no velocity remembered outside the range, the hold never acts."""
+    from controllers.ukf import velocity_spread_m_s
+
+    free_along, _, free = _velocity_through_a_drift(0.0, True)
+    held_along, _, held = _velocity_through_a_drift(2000.0, True)
+    steady = dict(dive_los_velocity_hold_window_s=20.0)
+    along, _, ukf = _velocity_through_a_drift(300.0, True, 2000.0, dive_los_velocity_hold_max_spread_m_s=0.5,
+                                              **steady)
+    spread = velocity_spread_m_s(ukf._vel_hist)
+    assert spread < 0.5 and along == pytest.approx(held_along, abs=0.02)
+    for cfg in (dict(dive_los_velocity_hold_max_spread_m_s=0.5 * spread, **steady),
+                dict(dive_los_velocity_hold_max_spread_m_s=0.5, dive_los_velocity_hold_window_s=60.0)):
+        along, _, ukf = _velocity_through_a_drift(300.0, True, 2000.0, **cfg)
+        assert along == free_along and np.array_equal(ukf.x, free.x)
+    along, _, ukf = _velocity_through_a_drift(2000.0, True, dive_los_velocity_hold_max_spread_m_s=50.0)
+    assert along == free_along and not ukf._vel_hist
+    # the spread: a steady velocity none; a zigzag's +-30 deg at 2 m/s over whole periods, 2 sin(30 deg) / sqrt(2)
+    t = np.linspace(0.0, 180.0, 1801)
+    course = np.radians(30.0) * np.sin(2.0 * np.pi * t / 90.0)
+    zig = np.column_stack([t, 2.0 * np.cos(course), 2.0 * np.sin(course)])
+    assert velocity_spread_m_s(np.column_stack([t, np.full_like(t, 3.0), np.ones_like(t)])) == pytest.approx(0.0)
+    assert velocity_spread_m_s(zig) == pytest.approx(2.0 * 0.5 / np.sqrt(2.0), rel=0.05)
