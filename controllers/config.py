@@ -623,7 +623,8 @@ class UkfConfig(StrictModel):
                     "it: the RMS of the horizontal velocity's deviation from its mean over the fused boxes of "
                     "the last dive_los_velocity_hold_window_s outside the hold's range at or under this (m/s). "
                     "A ship that turns, zigzags or changes speed shows it there, and in the last seconds its "
-                    "velocity changes for real, which the hold cannot follow; 0: no such condition")
+                    "velocity changes for real, which the hold cannot follow (docs/ENVELOPE.md, 'Fresh seeds 1672 "
+                    "and 1673': 0.5 measured, not adopted); 0: no such condition")
     dive_los_velocity_hold_window_s: float = Field(
         60.0, gt=0, le=600,
         description="the window of dive_los_velocity_hold_max_spread_m_s (s): the estimated velocity's history "
