@@ -670,7 +670,7 @@ def test_the_dive_hold_leaves_the_velocity_along_the_line_of_sight_inside_its_ra
 def test_the_dive_hold_acts_only_for_a_ship_whose_velocity_held_steady_before_it():
     """``dive_los_velocity_hold_max_spread_m_s``: the hold acts once the camera is inside its range only when
     the estimated velocity over the window before that stayed within the spread (the orbit's straight ship,
-    its velocity settled over the 25 s before the drift); with a spread under the one it had, or a window
+    its velocity settled over the 20 s window before the drift); with a spread under the one it had, or a window
     reaching back into the filter's first seconds (its velocity learnt from zero), the filter is the paper's.
     With no velocity remembered outside the range, the hold never acts."""
     from controllers.ukf import velocity_spread_m_s
