@@ -294,12 +294,18 @@ def cmd_batch(args) -> int:
     changes = SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold), only)
     out = Path(args.out) if args.out else Path("runs") / Path(args.spec).stem
     failed = 0
-    with Progress(TextColumn("runs {task.completed:>4.0f} / {task.total:.0f}"), BarColumn(),
-                  TextColumn("[red]{task.fields[failed]} failed[/]"), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=console, disable=args.quiet, transient=True) as bar:
-        task = bar.add_task("batch", total=0, failed=0)
-
+    # the bar starts with the first run, not before: a spec refused before any run flies leaves its one-line
+    # error alone on stderr (a bar stopped before it began would put an empty line ahead of it)
+    bar = Progress(TextColumn("runs {task.completed:>4.0f} / {task.total:.0f}"), BarColumn(),
+                   TextColumn("[red]{task.fields[failed]} failed[/]"), TimeElapsedColumn(), TimeRemainingColumn(),
+                   console=console, disable=args.quiet, transient=True)
+    task = bar.add_task("batch", total=0, failed=0)
+    started = False
+    try:
         def on_start(total: int, resumed: int) -> None:
+            nonlocal started
+            bar.start()
+            started = True
             bar.update(task, total=total, completed=resumed)
             console.print(f"[bold]fwsim batch[/] {args.spec}: {total} runs -> {out}"
                           + (f" ({resumed} read back from their logs with --resume)" if resumed else ""))
@@ -314,10 +320,15 @@ def cmd_batch(args) -> int:
                                on_start=on_start, on_row=on_row, changes=changes)
         except KeyboardInterrupt as exc:
             from fwsim._entry import exit_code
-            bar.stop()
+            if started:
+                bar.stop()
+                started = False
             console.print(f"[yellow]interrupted[/]: the summary of the finished runs is in {out}; "
                           "continue with --resume")
             return exit_code(exc)
+    finally:
+        if started:  # (Progress.stop prints a line off a terminal, started or not)
+            bar.stop()
     bad = result.failed
     if bad:
         table = Table(title=f"{len(bad)} of {len(result.rows)} runs did not complete")

@@ -221,3 +221,12 @@ def test_a_batch_entry_naming_a_folder_for_its_scenario_says_so(tmp_path, capsys
     assert main(["batch", str(spec), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("error: ") and "is a folder, expected a scenario file" in err and "runs.0" in err
+
+
+@pytest.mark.parametrize("text", ["runs: [1, 2\n", "- a\n- b\n", "runs: []\n"])
+def test_a_batch_spec_refused_before_any_run_gives_one_line_and_nothing_else(tmp_path, capsys, text):
+    spec = tmp_path / "b.yaml"
+    spec.write_text(text)
+    assert main(["batch", str(spec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, repr(err)  # no empty line ahead of it
