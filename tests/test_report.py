@@ -198,6 +198,14 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
         len(rows) == 1 and rows[0].split("|")[2].strip() in ("never converged", "over 8 m"), out
 
 
+def test_the_envelope_why_names_the_topic_a_short_log_lacks():
+    """A run that ended before its estimator began: --why's row says which topic its log lacks."""
+    problem = _envelope_tool()._log_problem
+    assert problem(KeyError("no topic '/fsw/estimate' in x.mcap; topics: ['/events']")) == "no /fsw/estimate"
+    assert problem(KeyError("pos_enu_m")) == "KeyError"
+    assert problem(ValueError("no topic '/x'")) == "ValueError"  # only a missing topic is named
+
+
 def test_the_envelope_why_course_model_by_hand():
     """--why's course-model cell from /fsw/course_turn's last record: a periodic course, a steady turn, none,
     a log from before the periodic course (no period field), no record."""

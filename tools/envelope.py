@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -491,6 +492,13 @@ def _failed_bar(row: dict) -> str:
     return "distance and angle" if far and off else "distance" if far else "angle"
 
 
+def _log_problem(exc: BaseException) -> str:
+    """What kept a run's log from its --why cells, in a few words: the topic it lacks (a run that ended before
+    the estimator or the dive began), else the error's kind."""
+    m = re.match(r"no topic '([^']+)'", str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else "")
+    return f"no {m.group(1)}" if m else type(exc).__name__
+
+
 def _log_cell(log, needs: tuple[str, ...], make) -> str:
     """One --why cell from a log: ``make()`` when the log has the topics ``needs``; "-" without them or when
     ``make`` cannot read the log (a cell of its own: the row's other cells stay as they are)."""
@@ -641,7 +649,7 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             cells.append(_heading_cell(log))
             cells.append(_size_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {type(exc).__name__})"] + ["-"] * (len(WHY_TIMES_S) + 7)
+            cells += [f"(log: {_log_problem(exc)})"] + ["-"] * (len(WHY_TIMES_S) + 7)
         table.append(cells)
     return table
 
