@@ -300,12 +300,14 @@ def cmd_batch(args) -> int:
                    TextColumn("[red]{task.fields[failed]} failed[/]"), TimeElapsedColumn(), TimeRemainingColumn(),
                    console=console, disable=args.quiet, transient=True)
     task = bar.add_task("batch", total=0, failed=0)
-    started = False
+
+    def stop_bar() -> None:
+        if bar.live.is_started:  # (Progress.stop prints a line off a terminal, started or not)
+            bar.stop()
+
     try:
         def on_start(total: int, resumed: int) -> None:
-            nonlocal started
             bar.start()
-            started = True
             bar.update(task, total=total, completed=resumed)
             console.print(f"[bold]fwsim batch[/] {args.spec}: {total} runs -> {out}"
                           + (f" ({resumed} read back from their logs with --resume)" if resumed else ""))
@@ -320,15 +322,12 @@ def cmd_batch(args) -> int:
                                on_start=on_start, on_row=on_row, changes=changes)
         except KeyboardInterrupt as exc:
             from fwsim._entry import exit_code
-            if started:
-                bar.stop()
-                started = False
+            stop_bar()
             console.print(f"[yellow]interrupted[/]: the summary of the finished runs is in {out}; "
                           "continue with --resume")
             return exit_code(exc)
     finally:
-        if started:  # (Progress.stop prints a line off a terminal, started or not)
-            bar.stop()
+        stop_bar()
     bad = result.failed
     if bad:
         table = Table(title=f"{len(bad)} of {len(result.rows)} runs did not complete")

@@ -198,12 +198,26 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
         len(rows) == 1 and rows[0].split("|")[2].strip() in ("never converged", "over 8 m"), out
 
 
-def test_the_envelope_why_names_the_topic_a_short_log_lacks():
+def test_the_envelope_why_names_the_topic_a_short_log_lacks(tmp_path, capsys):
     """A run that ended before its estimator began: --why's row says which topic its log lacks."""
-    problem = _envelope_tool()._log_problem
-    assert problem(KeyError("no topic '/fsw/estimate' in x.mcap; topics: ['/events']")) == "no /fsw/estimate"
-    assert problem(KeyError("pos_enu_m")) == "KeyError"
-    assert problem(ValueError("no topic '/x'")) == "ValueError"  # only a missing topic is named
+    import yaml
+
+    from fwsim import PROJECT_ROOT as root
+    from fwsim.loop import run
+    from fwsim.scenario import parse_scenario
+    data = yaml.safe_load((root / "scenarios" / "paper_mission.yaml").read_text())
+    data["duration_s"] = 1.0  # over long before the lock
+    text = yaml.safe_dump(data, sort_keys=False)
+    (tmp_path / "logs").mkdir()
+    run(parse_scenario(text), text, tmp_path / "logs" / "t.mcap")
+    row = {"id": "t", "status": "completed", "hit": 0.0, "miss_distance_m": 900.0, "log": "logs/t.mcap",
+           "target_in_fov_fraction_after_lock": 0.0}
+    (tmp_path / "summary.json").write_text(json.dumps({"rows": [row]}))
+    _envelope_tool().main([str(tmp_path), "--why"])
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("| t |")]
+    assert len(line) == 1, line
+    cells = [c.strip() for c in line[0].strip("|").split("|")]
+    assert cells[8] == "(log: no /fsw/estimate)" and set(cells[9:]) == {"-"}, cells
 
 
 def test_the_envelope_why_course_model_by_hand():

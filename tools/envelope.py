@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -492,13 +491,6 @@ def _failed_bar(row: dict) -> str:
     return "distance and angle" if far and off else "distance" if far else "angle"
 
 
-def _log_problem(exc: BaseException) -> str:
-    """What kept a run's log from its --why cells, in a few words: the topic it lacks (a run that ended before
-    the estimator or the dive began), else the error's kind."""
-    m = re.match(r"no topic '([^']+)'", str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else "")
-    return f"no {m.group(1)}" if m else type(exc).__name__
-
-
 def _log_cell(log, needs: tuple[str, ...], make) -> str:
     """One --why cell from a log: ``make()`` when the log has the topics ``needs``; "-" without them or when
     ``make`` cannot read the log (a cell of its own: the row's other cells stay as they are)."""
@@ -631,8 +623,14 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
                  f"{r['set.target.speed_m_s']:.1f}" if isinstance(r.get("set.target.speed_m_s"), (int, float))
                  else "-",
                  f"{hidden:.1f}" if isinstance(hidden, (int, float)) and math.isfinite(hidden) else "-"]
+        no_log = ["-"] * (len(WHY_TIMES_S) + 7)  # the cells after the first one that says why
         try:
             log = read_log(out_dir / r["log"])
+            lacking = [t for t in (topics.FSW_ESTIMATE, topics.TARGET_STATE, topics.UAV_STATE,
+                                   topics.FSW_DETECTION_FUSION) if t not in log.topics]
+            if lacking:  # a run that ended before its estimator (or its detections) began: say which topic
+                table.append(cells + [f"(log: no {lacking[0]})"] + no_log)
+                continue
             est, tru, uav = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE), log.table(topics.UAV_STATE)
             end = float(uav["t_s"][-1])
             errs = ship_frame_errors(est["t_s"], est["pos_enu_m"][:, :2], tru["t_s"], tru["pos_enu_m"][:, :2],
@@ -649,7 +647,7 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
             cells.append(_heading_cell(log))
             cells.append(_size_cell(log))
         except (OSError, KeyError, ValueError, IndexError) as exc:
-            cells += [f"(log: {_log_problem(exc)})"] + ["-"] * (len(WHY_TIMES_S) + 7)
+            cells += [f"(log: {type(exc).__name__})"] + no_log
         table.append(cells)
     return table
 
