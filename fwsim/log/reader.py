@@ -305,50 +305,29 @@ def _read_chunk(log: RunLog, body: bytes) -> None:
         pos += length
 
 
-def read_log(path: str | os.PathLike) -> RunLog:
-    """Read a run's MCAP log.
+def _read_records(log: RunLog, f) -> bool:
+    """Read the file's records after the leading magic; True once the footer is reached."""
+    while True:
+        head = f.read(9)
+        if len(head) < 9:
+            raise _Truncated(f"at byte {f.tell() - len(head)}")
+        opcode, length = _RECORD_HEAD.unpack(head)
+        if opcode in _SKIPPED:  # indexes and summary: not needed
+            f.seek(length, io.SEEK_CUR)
+            continue
+        body = f.read(length)
+        if len(body) < length:
+            raise _Truncated(f"inside a record of {length} bytes at byte {f.tell() - len(body) - 9}")
+        if opcode == Opcode.FOOTER:
+            return True
+        if opcode == Opcode.CHUNK:
+            _read_chunk(log, body)
+        else:
+            _add_record(log, opcode, body)
 
-    The file is read in one sequential (non-seeking) pass that does not need
-    the summary section, so a file cut off by a hard kill reads too: the pass
-    stops at the first incomplete record and everything before it (complete
-    chunks, metadata, attachments) is returned with ``truncated=True``.
-    Messages are kept in file order (= the order they were written).
-    """
-    log = RunLog(Path(path))
-    footer_seen = False
-    with open(log.path, "rb") as f:
-        magic = f.read(len(MCAP0_MAGIC))
-        if not magic or magic != MCAP0_MAGIC[: len(magic)]:
-            raise LogError(f"{log.path} is not an MCAP file")
-        try:
-            if len(magic) < len(MCAP0_MAGIC):
-                raise _Truncated("inside the leading magic")
-            while True:
-                head = f.read(9)
-                if len(head) < 9:
-                    raise _Truncated(f"at byte {f.tell() - len(head)}")
-                opcode, length = _RECORD_HEAD.unpack(head)
-                if opcode in _SKIPPED:  # indexes and summary: not needed
-                    f.seek(length, io.SEEK_CUR)
-                    continue
-                body = f.read(length)
-                if len(body) < length:
-                    raise _Truncated(f"inside a record of {length} bytes at byte {f.tell() - len(body) - 9}")
-                if opcode == Opcode.FOOTER:
-                    footer_seen = True
-                    break
-                if opcode == Opcode.CHUNK:
-                    _read_chunk(log, body)
-                else:
-                    _add_record(log, opcode, body)
-        except _Truncated as e:
-            log.truncation_error = f"cut off {e}"
-        except LogError as e:  # readable, but not here
-            raise LogError(f"{log.path}: {e}") from None
-        except Exception as e:  # noqa: BLE001 - a record that does not parse: the file is damaged there
-            log.truncation_error = f"corrupted at byte {f.tell()}: {type(e).__name__}: {e}"
-            log.corrupted = True
-    log.truncated = not footer_seen
+
+def _finish(log: RunLog) -> None:
+    """Counts, sim time and the run's status and scenario, once the records are read."""
     # Channels whose messages were all lost in the cut still show (count 0).
     for topic in log.topics:
         log.topics[topic] = len(log._messages.get(topic, ()))
@@ -376,6 +355,36 @@ def read_log(path: str | os.PathLike) -> RunLog:
             log.scenario_text = scenario.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise LogError(f"{log.path}: corrupted (its scenario attachment is not UTF-8 text: {exc.reason})") from None
+
+
+def read_log(path: str | os.PathLike) -> RunLog:
+    """Read a run's MCAP log.
+
+    The file is read in one sequential (non-seeking) pass that does not need
+    the summary section, so a file cut off by a hard kill reads too: the pass
+    stops at the first incomplete record and everything before it (complete
+    chunks, metadata, attachments) is returned with ``truncated=True``.
+    Messages are kept in file order (= the order they were written).
+    """
+    log = RunLog(Path(path))
+    footer_seen = False
+    with open(log.path, "rb") as f:
+        magic = f.read(len(MCAP0_MAGIC))
+        if not magic or magic != MCAP0_MAGIC[: len(magic)]:
+            raise LogError(f"{log.path} is not an MCAP file")
+        try:
+            if len(magic) < len(MCAP0_MAGIC):
+                raise _Truncated("inside the leading magic")
+            footer_seen = _read_records(log, f)
+        except _Truncated as e:
+            log.truncation_error = f"cut off {e}"
+        except LogError as e:  # readable, but not here
+            raise LogError(f"{log.path}: {e}") from None
+        except Exception as e:  # noqa: BLE001 - a record that does not parse: the file is damaged there
+            log.truncation_error = f"corrupted at byte {f.tell()}: {type(e).__name__}: {e}"
+            log.corrupted = True
+    log.truncated = not footer_seen
+    _finish(log)
     return log
 
 

@@ -193,6 +193,32 @@ class RerunLive:
         self._health_every_s = health_every_s
         self._flush_timeout_s = flush_timeout_s
 
+        self._init_buffers(scenario)
+        self._end_line = ""
+        self._run_text = self._describe(scenario, log_path)
+        now = time.monotonic()
+        self._next_send = now + send_every_s
+        self._next_path = now + path_every_s
+        self._next_health = now + health_every_s
+
+        self._handlers = {
+            topics.UAV_POSE: self._on_pose, topics.TF: self._on_tf, topics.FSW_STATUS: self._on_fsw,
+            topics.TARGET_STATE: self._on_target, topics.CAMERA_CALIBRATION: self._on_calibration,
+            topics.CAMERA_IMAGE: self._on_image, topics.CAMERA_DETECTION: self._on_detection,
+            topics.EVENTS: self._on_event, topics.FSW_ESTIMATE: self._on_estimate,
+        }
+
+        self._rec = rr.RecordingStream(self.options.application_id, recording_id=recording_id)
+        try:
+            self._open(rx.blueprint_for(self.layers))
+            self._log_static(scenario, scenario_text)
+        except BaseException:
+            self._disconnect()
+            raise
+
+
+    def _init_buffers(self, scenario) -> None:
+        """The per-stream buffers the sink batches its sends in."""
         self._last_t: dict[str, float] = {}  # per-topic decimation
         self._scalars: dict[str, tuple[list, list]] = {}
         self._signals: dict[str, list] = {}  # topic -> the rx.SIGNALS drawn from it
@@ -215,27 +241,6 @@ class RerunLive:
             cam = scenario.camera
             if cam.render.width_px and cam.width_px:
                 self._image_scale = cam.render.width_px / cam.width_px
-        self._end_line = ""
-        self._run_text = self._describe(scenario, log_path)
-        now = time.monotonic()
-        self._next_send = now + send_every_s
-        self._next_path = now + path_every_s
-        self._next_health = now + health_every_s
-
-        self._handlers = {
-            topics.UAV_POSE: self._on_pose, topics.TF: self._on_tf, topics.FSW_STATUS: self._on_fsw,
-            topics.TARGET_STATE: self._on_target, topics.CAMERA_CALIBRATION: self._on_calibration,
-            topics.CAMERA_IMAGE: self._on_image, topics.CAMERA_DETECTION: self._on_detection,
-            topics.EVENTS: self._on_event, topics.FSW_ESTIMATE: self._on_estimate,
-        }
-
-        self._rec = rr.RecordingStream(self.options.application_id, recording_id=recording_id)
-        try:
-            self._open(rx.blueprint_for(self.layers))
-            self._log_static(scenario, scenario_text)
-        except BaseException:
-            self._disconnect()
-            raise
 
     def __str__(self) -> str:
         return f"the Rerun live view ({self.target})"
