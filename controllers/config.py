@@ -969,7 +969,7 @@ class SwitchConfig(StrictModel):
     altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
     dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long (counted from Phase "
                                                              "2's start on, alongside min_loiter_s)")
-    min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
+    min_loiter_s: float = Field(30.0, ge=0, le=3600, description="no switch before this long in Phase 2")
     approach_window_deg: float | None = Field(
         5.0, gt=0, le=180,
         description="bearing from the UAV to the target within this of the approach bearing plus the lead "
@@ -1302,7 +1302,7 @@ class Controllers(StrictModel):
                     "imm (the two mixed by the probability that the ship manoeuvres: settings in imm, ct_ukf "
                     "and ukf), or a user's class")
     after_lock: LoiterChoice = Field(
-        default_factory=lambda: BlockChoice(use="path"),
+        default_factory=lambda: BlockChoice(use="nmpc"),
         description="after the lock: keep the initial path (path), or loiter (Phase 2) with a circle follower "
                     "(orbit) or the paper's NMPC (nmpc), or a user's class")
     terminal: TerminalChoice = Field(
@@ -1313,7 +1313,7 @@ class Controllers(StrictModel):
         description="the gimbal's tracking law: ibvs (the paper's, settings in ibvs), or a user's class")
     orbit: Orbit = Field(default_factory=Orbit)
     nmpc: NmpcConfig = Field(default_factory=NmpcConfig)
-    switch: SwitchConfig = Field(default_factory=lambda: SwitchConfig(enabled=False))
+    switch: SwitchConfig = Field(default_factory=SwitchConfig)
     reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
     bpng: BpngConfig = Field(default_factory=BpngConfig)
     ukf: UkfConfig = Field(default_factory=UkfConfig)

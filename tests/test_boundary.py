@@ -48,6 +48,7 @@ def test_flight_software_runs_on_measurements_alone():
 name: b
 duration_s: 10
 initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
+controllers: {after_lock: path, switch: {enabled: false}}   # the initial path alone
 """)
     fsw = FlightSoftware(s.controllers, s.initial, s.camera)
     for k in range(30):
@@ -71,7 +72,7 @@ def test_a_detection_above_the_horizon_does_not_stop_the_flight_software():
 name: b
 duration_s: 10
 initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
-controllers: {acquisition: {lock_detections: 1}}
+controllers: {acquisition: {lock_detections: 1}, after_lock: path, switch: {enabled: false}}
 camera: {gimbal: {initial_tilt_rad: 0.5}}
 """)
     fsw = FlightSoftware(s.controllers, s.initial, s.camera)
