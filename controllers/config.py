@@ -94,18 +94,6 @@ class DetectionGateConfig(StrictModel):
                             "it, its centre's pixel variance raised by (half the width's difference)^2 and (half "
                             "the height's)^2 from the predicted box (where a box cut short on one side puts its "
                             "centre)")
-    own_headings_doubt: bool = Field(
-        False,
-        description="size_mismatch_action own_headings: a box corrected over its own headings also carries, "
-                    "as pixel variance in each axis, the square of how far that correction lies from the "
-                    "estimated headings' (besides the own headings' spread): a box no estimated heading explains "
-                    "says that the heading is wrong or that the ship is not the class, and only the first makes "
-                    "its own headings' correction right (1655 s26, a ferry turning at 6.8 m/s, its course known: "
-                    "its dive's boxes, corrected over headings up to the reverse of its course, took the "
-                    "estimate 14 m short close in, 9.05 -> 0.89 m). Off by default: it makes the std honest "
-                    "close in, and the closed-loop test of a ship unlike the class then never counts as "
-                    "converged (tests/test_mission.py; the std 7.5 m at the impact, 4.0 m without); off: "
-                    "their spread alone")
     maybe_cut_action: Literal["skip", "deweight"] = Field(
         "deweight", description="size_mismatch_action own_headings: what becomes of a box off in size that may be "
                                 "cut short (no larger than every estimated heading's box, the ship not clear of the "
@@ -142,19 +130,6 @@ class DetectionGateConfig(StrictModel):
                     "min_range_m 0 turns both off")
     moving_speed_m_s: float = Field(
         2.0, ge=0, le=50, description="see moving_min_range_m: the estimated horizontal speed, m/s")
-    slow_coast_velocity: Literal["latest", "dive_start"] = Field(
-        "latest",
-        description="the velocity a slow ship's estimate coasts on after the dive's last fused box (the "
-                    "coast of the last min_range_m): latest, the estimator's own (the velocity of its last "
-                    "update); dive_start, the velocity estimated when the dive began, when it and the last "
-                    "update's are both under moving_speed_m_s and no turn is handed on "
-                    "(controllers.turn_from_course). The dive's boxes carry box-centre errors that change with "
-                    "the closing range and elevation, which a constant-velocity filter reads as velocity: a "
-                    "slow ship's estimated velocity, often 0.04-0.10 m/s off at the dive's start, is 0.4-1.4 m/s "
-                    "off at its last box (docs/ENVELOPE.md, seed 1658), and the 1.4-3.4 s coast flies that. The "
-                    "position at the last box is kept; /fsw/estimate stays the filter's own. Not the default: "
-                    "at 1658 and 1659 it moved 11 misses, 7 down and 4 up (a slow zigzag's own turn in the "
-                    "dive, 2.77 -> 5.18 m), no bar")
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
@@ -171,14 +146,8 @@ class DetectionGateConfig(StrictModel):
     class_mismatch_enter: float = Field(
         0.5, gt=0, le=1,
         description="... when this share or more are off in size (box_size_tolerance), the boxes disagree with "
-                    "the ship class (another size or layout than configured): the perception then does "
-                    "class_mismatch_action")
-    class_mismatch_action: Literal["rescale", "plain_centre", "no_size_gate"] = Field(
-        "rescale",
-        description="what the perception does while the boxes disagree with the class: rescale (the size gate "
-                    "against the class's boxes scaled by the median size ratio of the last class_check_window "
-                    "boxes), no_size_gate (no box skipped for its size), plain_centre (the plain box centre: no "
-                    "class correction, no size gate)")
+                    "the ship class (another size or layout than configured): the size gate then compares "
+                    "each box with the class's boxes scaled by the boxes' median size ratio")
     class_mismatch_exit: float = Field(
         0.2, ge=0, le=1,
         description="... and goes back to the class correction when the share falls to this or below")

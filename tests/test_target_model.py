@@ -1301,47 +1301,6 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     assert own_err < 0.7 * wrong_err, errs  # 6.6 against 11.0 px
 
 
-def test_a_box_corrected_over_its_own_headings_doubts_it_by_the_estimates_correction():
-    """``own_headings_doubt`` (an option, off by default): a box no estimated heading explains says that the
-    heading is wrong or that the ship is not the class, and its own headings' correction is right only in the
-    first case. So
-    the fix (the same either way) carries, besides the own headings' spread, the square of its distance from
-    the estimated course's correction in each axis: the filter leans on it as little as that distance says.
-    The ship points north while the estimate says east (test_a_box_the_estimated_course_cannot_explain_is_
-    corrected_over_its_own_headings)."""
-    from controllers.ukf import CameraMotion
-    cam = PinholeCamera.from_config(CAM_CFG)
-    h = UkfConfig().target_plane_height_m
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
-    assert not DetectionGateConfig().own_headings_doubt  # (an option: docs/ENVELOPE.md, "A fresh seed, 1656")
-
-    def perception(doubt: bool) -> Perception:
-        p = Perception(DetectionGateConfig(maybe_cut_action="skip", own_headings_doubt=doubt),
-                       AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), cam), cam)
-        p.lock.locked = True
-        return p
-    on, off_ = perception(True), perception(False)
-    outline = ShipOutline(ShipModelConfig())
-    own = 0
-    for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=40.0, rng_m=400.0):
-        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
-                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
-        a, b = on.step(meas, motion, prior), off_.step(meas, motion, prior)
-        assert (a.use, a.u_px, a.v_px, a.overridden) == (b.use, b.u_px, b.v_px, b.overridden)
-        if not (a.use and a.overridden == FusionReason.SIZE_MISMATCH):
-            assert a.centre_noise_px2 == b.centre_noise_px2
-            continue
-        own += 1
-        est = box_centre_offset_px(outline, cam, cp, Rc, np.zeros(3), 0.0, h)  # the eastward course's offset
-        du, dv = (meas.det_u_px - est[0]) - a.u_px, (meas.det_v_px - est[1]) - a.v_px
-        assert a.centre_noise_px2 == pytest.approx((b.centre_noise_px2[0] + du * du, b.centre_noise_px2[1] + dv * dv),
-                                                   rel=1e-9, abs=1e-9)
-        assert max(abs(du), abs(dv)) > 1.0  # the two corrections differ by pixels here
-    assert own >= 3, own
-
-
 def test_a_moving_ship_s_boxes_are_taken_closer_in():
     """``detection_gate.moving_min_range_m``: a ship estimated to move at ``moving_speed_m_s`` or more has its
     boxes taken down to that range (the coast after the last box flies its velocity); a still or slow one's
