@@ -202,28 +202,6 @@ class ShapeHeadingConfig(StrictModel):
         description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
                     "misfit repeats from frame to frame and must not make the heading look surer than it is")
     min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
-    centre_fit: bool = Field(
-        False,
-        description="while the course is unknown, weigh each heading also by how well its predicted boxes' "
-                    "centres follow the detected ones as the view changes (:class:`ShapeHeading`): seen from a "
-                    "closing or turning viewpoint, the box centre moves over the ship in a way the heading "
-                    "decides (a tall superstructure at one end pulls it that way more and more as the range "
-                    "closes), and the estimate's own error, a shift common to all headings, is fitted out. The "
-                    "box sizes barely tell a still ship's bow from its stern; this does. Off by default: on the "
-                    "class's own ship it cuts a still ship's miss in a dive by about a third, on slow ships unlike "
-                    "the class it does a little harm (README, 'A still ship's heading from its box shapes')")
-    centre_fit_time_s: float = Field(
-        10.0, gt=0, le=600,
-        description="the centre fit forgets with this time constant, s (the estimate's error it fits out "
-                    "changes as the estimate converges)")
-    centre_fit_sigma_px: float = Field(
-        3.0, gt=0, le=100,
-        description="std. dev. of a detected box centre against a heading's predicted one, px, once the "
-                    "estimate's shift is fitted out (attitude noise, the outline's coarseness)")
-    centre_fit_max_effective: float = Field(
-        5.0, gt=0, le=10000,
-        description="the centre fit's evidence counts at most this many detections (its misfit repeats from "
-                    "frame to frame, like the sizes')")
     min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
                                                             "times the largest are dropped")
     tell_bow_from_stern: bool = Field(
@@ -231,21 +209,6 @@ class ShapeHeadingConfig(StrictModel):
                           "which shows in the box heights, most of all as the view steepens in the dive); "
                           "false: a heading and its opposite count alike (the fore-aft part of the offset is "
                           "then not removed)")
-    ends_unsure_flips: int = Field(
-        0, ge=0, le=1000,
-        description="a per-ship tell_bow_from_stern: once the shapes' likeliest heading has turned end for end "
-                    "(jumped by over 135 deg from one box taken to the next) this many times within "
-                    "ends_unsure_window_s, the shapes are taken not to tell this ship's bow from its stern, for "
-                    "the rest of the flight: while the course is unknown a heading and its opposite then count "
-                    "alike (the fore-aft part of the offset is not removed). A ship unlike the class, read with "
-                    "the class's outline, can fit either end and its shapes' best end comes and goes; one whose "
-                    "ends the shapes tell should keep it. A known course, the layout fit and the log's best heading "
-                    "are untouched. 0: off (the default: at 1660 and 1661, 3 brought the worst slow ships "
-                    "nearer but moved no bar at the fresh seed, and it latches in the first seconds for many "
-                    "ships, the class's own still ship too, which then lands 1-2 m off; docs/ENVELOPE.md, "
-                    "'Fresh seeds 1660 and 1661')")
-    ends_unsure_window_s: float = Field(
-        120.0, gt=0, le=100000, description="the window ends_unsure_flips counts the end-for-end turns in, s")
     fuse_with_course: bool = Field(
         True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
                           "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
@@ -275,33 +238,6 @@ class ShapeHeadingConfig(StrictModel):
                     "that moved along a course does not face the other way seconds later, and the shapes of a "
                     "ship unlike the class may prefer its stern (1.5: the turn rate the envelope's ships "
                     "reach). 0: off, the shapes alone")
-    end_from_velocity_std_floor_m_s: float | None = Field(
-        None, gt=0, le=50,
-        description="while the course is unknown (the estimated speed under min_speed_for_course_m_s), the "
-                    "estimated velocity still says which end of the axis is the bow: a ship moves bow first, so "
-                    "each heading is weighed by the probability that the velocity's component along it is "
-                    "positive (its std the estimate's horizontal velocity std and this floor in quadrature: the "
-                    "filter's velocity std is tighter than a still ship's estimated velocity wanders). A heading "
-                    "and its opposite share one unit of it, so the axis stays the box shapes'; a still ship's "
-                    "velocity, noise, nudges its ends a little either way. Ships unlike the class, whose box shapes "
-                    "read with the class's outline pick an end at random (a patrol boat with its cabin "
-                    "amidships), have it from how they move. Off (None: the box shapes and a course held alone) "
-                    "by default: read from the estimate, the end it picks moves the corrected fixes along the ship, "
-                    "and so the velocity itself, which a still ship's then follows (over the envelope's slow ships "
-                    "it did harm at 0.25 and 0.5); read from the box centres, it turned bridge-forward ships, whose "
-                    "shapes' reversed end was the right superstructure for the class's outline, end for end "
-                    "(docs/ENVELOPE.md, 'The bow from a slow ship's velocity')")
-    end_velocity_source: Literal["estimate", "box_centres"] = Field(
-        "box_centres",
-        description="the velocity end_from_velocity_std_floor_m_s reads: the estimator's (which the corrected "
-                    "fixes, and so the end picked, move), or a straight-line fit over end_velocity_window_s to "
-                    "the plain detected box centres met with the tracked point's plane (ShipModel's "
-                    "BoxCentreTrack: nothing the correction does moves them; the superstructure's pull on them "
-                    "goes round with the loiter and largely cancels over a lap)")
-    end_velocity_window_s: float = Field(
-        120.0, gt=5, le=1000,
-        description="the box-centre fit's window, s (box_centres): about a loiter lap, so that the pull of the "
-                    "superstructure on the box centre, which turns with the view, averages out")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
@@ -326,17 +262,6 @@ class ShapeHeadingConfig(StrictModel):
                     "at the heading it has had lately, not at all it had. 120 s: at 30 s a still ship's bow "
                     "and stern, which the box shapes tell only weakly, came and went with the last boxes "
                     "(docs/ENVELOPE.md, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
-    turn_rate_switch_s: float | None = Field(
-        None, gt=0, le=100000,
-        description="while the course is not followed, the ship's turn rate may change (a zigzag's turn reverses, "
-                    "a turn starts or ends): between boxes each rate hypothesis hands the share 1 - exp(-dt / "
-                    "this) of its evidence over to the rates' prior mixture (a Markov chain on the rates, as an "
-                    "interacting multiple model's), so that the heading follows a turn that no one rate fits "
-                    "from the first box on, and the boxes' evidence for the bow stays with the heading as it "
-                    "turns. Seconds a rate is expected to hold (20: offline, a +-30 deg / 90 s zigzag's heading "
-                    "to 11 deg at p90, not 38, and no longer toward the stern; 60 did about as well; in flight "
-                    "not better at the bars, so off by default: docs/ENVELOPE.md, 'Switching turn rates for a "
-                    "slow ship's heading'); None: each rate holds for good. Nothing to switch with one rate")
 
     @field_validator("turn_rates_deg_s")
     @classmethod
@@ -383,19 +308,6 @@ class SizeFitConfig(StrictModel):
                     "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
                     "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
                     "starts again flies differently (3 of 448 at 1663-1669; docs/ENVELOPE.md)")
-    per_layout: bool = Field(
-        False,
-        description="fit the sizes twice, side by side on the same boxes: once with the class's layout and once "
-                    "with its superstructure at the other end (controllers.target_model.LayoutFit); the "
-                    "correction uses the fit of the layout in use, and the layout fit weighs each layout at its "
-                    "own sizes. False: one fit, which goes on with the layout in use from where it stands (sizes "
-                    "learnt with one layout then correct with the other: half of 1666's envelope runs switched "
-                    "layout in the loiter, after 29-785 boxes fitted with the class's; offline, a ferry's "
-                    "corrected centres 3.6-5.3 m RMS with its own layout's fit, 5.8-8.2 m with the other's). "
-                    "Not the default: at 1666, the seed it came from, within 3 m / 3 deg 49 -> 51 and the "
-                    "estimate bar 43 -> 48, but one hit lost (a ferry whose layout changed back 13 s before the "
-                    "dive, 5.46 -> 8.83 m); at the fresh 1668 within 42 -> 43, the estimate bar 45 -> 42, CEP50 "
-                    "1.80 -> 2.07 m (docs/ENVELOPE.md, seeds 1666 and 1668)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "
@@ -405,37 +317,6 @@ class SizeFitConfig(StrictModel):
         description="boxes weighed per second at most: consecutive frames carry nearly the same information, "
                     "which the fit, taking each box as independent, would count again and again (and it is "
                     "the perception's costliest step, five outline projections a box)")
-    course_unknown: Literal["learn", "hold", "doubt"] = Field(
-        "learn",
-        description="while the ship's course is unknown (a slow ship: its heading from the box shapes alone): "
-                    "learn, the fit takes boxes at the shapes' heading when that is sure (the default); hold, it "
-                    "takes none and keeps what it has (the class's sizes, or what it learnt while the course was "
-                    "known); doubt, it takes them with the sizes predicted at that heading +- "
-                    "course_unknown_heading_std_deg in each box's noise (a view whose box changes little with the "
-                    "heading still teaches the size; one that changes much teaches little). A slow ship's shapes "
-                    "can be sure of a heading 30-60 deg off its axis (a ship unlike the class, a zigzag), and the "
-                    "fit then reads the box's extent along the wrong axis as height. hold and doubt were "
-                    "measured on the slow ships of two seeds and are not the default: at the fresh one neither "
-                    "raised the count within 3 m / 3 deg (docs/ENVELOPE.md, seed 1662)")
-    course_unknown_heading_std_deg: float = Field(
-        30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
-    course_unknown_steady_s: float = Field(
-        0.0, ge=0, le=600,
-        description="with course_unknown: learn, while the course is unknown the fit takes a box only when the "
-                    "box shapes' axis (their headings' mean axis, bow and stern alike) has stayed within "
-                    "course_unknown_steady_deg of its present direction for this long (0: off, the default). A "
-                    "slow ship's shapes swing 30-60 deg off its axis for tens of seconds at a time (a zigzag, a "
-                    "ship unlike the class), and a fit fed meanwhile reads the wrong axis's extent as height. 20 s "
-                    "was measured and is not the default: it held good fits as often as bad ones "
-                    "(docs/ENVELOPE.md, seed 1662)")
-    course_unknown_steady_deg: float = Field(
-        10.0, gt=0, le=90, description="see course_unknown_steady_s, deg")
-    hold_in_terminal: bool = Field(
-        False, description="the fit stops learning when the terminal dive starts and keeps what the loiter taught "
-                           "it: in the dive the UAV may bank past 90 deg and its own airframe cut the boxes for "
-                           "seconds on end (a run of them can restart the fit, which then learns the cut boxes). "
-                           "Off by default: over the envelope's tuning draws it did not pay (hits 64 -> 63, "
-                           "within 3 m / 3 deg 29 -> 26, miss p90 7.5 -> 7.2 m)")
 
 
 class LayoutFitConfig(StrictModel):
@@ -478,18 +359,6 @@ class LayoutFitConfig(StrictModel):
     shape_clip: float = Field(
         5.0, gt=0, le=50, description="each box's shape log ratio is clipped to +- this before the window's mean "
                                       "(the shapes' posterior is sure of itself far beyond what it knows)")
-    correction: Literal["switch", "mixture"] = Field(
-        "switch",
-        description="how the box-centre correction uses the two layouts: switch, the one in use alone (the class's "
-                    "until the other end's probability reaches switch_probability); mixture, both, weighted by "
-                    "their probabilities, and the spread between their offsets (p (1 - p) times their "
-                    "difference squared) added to the heading spread the reported std carries: a ship the box "
-                    "centres tell neither way (its superstructure amidships, or along most of its length) is "
-                    "corrected part way, and the estimate says how far off that may be. Measured, not the "
-                    "default: round still patrol boats and ferries on the unit tests' ring (700 m, 16 cases) it "
-                    "brought the corrected centres' RMS error down by a median 6 % (up to 25 %; one case 1 % up), "
-                    "but in flight at the fresh seed 1663 within "
-                    "3 m / 3 deg went 44 -> 42 of 64 (4 misses better by over 1 m, 4 worse; docs/ENVELOPE.md)")
 
 
 class ShipModelConfig(StrictModel):
@@ -510,19 +379,6 @@ class ShipModelConfig(StrictModel):
                                       "taken as unknown")
     headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
                                                                    "when the course is unknown")
-    anchor: Literal["box_centre", "hull_bottom", "hull_bottom_in_dive", "blend", "blend_in_dive"] = Field(
-        "box_centre",
-        description="what the correction takes the tracked point's image from: box_centre (the detected centre "
-                    "less the whole outline's predicted centre offset, the superstructure's layout and height "
-                    "in it: the default), hull_bottom (the detected centre's u less the hull's predicted centre "
-                    "offset; its v moved down by half the box's height to the box's lower edge, less the hull's "
-                    "predicted lower-edge offset: superstructure shows up and inward of the hull's near lower "
-                    "edge, so the edge takes none of the superstructure the class may have wrong, but all of "
-                    "the hull's size), blend (the mean of the two fixes; a box off in size, which may be cut at "
-                    "its lower edge, keeps box_centre's); *_in_dive: box_centre until the terminal switch (in "
-                    "the loiter a wrong superstructure's error averages out as the view goes round the ship, "
-                    "in the dive it does not). docs/ENVELOPE.md, 'The hull's lower edge as the fix': blend_in_dive "
-                    "gained at its tuning seed, not at two fresh ones")
     heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
     size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
     layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig)
@@ -576,39 +432,6 @@ class UkfConfig(StrictModel):
                     "a few px from the real heading's: an error common to every detection until the heading is "
                     "known, which the filter's covariance, fusing detections as independent, does not hold); "
                     "like box_centre_bias_frac it is not fused")
-    dive_los_velocity_hold_m: float = Field(
-        0.0, ge=0, le=5000,
-        description="in the terminal dive, from this range (m, camera to estimate) in, the boxes no longer move "
-                    "the ship's velocity along the horizontal line of sight: a Schmidt (consider) update, the "
-                    "gain's component along it zeroed and the covariance updated for the gain used; the position "
-                    "and the velocity across the line of sight learn as before, and so does all of it while "
-                    "turn_from_course hands on a turn or a periodic course. Close in, a ship unlike the "
-                    "class's corrected box centres drift along the line of sight as the view steepens, and the "
-                    "filter reads the drift as velocity, which the coast of the last metres flies "
-                    "(docs/ENVELOPE.md, 'Fresh seeds 1670 and 1671': measured, not adopted); 0: off")
-    dive_los_velocity_hold_max_spread_m_s: float = Field(
-        0.0, ge=0, le=50,
-        description="dive_los_velocity_hold_m acts only for a ship whose estimated velocity held steady before "
-                    "it: the RMS of the horizontal velocity's deviation from its mean over the fused boxes of "
-                    "the last dive_los_velocity_hold_window_s outside the hold's range at or under this (m/s). "
-                    "A ship that turns, zigzags or changes speed shows it there, and in the last seconds its "
-                    "velocity changes for real, which the hold cannot follow (docs/ENVELOPE.md, 'Fresh seeds 1672 "
-                    "and 1673': 0.5 measured, not adopted); 0: no such condition")
-    dive_los_velocity_hold_window_s: float = Field(
-        60.0, gt=0, le=600,
-        description="the window of dive_los_velocity_hold_max_spread_m_s (s): the estimated velocity's history "
-                    "before the hold's range")
-    consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
-        "latest_view",
-        description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "
-                    "box_centre_height_std_m) follows the detections: latest_view, that of the last fused box "
-                    "seen from its view alone; latest_undoubted, that of the last box fused without a doubt "
-                    "(a box the perception hands over with centre noise, fused as noise, barely moves the "
-                    "estimate); gain_weighted, that of the estimate, a gain-weighted blend of the boxes it "
-                    "fused: each fused box moves the estimate's systematic error by the update's gain times the "
-                    "difference between the box's error and the one the estimate carries, the errors taken as "
-                    "fully correlated from box to box (a box fused with a large doubt barely moves the "
-                    "estimate, nor its error)")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "
@@ -943,14 +766,10 @@ class SwitchConfig(StrictModel):
         5.0, gt=0, le=180,
         description="bearing from the UAV to the target within this of the approach bearing plus the lead "
                     "(none: any bearing)")
-    approach_from: Literal["impact_heading", "closing", "closing_after_go_around"] = Field(
+    approach_from: Literal["impact_heading", "closing_after_go_around"] = Field(
         "closing_after_go_around",
-        description="the approach bearing: the impact heading; 'closing': the bearing the UAV closes on the "
-                    "target in at the end of the dive (its ground velocity along the impact direction at "
-                    "bpng.airspeed_m_s in the estimated wind, less the target's estimated velocity: "
-                    "controllers.phases.approach_bearing_deg), which a fast ship and a steep dive into a headwind "
-                    "turn tens of degrees from the impact heading; 'closing_after_go_around': the impact heading "
-                    "until a dive has gone round (go_around_m), the closing bearing after it")
+        description="the approach bearing: the impact heading; 'closing_after_go_around': the impact heading until "
+                    "a dive has gone round (go_around_m), then the bearing the UAV closes on the target in")
     go_around_m: float | None = Field(
         100.0, gt=0, le=10000,
         description="in Phase 3, back to Phase 2 (the loiter, the switch armed again) once the range to the "
@@ -1229,13 +1048,6 @@ class AirframeConfig(StrictModel):
                     "align_when): the predicted ship is moved onto the detected box by the sides its own outline "
                     "makes, the move corrected this many times (AirframeShadow.aligned_cut), and its cut is "
                     "moved back; 0: always cut at the estimate's position")
-    align_when: Literal["always", "course_unknown"] = Field(
-        "course_unknown",
-        description="align_iterations apply only while the ship's course is unknown (its heading from the box "
-                    "shapes alone, which can be tens of degrees off a turning ship's, and the cut at the "
-                    "estimate with it), or always (at envelope seeds 1618, 1621-1623 the cut at the estimate did "
-                    "as well or better once the course was known: within 3 m / 3 deg 42 -> 40 at 1621, 43 -> 40 "
-                    "at 1623)")
     max_hidden_share: float = Field(
         0.5, ge=0, le=1,
         description="while the ship's course is unknown, skip a detection (reason airframe_hidden) when the "

@@ -117,10 +117,7 @@ class FlightSoftware:
                                                      sw.entry_descent_rate_m_s * (nav.t_s - self.phase.descent_t_s))
         for e in events:
             self.recorder.event(e)
-        self.perception.in_dive = self.estimation.in_dive = self.phase.phase == 3
         if events and self.phase.phase == 3:
-            if self.cfg.target_model.size_fit.hold_in_terminal:
-                self.perception.ship.hold_size()
             self.perception.ship.layout.hold()  # (the airframe starts to cut the boxes)
 
     def _output(self, nav: Measurements, est: TargetState, fix: DetectionFix, guide: Guidance,

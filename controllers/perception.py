@@ -258,7 +258,7 @@ class Perception:
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
         headings = (courses, weights, len(courses) == 1, None)
         if fit_size:
-            self._learn_size(nav, cam, ref, courses, weights, b, course is not None)
+            self._learn_size(nav, cam, ref, courses, weights, b)
         scale = self.ship.size.scale
         pred, why, doubt, own_used = _NAN4, "", _NO_NOISE, False
         if (course is not None or self.ship.shape.ready) and np.isfinite(b).all():
@@ -288,12 +288,12 @@ class Perception:
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
         return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
 
-    def _learn_size(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, weights, b: np.ndarray,
-                    course_known: bool) -> None:
+    def _learn_size(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, weights,
+                    b: np.ndarray) -> None:
         """Hand the box to the size fit (:meth:`~controllers.target_model.ShipModel.learn_size`); an event
         when the fit starts again."""
         restarts = self.ship.size.restarts
-        self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s, course_known)
+        self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
         if self.ship.size.restarts != restarts:
             sf = self.ship.cfg.size_fit
             self._event(f"perception: the size fit turned {sf.max_gated_in_a_row} boxes away in a row and "
@@ -490,7 +490,6 @@ class Perception:
         share = self._size_off_count / len(window)
         if not self.class_mismatch and share >= g.class_mismatch_enter:
             self.class_mismatch = True
-            self.ship.shape.doubt_class()
             self._event(f"perception: {100 * share:.0f} % of the last {len(window)} boxes are off the ship class's "
                         "size: rescale from now on")
         elif self.class_mismatch and share <= g.class_mismatch_exit:
