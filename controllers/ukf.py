@@ -712,8 +712,6 @@ class UkfTargetEstimator:
         self._motion = None
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
-        if self._vel_hist is not None:
-            self._vel_hist.clear()
 
     def initialise(self, fix: DetectionFix, motion: CameraMotion) -> None:
         """Start from one detection (its box centre ``u_px, v_px``): r_q on the plane along its ray, V_q = 0
