@@ -45,9 +45,9 @@ class NavigationConfig(StrictModel):
                           "path turns with the airframe); false: hold it")
     wind_gain: float = Field(
         0.02, ge=0, le=1,
-        description="weight of each fix's wind (fix velocity minus airspeed along the nose, horizontal; taken in "
-                    "near-level flight only) in the running wind estimate; the velocity turns with the gyros "
-                    "relative to the air, V - wind; 0: no wind estimate")
+        description="weight of each near-level fix's wind (fix velocity minus airspeed along the nose) in the "
+                    "running wind estimate; the velocity then turns with the gyros relative to the air; 0: no wind "
+                    "estimate")
     max_gap_s: float = Field(1.0, gt=0, le=60,
                              description="a fix older than this when the next arrives: restart from the fix")
 
@@ -78,91 +78,41 @@ class DetectionGateConfig(StrictModel):
 
     box_size_tolerance: float = Field(
         0.1, ge=0, le=10,
-        description="skip a detection whose box width or height differs from the one the ship model predicts "
-                    "(for the course, or for every heading the box shapes allow) by more than this fraction plus "
-                    "box_size_tolerance_px: part of the ship is "
-                    "hidden (e.g. by the UAV's own airframe) or the box is wrong; a large value: never")
+        description="a box whose width or height differs from every plausible heading's predicted one by more than "
+                    "this fraction plus box_size_tolerance_px is off in size; a large value: never")
     box_size_tolerance_px: float = Field(6.0, ge=0, le=1000, description="see box_size_tolerance, px")
     size_mismatch_action: Literal["skip", "deweight", "own_headings"] = Field(
-        "own_headings", description="a box whose size no heading explains (box_size_tolerance): own_headings "
-                            "(the default): when it cannot be a box cut short, correct it over the headings all "
-                            "round whose predicted size explains it, their offsets' spread added to its pixel "
-                            "variance; it cannot when it is larger than every estimated heading's box (more ship "
-                            "than they show: no occlusion does that, a turn the estimate has not followed does) "
-                            "or when the ship lies clear of the airframe (airframe_clearance_deg); skipped "
-                            "otherwise (until max_skipped_in_a_row). skip: skip every such box. deweight: use "
-                            "it, its centre's pixel variance raised by (half the width's difference)^2 and (half "
-                            "the height's)^2 from the predicted box (where a box cut short on one side puts its "
-                            "centre)")
-    own_headings_doubt: bool = Field(
-        False,
-        description="size_mismatch_action own_headings: a box corrected over its own headings also carries, "
-                    "as pixel variance in each axis, the square of how far that correction lies from the "
-                    "estimated headings' (besides the own headings' spread): a box no estimated heading explains "
-                    "says that the heading is wrong or that the ship is not the class, and only the first makes "
-                    "its own headings' correction right (1655 s26, a ferry turning at 6.8 m/s, its course known: "
-                    "its dive's boxes, corrected over headings up to the reverse of its course, took the "
-                    "estimate 14 m short close in, 9.05 -> 0.89 m). Off by default: it makes the std honest "
-                    "close in, and the closed-loop test of a ship unlike the class then never counts as "
-                    "converged (tests/test_mission.py; the std 7.5 m at the impact, 4.0 m without); off: "
-                    "their spread alone")
+        "own_headings", description="a box off in size: own_headings (correct it over the headings all round that "
+                                    "explain it, when it cannot be cut short; else maybe_cut_action), skip, or "
+                                    "deweight (its centre's doubt added)")
     maybe_cut_action: Literal["skip", "deweight"] = Field(
-        "deweight", description="size_mismatch_action own_headings: what becomes of a box off in size that may be "
-                                "cut short (no larger than every estimated heading's box, the ship not clear of the "
-                                "airframe) or that no heading all round explains: deweight (the default): use it "
-                                "with its centre's doubt as size_mismatch_action deweight does, (half its size "
-                                "difference from the predicted box)^2 in each axis; skip: skip it (until "
-                                "max_skipped_in_a_row; the default before 2026-11-25)")
+        "deweight", description="own_headings: a box off in size that may be cut short (or that no heading "
+                                "explains): deweight (use it, its centre's doubt as pixel variance) or skip it "
+                                "(until max_skipped_in_a_row)")
     airframe_clearance_deg: float = Field(
         3.0, ge=0, le=90,
-        description="size_mismatch_action own_headings: a box smaller than the estimated headings' is also "
-                    "corrected over its own headings when the estimated ship lies at least this far below the "
-                    "wing plane (the self-occlusion model of the NMPC's barrier): the airframe is not in the way "
-                    "there (in the envelope's dives no box it cut had its ship more than 1 deg below the plane), "
-                    "so the box is the ship's own size (a turn the estimate has not followed, a ship unlike the "
-                    "class), not a cut one; 90: never (smaller boxes are always skipped; with "
-                    "class_check_clear_only the class check then counts no box)")
+        description="own_headings: a smaller box is corrected over its own headings when the estimated ship lies "
+                    "this far below the wing plane (the airframe cannot cut it there), deg; 90: never")
     skip_overflowing_box: bool = Field(
         True, description="skip a detection whose box spans the whole image width or height (the ship is "
                           "larger than the frame: the box centre says little)")
     edge_px: float = Field(6.0, ge=0, le=100, description="a box edge this close to the image border touches it")
     min_range_m: float = Field(
         120.0, ge=0, le=10000,
-        description="skip detections while the estimated range to the target is below this: close in the box "
-                    "centre no longer follows the ship model (perspective, parts of the ship out of the image) "
-                    "and the estimate coasts on its velocity; 0: never")
+        description="skip detections while the estimated range to the target is below this (close in the box centre "
+                    "no longer follows the ship model; the estimate coasts), m; 0: never")
     moving_min_range_m: float = Field(
         80.0, ge=0, le=10000,
-        description="min_range_m for a ship estimated to move at moving_speed_m_s or more: the last seconds "
-                    "coast on the estimated velocity, whose error (a course a few degrees off, a turn or a speed "
-                    "change not yet followed) grows with the ship's speed, so a moving ship's boxes are taken "
-                    "closer in and the coast is shorter; a still or slow ship has little to drift on and keeps "
-                    "min_range_m (the close boxes' own errors, parts of the ship leaving the image, would only "
-                    "add). Equal to min_range_m: one range for every ship (the default before 2026-11-25); "
-                    "min_range_m 0 turns both off")
+        description="min_range_m for a ship estimated to move at moving_speed_m_s or more (a shorter coast on its "
+                    "velocity), m; equal to min_range_m: one range for every ship")
     moving_speed_m_s: float = Field(
         2.0, ge=0, le=50, description="see moving_min_range_m: the estimated horizontal speed, m/s")
-    slow_coast_velocity: Literal["latest", "dive_start"] = Field(
-        "latest",
-        description="the velocity a slow ship's estimate coasts on after the dive's last fused box (the "
-                    "coast of the last min_range_m): latest, the estimator's own (the velocity of its last "
-                    "update); dive_start, the velocity estimated when the dive began, when it and the last "
-                    "update's are both under moving_speed_m_s and no turn is handed on "
-                    "(controllers.turn_from_course). The dive's boxes carry box-centre errors that change with "
-                    "the closing range and elevation, which a constant-velocity filter reads as velocity: a "
-                    "slow ship's estimated velocity, often 0.04-0.10 m/s off at the dive's start, is 0.4-1.4 m/s "
-                    "off at its last box (docs/ENVELOPE.md, seed 1658), and the 1.4-3.4 s coast flies that. The "
-                    "position at the last box is kept; /fsw/estimate stays the filter's own. Not the default: "
-                    "at 1658 and 1659 it moved 11 misses, 7 down and 4 up (a slow zigzag's own turn in the "
-                    "dive, 2.77 -> 5.18 m), no bar")
     max_skipped_in_a_row: int = Field(
         30, ge=1, le=100000, description="after this many skipped detections in a row the next one is used anyway "
                                          "(the estimate the checks rely on may be what is wrong)")
     propagate_feature: bool = Field(
-        True, description="bring a late detection's box centre to now before it is used (the detector's latency: "
-                          "the box is of the exposure, the camera pose of now): its ray from the camera pose at "
-                          "the exposure (kept from the last ticks) meets the target's plane, the point moves on "
-                          "by the estimated velocity over the latency and is projected into the camera of now")
+        True, description="bring a late detection's box centre from its exposure to now (its ray from the exposure's "
+                          "camera pose meets the target plane, moves on by the estimated velocity, projected anew)")
     max_propagation_s: float = Field(
         0.5, gt=0, le=10, description="a detection older than this is used as it is (propagate_feature)")
     class_check_window: int = Field(
@@ -170,26 +120,15 @@ class DetectionGateConfig(StrictModel):
         description="the ship-class check: of the last this many boxes whose size the ship model predicted, ...")
     class_mismatch_enter: float = Field(
         0.5, gt=0, le=1,
-        description="... when this share or more are off in size (box_size_tolerance), the boxes disagree with "
-                    "the ship class (another size or layout than configured): the perception then does "
-                    "class_mismatch_action")
-    class_mismatch_action: Literal["rescale", "plain_centre", "no_size_gate"] = Field(
-        "rescale",
-        description="what the perception does while the boxes disagree with the class: rescale (the size gate "
-                    "against the class's boxes scaled by the median size ratio of the last class_check_window "
-                    "boxes), no_size_gate (no box skipped for its size), plain_centre (the plain box centre: no "
-                    "class correction, no size gate)")
+        description="... when this share or more are off in size, the boxes disagree with the class: the size gate "
+                    "then compares with the class's boxes scaled by the boxes' median size ratio")
     class_mismatch_exit: float = Field(
         0.2, ge=0, le=1,
         description="... and goes back to the class correction when the share falls to this or below")
     class_check_clear_only: bool = Field(
         True,
-        description="the class check (its window and the rescale's size ratios) counts only the boxes whose "
-                    "estimated ship lies airframe_clearance_deg or more below the wing plane: a box the airframe "
-                    "may have cut short says nothing of the ship's size (every loiter box counts; in the dive "
-                    "about half do). false: every size-checked box counts (before 2026-11-25: in 25 of 64 of the "
-                    "envelope's dives at one seed the cut boxes made the check find another class and "
-                    "the rescaled gate then let cut boxes through)")
+        description="the class check counts only boxes whose estimated ship lies airframe_clearance_deg or more "
+                    "below the wing plane (a box the airframe may have cut is no size evidence); false: all")
 
     @model_validator(mode="after")
     def _class_check_hysteresis(self):
@@ -215,11 +154,8 @@ class ShapeHeadingConfig(StrictModel):
                                                            "(detector noise, model's coarseness)")
     size_bias_range: tuple[float, float] = Field(
         (-0.15, 0.05),
-        description="the detected boxes' widths (and, apart, heights) may all be off the model's by one "
-                    "unknown fraction in this range (a detector shrinks boxes and misses thin parts such as a "
-                    "mast): each heading's likelihood is marginalised over it, so that such a bias, which "
-                    "favours whichever heading predicts the smaller boxes, cannot pass for evidence. "
-                    "(0, 0): none")
+        description="the detected boxes' widths (and apart heights) may all be off the model's by one unknown "
+                    "fraction in this range; each heading's likelihood is marginalised over it. (0, 0): none")
     size_bias_steps: int = Field(13, ge=1, le=101, description="grid points over size_bias_range")
 
     @field_validator("size_bias_range")
@@ -233,141 +169,47 @@ class ShapeHeadingConfig(StrictModel):
         description="the evidence of more detections counts as this many: the model's outline is coarse, so its "
                     "misfit repeats from frame to frame and must not make the heading look surer than it is")
     min_updates: int = Field(10, ge=1, le=100000, description="detections used before the heading is trusted")
-    centre_fit: bool = Field(
-        False,
-        description="while the course is unknown, weigh each heading also by how well its predicted boxes' "
-                    "centres follow the detected ones as the view changes (:class:`ShapeHeading`): seen from a "
-                    "closing or turning viewpoint, the box centre moves over the ship in a way the heading "
-                    "decides (a tall superstructure at one end pulls it that way more and more as the range "
-                    "closes), and the estimate's own error, a shift common to all headings, is fitted out. The "
-                    "box sizes barely tell a still ship's bow from its stern; this does. Off by default: on the "
-                    "class's own ship it cuts a still ship's miss in a dive by about a third, on slow ships unlike "
-                    "the class it does a little harm (README, 'A still ship's heading from its box shapes')")
-    centre_fit_time_s: float = Field(
-        10.0, gt=0, le=600,
-        description="the centre fit forgets with this time constant, s (the estimate's error it fits out "
-                    "changes as the estimate converges)")
-    centre_fit_sigma_px: float = Field(
-        3.0, gt=0, le=100,
-        description="std. dev. of a detected box centre against a heading's predicted one, px, once the "
-                    "estimate's shift is fitted out (attitude noise, the outline's coarseness)")
-    centre_fit_max_effective: float = Field(
-        5.0, gt=0, le=10000,
-        description="the centre fit's evidence counts at most this many detections (its misfit repeats from "
-                    "frame to frame, like the sizes')")
     min_weight: float = Field(0.02, ge=0, lt=1, description="headings with less posterior weight than this "
                                                             "times the largest are dropped")
     tell_bow_from_stern: bool = Field(
-        True, description="trust the box shapes to tell the bow from the stern (the superstructure stands aft, "
-                          "which shows in the box heights, most of all as the view steepens in the dive); "
-                          "false: a heading and its opposite count alike (the fore-aft part of the offset is "
-                          "then not removed)")
-    ends_unsure_flips: int = Field(
-        0, ge=0, le=1000,
-        description="a per-ship tell_bow_from_stern: once the shapes' likeliest heading has turned end for end "
-                    "(jumped by over 135 deg from one box taken to the next) this many times within "
-                    "ends_unsure_window_s, the shapes are taken not to tell this ship's bow from its stern, for "
-                    "the rest of the flight: while the course is unknown a heading and its opposite then count "
-                    "alike (the fore-aft part of the offset is not removed). A ship unlike the class, read with "
-                    "the class's outline, can fit either end and its shapes' best end comes and goes; one whose "
-                    "ends the shapes tell should keep it. A known course, the layout fit and the log's best heading "
-                    "are untouched. 0: off (the default: at 1660 and 1661, 3 brought the worst slow ships "
-                    "nearer but moved no bar at the fresh seed, and it latches in the first seconds for many "
-                    "ships, the class's own still ship too, which then lands 1-2 m off; docs/ENVELOPE.md, "
-                    "'Fresh seeds 1660 and 1661')")
-    ends_unsure_window_s: float = Field(
-        120.0, gt=0, le=100000, description="the window ends_unsure_flips counts the end-for-end turns in, s")
+        True, description="trust the box shapes to tell the bow from the stern; false: a heading and its opposite "
+                          "count alike (the fore-aft part of the offset is then not removed)")
     fuse_with_course: bool = Field(
         True, description="with a known course, weigh the shapes' headings by it (and the course by them): "
                           "the course from a noisy velocity wanders by 10-20 deg in a dive, the shapes' by ~5")
     fuse_min_course_std_deg: float = Field(3.0, gt=0, le=90, description="the course's std when fused is at "
                                                                          "least this, deg")
     follow_course: bool = Field(
-        True, description="between detections the posterior turns with the ship's estimated course (a ship's "
-                          "heading turns with its course): the boxes of a turning or zigzagging ship, seen over "
-                          "a loiter, then add up at the heading it has now, not spread over those it had. "
-                          "false: the posterior stays put (a ship that keeps its heading)")
+        True, description="between detections the posterior turns with the ship's estimated course (a turning ship's "
+                          "boxes add up at its heading now); false: the posterior stays put")
     follow_course_settle_s: float = Field(
         10.0, ge=0, le=600,
-        description="the course is followed once it has been known (ShipModelConfig.min_speed_for_course_m_s, "
-                    "max_vel_std_for_course_m_s) this long without a break, s: in the first seconds after a lock "
-                    "or a re-initialisation the estimated velocity's course swings by tens of degrees as it "
-                    "converges, which is the estimate settling, not the ship turning")
+        description="the course is followed once it has been known (min_speed_for_course_m_s, "
+                    "max_vel_std_for_course_m_s) this long without a break, s")
     follow_course_max_rate_deg_s: float = Field(
         3.0, gt=0, le=90,
         description="the posterior turns at most this fast, deg/s: a ship turns slower (the estimate's jumps "
                     "are not turns)")
     held_course_spread_deg_s: float = Field(
         1.5, ge=0, le=90,
-        description="once the course has been followed and then is lost (the estimated speed dips under "
-                    "min_speed_for_course_m_s, as a slow ship's does round the loiter), the shapes' headings are "
-                    "weighed by the course last followed, with a std of fuse_min_course_std_deg growing by this "
-                    "many deg per second since (the ship may have turned), until it spans the circle: a ship "
-                    "that moved along a course does not face the other way seconds later, and the shapes of a "
-                    "ship unlike the class may prefer its stern (1.5: the turn rate the envelope's ships "
-                    "reach). 0: off, the shapes alone")
-    end_from_velocity_std_floor_m_s: float | None = Field(
-        None, gt=0, le=50,
-        description="while the course is unknown (the estimated speed under min_speed_for_course_m_s), the "
-                    "estimated velocity still says which end of the axis is the bow: a ship moves bow first, so "
-                    "each heading is weighed by the probability that the velocity's component along it is "
-                    "positive (its std the estimate's horizontal velocity std and this floor in quadrature: the "
-                    "filter's velocity std is tighter than a still ship's estimated velocity wanders). A heading "
-                    "and its opposite share one unit of it, so the axis stays the box shapes'; a still ship's "
-                    "velocity, noise, nudges its ends a little either way. Ships unlike the class, whose box shapes "
-                    "read with the class's outline pick an end at random (a patrol boat with its cabin "
-                    "amidships), have it from how they move. Off (None: the box shapes and a course held alone) "
-                    "by default: read from the estimate, the end it picks moves the corrected fixes along the ship, "
-                    "and so the velocity itself, which a still ship's then follows (over the envelope's slow ships "
-                    "it did harm at 0.25 and 0.5); read from the box centres, it turned bridge-forward ships, whose "
-                    "shapes' reversed end was the right superstructure for the class's outline, end for end "
-                    "(docs/ENVELOPE.md, 'The bow from a slow ship's velocity')")
-    end_velocity_source: Literal["estimate", "box_centres"] = Field(
-        "box_centres",
-        description="the velocity end_from_velocity_std_floor_m_s reads: the estimator's (which the corrected "
-                    "fixes, and so the end picked, move), or a straight-line fit over end_velocity_window_s to "
-                    "the plain detected box centres met with the tracked point's plane (ShipModel's "
-                    "BoxCentreTrack: nothing the correction does moves them; the superstructure's pull on them "
-                    "goes round with the loiter and largely cancels over a lap)")
-    end_velocity_window_s: float = Field(
-        120.0, gt=5, le=1000,
-        description="the box-centre fit's window, s (box_centres): about a loiter lap, so that the pull of the "
-                    "superstructure on the box centre, which turns with the view, averages out")
+        description="once a followed course is lost, the shapes' headings are weighed by it, its std "
+                    "fuse_min_course_std_deg growing by this per second, until it spans the circle, deg/s; 0: off")
     max_course_off_axis_deg: float = Field(
         25.0, gt=0, le=90,
         description="an estimated velocity more than this off the ship's axis (as the shapes tell it) gives no "
                     "course: a ship moves along its axis, so such a velocity is the estimate's error")
     turn_rates_deg_s: tuple[float, ...] = Field(
         (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0), min_length=1, max_length=15,
-        description="while the course is not followed (unknown: a still or slow ship), the ship may be turning "
-                    "at any of these rates, deg/s (clockwise seen from above: the heading grows): each is a "
-                    "hypothesis whose boxes are weighed at the headings it would have turned the ship to, and "
-                    "the posterior is over the heading now, summed over them. The default, -2..2 by 0.5, spans "
-                    "turns up to 1.5 deg/s with room and a +-30 deg zigzag's fastest turn (about 2 deg/s over "
-                    "90 s). (0,): a ship that keeps its heading while its course is unknown (as before "
-                    "2026-11-26)")
+        description="while the course is not followed, the turn rates the ship may have, deg/s (clockwise seen from "
+                    "above), each a hypothesis the posterior sums over; (0,): a ship that keeps its heading")
     turn_rate_prior_zero: float = Field(
         0.5, gt=0, le=1,
         description="a priori weight of the rate 0 among turn_rates_deg_s (the rest share the remainder "
                     "equally): most slow ships keep their heading")
     memory_s: float | None = Field(
         120.0, gt=0, le=100000,
-        description="while the course is not followed, the box shapes' evidence fades with this time constant, "
-                    "s: a ship that turns otherwise than at one of turn_rates_deg_s (a zigzag) is then weighed "
-                    "at the heading it has had lately, not at all it had. 120 s: at 30 s a still ship's bow "
-                    "and stern, which the box shapes tell only weakly, came and went with the last boxes "
-                    "(docs/ENVELOPE.md, 'A slow ship that turns'). None: kept for good (as before 2026-11-26)")
-    turn_rate_switch_s: float | None = Field(
-        None, gt=0, le=100000,
-        description="while the course is not followed, the ship's turn rate may change (a zigzag's turn reverses, "
-                    "a turn starts or ends): between boxes each rate hypothesis hands the share 1 - exp(-dt / "
-                    "this) of its evidence over to the rates' prior mixture (a Markov chain on the rates, as an "
-                    "interacting multiple model's), so that the heading follows a turn that no one rate fits "
-                    "from the first box on, and the boxes' evidence for the bow stays with the heading as it "
-                    "turns. Seconds a rate is expected to hold (20: offline, a +-30 deg / 90 s zigzag's heading "
-                    "to 11 deg at p90, not 38, and no longer toward the stern; 60 did about as well; in flight "
-                    "not better at the bars, so off by default: docs/ENVELOPE.md, 'Switching turn rates for a "
-                    "slow ship's heading'); None: each rate holds for good. Nothing to switch with one rate")
+        description="while the course is not followed, the box shapes' evidence fades with this time constant, s; "
+                    "none: kept for good")
 
     @field_validator("turn_rates_deg_s")
     @classmethod
@@ -389,10 +231,8 @@ class SizeFitConfig(StrictModel):
                                        "(detector noise, the layout's difference from the class)")
     box_scale: float = Field(
         0.95, gt=0.5, le=1.5,
-        description="a detected box's size over its silhouette's, a priori (the detector's calibration; the "
-                    "heading from box shapes allows -15..+5 %, heading_from_shape.size_bias_range, and this is its "
-                    "middle): without it a ship exactly of the class is read 4-7 % small and its corrected box "
-                    "centre, scaled about the waterline, 1-2 px low")
+        description="a detected box's size over its silhouette's, a priori (the detector's calibration; the middle "
+                    "of heading_from_shape.size_bias_range)")
     box_px_std: float = Field(3.0, ge=0, le=100,
                               description="1-sigma of a box's width and height in px on top of box_std (a small, "
                                           "far box's sizes are a few pixels' worth)")
@@ -406,67 +246,15 @@ class SizeFitConfig(StrictModel):
                              description="boxes taken before the fitted outline replaces the class's")
     class_after_restarts: int = Field(
         1, ge=0, le=100000,
-        description="once the fit has started again this many times (max_gated_in_a_row boxes turned away in a "
-                    "row: the fit was off, not the boxes), the correction keeps the class's outline for good and "
-                    "the fit takes no more boxes; 0: never (it learns again from the prior, the default before "
-                    "2026-11-29). A fit that went wrong once at a ship (boxes read at a wrong heading, a layout "
-                    "unlike the class's) may go wrong again, and a wrong height lands along the line of sight in "
-                    "the dive: at 1663 a still ferry's refit read its height 1.5 times the ship's and the dive "
-                    "missed it by 15.9 m; with the class's outline it hit, 3.05 m off. Only a run whose fit "
-                    "starts again flies differently (3 of 448 at 1663-1669; docs/ENVELOPE.md)")
-    per_layout: bool = Field(
-        False,
-        description="fit the sizes twice, side by side on the same boxes: once with the class's layout and once "
-                    "with its superstructure at the other end (controllers.target_model.LayoutFit); the "
-                    "correction uses the fit of the layout in use, and the layout fit weighs each layout at its "
-                    "own sizes. False: one fit, which goes on with the layout in use from where it stands (sizes "
-                    "learnt with one layout then correct with the other: half of 1666's envelope runs switched "
-                    "layout in the loiter, after 29-785 boxes fitted with the class's; offline, a ferry's "
-                    "corrected centres 3.6-5.3 m RMS with its own layout's fit, 5.8-8.2 m with the other's). "
-                    "Not the default: at 1666, the seed it came from, within 3 m / 3 deg 49 -> 51 and the "
-                    "estimate bar 43 -> 48, but one hit lost (a ferry whose layout changed back 13 s before the "
-                    "dive, 5.46 -> 8.83 m); at the fresh 1668 within 42 -> 43, the estimate bar 45 -> 42, CEP50 "
-                    "1.80 -> 2.07 m (docs/ENVELOPE.md, seeds 1666 and 1668)")
+        description="once the fit has started again this many times, the correction keeps the class's outline for "
+                    "good and the fit takes no more boxes; 0: never (it learns again from the prior)")
     max_scale: float = Field(2.0, gt=1, le=10, description="each scale is kept within [1/this, this]")
     min_range_m: float = Field(150.0, ge=0, le=100000,
                                description="boxes from closer than this are not taken (perspective, the UAV's "
                                            "airframe in view)")
     rate_hz: float = Field(
         3.0, gt=0, le=240,
-        description="boxes weighed per second at most: consecutive frames carry nearly the same information, "
-                    "which the fit, taking each box as independent, would count again and again (and it is "
-                    "the perception's costliest step, five outline projections a box)")
-    course_unknown: Literal["learn", "hold", "doubt"] = Field(
-        "learn",
-        description="while the ship's course is unknown (a slow ship: its heading from the box shapes alone): "
-                    "learn, the fit takes boxes at the shapes' heading when that is sure (the default); hold, it "
-                    "takes none and keeps what it has (the class's sizes, or what it learnt while the course was "
-                    "known); doubt, it takes them with the sizes predicted at that heading +- "
-                    "course_unknown_heading_std_deg in each box's noise (a view whose box changes little with the "
-                    "heading still teaches the size; one that changes much teaches little). A slow ship's shapes "
-                    "can be sure of a heading 30-60 deg off its axis (a ship unlike the class, a zigzag), and the "
-                    "fit then reads the box's extent along the wrong axis as height. hold and doubt were "
-                    "measured on the slow ships of two seeds and are not the default: at the fresh one neither "
-                    "raised the count within 3 m / 3 deg (docs/ENVELOPE.md, seed 1662)")
-    course_unknown_heading_std_deg: float = Field(
-        30.0, gt=0, le=90, description="the heading's doubt for course_unknown: doubt, deg")
-    course_unknown_steady_s: float = Field(
-        0.0, ge=0, le=600,
-        description="with course_unknown: learn, while the course is unknown the fit takes a box only when the "
-                    "box shapes' axis (their headings' mean axis, bow and stern alike) has stayed within "
-                    "course_unknown_steady_deg of its present direction for this long (0: off, the default). A "
-                    "slow ship's shapes swing 30-60 deg off its axis for tens of seconds at a time (a zigzag, a "
-                    "ship unlike the class), and a fit fed meanwhile reads the wrong axis's extent as height. 20 s "
-                    "was measured and is not the default: it held good fits as often as bad ones "
-                    "(docs/ENVELOPE.md, seed 1662)")
-    course_unknown_steady_deg: float = Field(
-        10.0, gt=0, le=90, description="see course_unknown_steady_s, deg")
-    hold_in_terminal: bool = Field(
-        False, description="the fit stops learning when the terminal dive starts and keeps what the loiter taught "
-                           "it: in the dive the UAV may bank past 90 deg and its own airframe cut the boxes for "
-                           "seconds on end (a run of them can restart the fit, which then learns the cut boxes). "
-                           "Off by default: over the envelope's tuning draws it did not pay (hits 64 -> 63, "
-                           "within 3 m / 3 deg 29 -> 26, miss p90 7.5 -> 7.2 m)")
+        description="boxes weighed per second at most (consecutive frames carry nearly the same information), Hz")
 
 
 class LayoutFitConfig(StrictModel):
@@ -479,9 +267,8 @@ class LayoutFitConfig(StrictModel):
                           "course is known, and correct with the one the box centres fit")
     window_s: float = Field(
         60.0, gt=5, le=600,
-        description="the fit's window, s: each layout's corrected box centres, met with the tracked point's plane, "
-                    "are fitted by one track (position, velocity and acceleration: a ship's manoeuvre over a "
-                    "minute) and weighed by what that track leaves")
+        description="the fit's window, s: each layout's corrected box centres on the tracked point's plane are "
+                    "fitted by one track (position, velocity, acceleration) and weighed by its misfit")
     rate_hz: float = Field(3.0, gt=0, le=30, description="boxes taken a second at most (nearby frames are alike)")
     point_floor_m: float = Field(
         1.0, gt=0, le=50,
@@ -500,27 +287,11 @@ class LayoutFitConfig(StrictModel):
     pixel_noise_px: float = Field(2.0, gt=0, le=100, description="a box centre's pixel noise, 1-sigma, px")
     shape_weight: float = Field(
         1.0, ge=0, le=10,
-        description="the box shapes' say as well (0: the box centres' alone, the default before 2026-11-27): "
-                    "the heading-from-shapes posterior is worked out with the class's layout, and the class's "
-                    "outline turned end for end is the other end's, so with the course known the log ratio of "
-                    "its weight at the reverse of the course to its weight at the course is the shapes' "
-                    "evidence for the other end; its mean over the fit's window (each box's clipped to "
-                    "+-shape_clip), times this, is added to the log-odds")
+        description="weight of the box shapes' evidence for the other end (their posterior's log ratio at the "
+                    "reverse of the course over the course, window mean) in the log-odds; 0: box centres alone")
     shape_clip: float = Field(
         5.0, gt=0, le=50, description="each box's shape log ratio is clipped to +- this before the window's mean "
                                       "(the shapes' posterior is sure of itself far beyond what it knows)")
-    correction: Literal["switch", "mixture"] = Field(
-        "switch",
-        description="how the box-centre correction uses the two layouts: switch, the one in use alone (the class's "
-                    "until the other end's probability reaches switch_probability); mixture, both, weighted by "
-                    "their probabilities, and the spread between their offsets (p (1 - p) times their "
-                    "difference squared) added to the heading spread the reported std carries: a ship the box "
-                    "centres tell neither way (its superstructure amidships, or along most of its length) is "
-                    "corrected part way, and the estimate says how far off that may be. Measured, not the "
-                    "default: round still patrol boats and ferries on the unit tests' ring (700 m, 16 cases) it "
-                    "brought the corrected centres' RMS error down by a median 6 % (up to 25 %; one case 1 % up), "
-                    "but in flight at the fresh seed 1663 within "
-                    "3 m / 3 deg went 44 -> 42 of 64 (4 misses better by over 1 m, 4 worse; docs/ENVELOPE.md)")
 
 
 class ShipModelConfig(StrictModel):
@@ -541,22 +312,12 @@ class ShipModelConfig(StrictModel):
                                       "taken as unknown")
     headings_when_unknown: int = Field(8, ge=1, le=72, description="headings the offset is averaged over "
                                                                    "when the course is unknown")
-    anchor: Literal["box_centre", "hull_bottom", "hull_bottom_in_dive", "blend", "blend_in_dive"] = Field(
-        "box_centre",
-        description="what the correction takes the tracked point's image from: box_centre (the detected centre "
-                    "less the whole outline's predicted centre offset, the superstructure's layout and height "
-                    "in it: the default), hull_bottom (the detected centre's u less the hull's predicted centre "
-                    "offset; its v moved down by half the box's height to the box's lower edge, less the hull's "
-                    "predicted lower-edge offset: superstructure shows up and inward of the hull's near lower "
-                    "edge, so the edge takes none of the superstructure the class may have wrong, but all of "
-                    "the hull's size), blend (the mean of the two fixes; a box off in size, which may be cut at "
-                    "its lower edge, keeps box_centre's); *_in_dive: box_centre until the terminal switch (in "
-                    "the loiter a wrong superstructure's error averages out as the view goes round the ship, "
-                    "in the dive it does not). docs/ENVELOPE.md, 'The hull's lower edge as the fix': blend_in_dive "
-                    "gained at its tuning seed, not at two fresh ones")
-    heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig)
-    size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig)
-    layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig)
+    heading_from_shape: ShapeHeadingConfig = Field(default_factory=ShapeHeadingConfig,
+        description="the ship's heading from its boxes' shapes")
+    size_fit: SizeFitConfig = Field(default_factory=SizeFitConfig,
+        description="the ship's length, beam and height learnt from its boxes")
+    layout_fit: LayoutFitConfig = Field(default_factory=LayoutFitConfig,
+        description="which end the superstructure stands at, learnt from the box centres")
 
 
 class UkfConfig(StrictModel):
@@ -573,9 +334,8 @@ class UkfConfig(StrictModel):
         description="altimeter error in the flat-sea depth; adds (range / height * this) to the r_c noise, m")
     target_accel_noise_m_s2: float = Field(
         0.05, gt=0, le=50,
-        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2; small: "
-                    "a ship holds its velocity for tens of seconds, and a larger value lets the dive's "
-                    "geometry-dependent box-centre errors pass into the velocity, which the last seconds coast on")
+        description="horizontal white-noise target acceleration (process), PSD = this^2 per second, m/s^2; small, so "
+                    "the dive's box-centre errors do not pass into the velocity")
     target_vertical_accel_noise_m_s2: float = Field(
         0.02, gt=0, le=50, description="vertical white-noise target acceleration (process), m/s^2")
     feature_process_noise: float = Field(
@@ -586,72 +346,24 @@ class UkfConfig(StrictModel):
         description="height of the plane the detected point lies on (0: sea; e.g. the hull's aim height), m")
     box_centre_bias_frac: float = Field(
         0.04, ge=0, le=1,
-        description="1-sigma systematic error of the (corrected) box centre, as a fraction of the box's width "
-                    "(u) and height (v): what the ship class cannot tell of the real ship (its size, its "
-                    "layout). Not fused (it would average away as if it were noise): it is carried into the "
-                    "estimate's reported position std through the latest view's geometry (a consider "
-                    "covariance), so the std says how far off a ship unlike the class can be; 0: the class is "
-                    "exact")
+        description="1-sigma systematic error of the corrected box centre, as a fraction of the box's width (u) and "
+                    "height (v); not fused, carried into the reported position std; 0: the class is exact")
     box_centre_height_std_m: float = Field(
         2.2, ge=0, le=100,
-        description="1-sigma error of the height on the ship that the corrected box centre stands for, m: the "
-                    "real ship's height may be off the class's by up to +-30 % (25 m: +-7.5 m) and the box "
-                    "centre's height by half of that, 7.5 / (2 sqrt 3) = 2.2 m. A point seen that much higher or "
-                    "lower meets the target plane displaced along the line of sight by the height over tan of "
-                    "the elevation: metres from a steep view, tens of metres from 4 km at 15 deg. Not fused; "
-                    "carried into the reported position std like box_centre_bias_frac; 0: none")
+        description="1-sigma error of the height on the ship the corrected box centre stands for, m; not fused, "
+                    "carried into the reported position std through the view's geometry; 0: none")
     consider_heading_spread: bool = Field(
         True,
-        description="add to the reported position std the shape correction's spread over the headings the ship "
-                    "may have (while its heading is unknown the correction is their weighted mean, off by up to "
-                    "a few px from the real heading's: an error common to every detection until the heading is "
-                    "known, which the filter's covariance, fusing detections as independent, does not hold); "
-                    "like box_centre_bias_frac it is not fused")
-    dive_los_velocity_hold_m: float = Field(
-        0.0, ge=0, le=5000,
-        description="in the terminal dive, from this range (m, camera to estimate) in, the boxes no longer move "
-                    "the ship's velocity along the horizontal line of sight: a Schmidt (consider) update, the "
-                    "gain's component along it zeroed and the covariance updated for the gain used; the position "
-                    "and the velocity across the line of sight learn as before, and so does all of it while "
-                    "turn_from_course hands on a turn or a periodic course. Close in, a ship unlike the "
-                    "class's corrected box centres drift along the line of sight as the view steepens, and the "
-                    "filter reads the drift as velocity, which the coast of the last metres flies "
-                    "(docs/ENVELOPE.md, 'Fresh seeds 1670 and 1671': measured, not adopted); 0: off")
-    dive_los_velocity_hold_max_spread_m_s: float = Field(
-        0.0, ge=0, le=50,
-        description="dive_los_velocity_hold_m acts only for a ship whose estimated velocity held steady before "
-                    "it: the RMS of the horizontal velocity's deviation from its mean over the fused boxes of "
-                    "the last dive_los_velocity_hold_window_s outside the hold's range at or under this (m/s). "
-                    "A ship that turns, zigzags or changes speed shows it there, and in the last seconds its "
-                    "velocity changes for real, which the hold cannot follow (docs/ENVELOPE.md, 'Fresh seeds 1672 "
-                    "and 1673': 0.5 measured, not adopted); 0: no such condition")
-    dive_los_velocity_hold_window_s: float = Field(
-        60.0, gt=0, le=600,
-        description="the window of dive_los_velocity_hold_max_spread_m_s (s): the estimated velocity's history "
-                    "before the hold's range")
-    consider_update: Literal["latest_view", "latest_undoubted", "gain_weighted"] = Field(
-        "latest_view",
-        description="how the reported std's systematic part (box_centre_bias_frac, the heading spread, "
-                    "box_centre_height_std_m) follows the detections: latest_view, that of the last fused box "
-                    "seen from its view alone; latest_undoubted, that of the last box fused without a doubt "
-                    "(a box the perception hands over with centre noise, fused as noise, barely moves the "
-                    "estimate); gain_weighted, that of the estimate, a gain-weighted blend of the boxes it "
-                    "fused: each fused box moves the estimate's systematic error by the update's gain times the "
-                    "difference between the box's error and the one the estimate carries, the errors taken as "
-                    "fully correlated from box to box (a box fused with a large doubt barely moves the "
-                    "estimate, nor its error)")
+        description="add the shape correction's spread over the headings the ship may have to the reported position "
+                    "std (an error common to the detections until the heading is known); not fused")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "
                     "above this (13.8: 0.1 % of good detections); 0: never")
     innovation_gate_box_bias: bool = Field(
         True,
-        description="the gate also allows for the box centre's systematic error (box_centre_bias_frac of the "
-                    "box's width and height, which the update does not fuse): close in, a ship unlike the class "
-                    "puts its corrected centre tens of pixels off, and the gate, allowing for noise alone, turns "
-                    "the right boxes away. Only the test changes (the update weighs the box as before). False: "
-                    "the gate allows for the pixel noise alone (scenarios/paper_mission.yaml, whose ship is the "
-                    "class exactly; docs/ENVELOPE.md, 'The gate that allows for the box centre's systematic error')")
+        description="the innovation gate also allows for the box centre's systematic error (box_centre_bias_frac); "
+                    "the update is unchanged. false: the gate allows for the pixel noise alone")
     innovation_gate_max_rejects: int = Field(
         15, ge=1, le=100000, description="after this many rejections in a row the next detection is used anyway "
                                          "(the estimate, not the detections, may be wrong)")
@@ -679,12 +391,8 @@ class CtUkfConfig(StrictModel):
                     "deg/s; ships turn at up to ~1.5 deg/s, and a +-30 deg zigzag of period 60 s peaks at 3")
     turn_rate_time_s: float = Field(
         60.0, gt=0, le=3600,
-        description="correlation time of the turn rate, s: how long a turn is expected to last (a shorter one "
-                    "lets the estimate follow a zigzag's reversals, a longer one holds a steady turn better; "
-                    "30 and 60 s track a +-30 deg, 60 s zigzag alike, 60 s keeps a held turn's rate through the "
-                    "dive; 300 s follows a steady turn better and a zigzag worse: the envelope at two seeds, "
-                    "turning ships within 3 m / 3 deg 11 -> 14 of 17 and 18 -> 21 of 26, zigzags 9 -> 8 and "
-                    "14 -> 10, docs/ENVELOPE.md, 'A fresh seed, 1648')")
+        description="correlation time of the turn rate, s: how long a turn is expected to last (shorter follows a "
+                    "zigzag's reversals, longer holds a steady turn)")
     accel_std_m_s2: float = Field(
         0.3, gt=0, le=10,
         description="along-track acceleration std of the Gauss-Markov model (long run, and at the start), m/s^2; "
@@ -695,33 +403,24 @@ class CtUkfConfig(StrictModel):
     target_accel_noise_m_s2: float = Field(
         0.05, gt=0, le=50,
         description="horizontal white-noise acceleration beside the modelled turn and speed change (process, PSD = "
-                    "this^2 per second), m/s^2; the UKF's default: small, for the same reason (the dive's "
-                    "box-centre errors must not pass into the velocity)")
+                    "this^2 per second), m/s^2; small, as the UKF's")
     min_speed_m_s: float = Field(
         0.5, gt=0, le=20,
         description="the along-track direction is V / max(|V|, this): below this speed an acceleration moves "
                     "the velocity less (a ship at rest has no track to speed up along), m/s")
     manoeuvre_fade_speed_m_s: float = Field(
         2.0, ge=0, le=20,
-        description="below this estimated speed the turn rate and the acceleration also revert to zero within "
-                    "about manoeuvre_fade_time_s (fully at rest, not at all from this speed up): near zero speed "
-                    "they hardly move the velocity, so the detections cannot correct them, and a deceleration "
-                    "holds the estimate at zero speed; 0: no fade, m/s")
+        description="below this estimated speed the turn rate and acceleration also revert to zero within about "
+                    "manoeuvre_fade_time_s (fully at rest), m/s; 0: no fade")
     manoeuvre_fade_time_s: float = Field(
         2.0, gt=0, le=3600, description="the fade's time constant at rest, s")
     hold_tgo_s: float = Field(
         15.0, ge=0, le=600,
-        description="while the camera closes on the estimate fast enough to reach it within this time (range / "
-                    "closing speed: a dive), s, hold the manoeuvre learnt before: the turn rate kept, the "
-                    "acceleration set to zero (a speed change ends within seconds), neither learnt from "
-                    "detections any more: the dive's fast-changing view brings box-centre errors that look like a "
-                    "turn or a speed change, which the last seconds' coast would fly out. Released when the time "
-                    "to go exceeds twice this (or the camera recedes); 0: never hold")
+        description="while the camera closes on the estimate within this time to go (a dive), hold the manoeuvre "
+                    "learnt before (turn rate kept, acceleration zero); released above twice this, s; 0: never")
     hold_turn_rate: bool = Field(
-        True, description="the hold keeps the turn rate too (true), or goes on learning it (false: only the "
-                          "speed is held). Paper missions, seeds 11-13: a 1.5 deg/s turn, miss 1.05 against "
-                          "2.39 m; a +-30 deg, 60 s zigzag (its turn rate reverses within the dive), 4.65 against "
-                          "3.42 m; speed steps alike")
+        True, description="the hold keeps the turn rate too (true), or goes on learning it (false: only the speed is "
+                          "held)")
 
 
 class PeriodicCourseConfig(StrictModel):
@@ -770,10 +469,8 @@ class TurnFromCourseConfig(StrictModel):
     enabled: bool = Field(True, description="on: find the turn and take the lag out; off: the estimate as it is")
     window_s: float = Field(
         15.0, gt=0, le=600,
-        description="the course history fitted with a straight line (course against time), s: longer finds a "
-                    "steady turn's rate more surely, shorter follows a zigzag's reversals (against the analytic "
-                    "paths of tests/test_course_turn.py, 30 s made a +-30 deg, 60 s zigzag's velocity error worse "
-                    "than none, 15 s better)")
+        description="the course history fitted with a straight line (course against time), s: longer finds a steady "
+                    "turn more surely, shorter follows a zigzag's reversals")
     min_span_frac: float = Field(
         0.8, gt=0, le=1, description="fit only once the history spans this share of window_s")
     sample_s: float = Field(0.5, gt=0, le=10, description="one course sample per this, s")
@@ -793,22 +490,16 @@ class TurnFromCourseConfig(StrictModel):
                     "smooth, its errors correlated over seconds), s")
     steady_s: float = Field(
         30.0, ge=0, le=600,
-        description="a turn is used only when every fit of the last this long found one, within steady_tol of the "
-                    "newest: a steady turn, not a zigzag's swing (a +-30 deg, 60 s zigzag's rate reverses every "
-                    "30 s; held into a dive, a swing's rate leads the guidance the wrong way). On the estimates of "
-                    "1651's envelope (the UKF, ships at 3 m/s or more) 20 s kept the turn in use 88 % of a turning "
-                    "ship's time and 5 % of a zigzag's (a swing's rate held into the dive cost 1.9 -> 3.8 m), 30 s "
-                    "83 % and 0.1 %; 0: no such test, s")
+        description="a turn is used only when every fit of the last this long found one within steady_tol of the "
+                    "newest (a steady turn, not a zigzag's swing), s; 0: no such test")
     steady_tol_deg_s: float = Field(
         0.6, ge=0, le=20, description="see steady_s: the fits' spread allowed, deg/s (or steady_tol_frac)")
     steady_tol_frac: float = Field(
         0.5, ge=0, le=10, description="see steady_s: the fits' spread allowed, as a share of the newest's rate")
     hold_tgo_s: float = Field(
         15.0, ge=0, le=600,
-        description="while the camera closes on the estimate fast enough to reach it within this time (range / "
-                    "closing speed: a dive), s, hold the turn rate found before (the dive's box-centre errors turn "
-                    "the estimate's course: at 1651 s70 the fit went from 1.2 to 2.4 deg/s in the last 10 s, the "
-                    "ship's 1.5); released when the time to go exceeds twice this; 0: never hold")
+        description="while the camera closes on the estimate within this time to go (a dive), hold the turn rate "
+                    "found before; released above twice this, s; 0: never hold")
     max_lag_s: float = Field(
         10.0, gt=0, le=120,
         description="a lag correction implying a filter lag over this (velocity: lag x acceleration, position: "
@@ -825,18 +516,14 @@ class ImmConfig(StrictModel):
 
     switch_time_s: float = Field(
         60.0, gt=0, le=3600,
-        description="mean time the ship keeps to one mode, steady or manoeuvring, s: the Markov chain's switching "
-                    "rate (the chance of a switch over dt is 1 - exp(-dt / this)); the same order as "
-                    "ct_ukf.turn_rate_time_s, how long a turn lasts")
+        description="mean time the ship keeps to one mode, steady or manoeuvring, s: the Markov chain's switch "
+                    "probability over dt is 1 - exp(-dt / this)")
     prior_manoeuvring: float = Field(
         0.5, gt=0, lt=1, description="probability of the manoeuvring model at the start")
     hold_with_manoeuvre: bool = Field(
         True,
         description="while the CT-UKF holds its manoeuvre (ct_ukf.hold_tgo_s: the dive), hold the models' "
-                    "probabilities as the loiter left them: the dive's box-centre errors, which the hold keeps out "
-                    "of the turn rate, would otherwise reweigh the models (envelope, tuning seed 1642: on ships "
-                    "turning steadily the steady model's probability rose from 0.2-0.4 to 0.6-1 in the last "
-                    "80-150 m, and the estimate, now the UKF's trailing one, went 1 m -> 4 m off)")
+                    "probabilities as the loiter left them")
     min_probability: float = Field(
         1e-3, gt=0, lt=0.5,
         description="each model's probability is kept at least this: a model that has lost for minutes still "
@@ -847,16 +534,16 @@ class ImmConfig(StrictModel):
 
 
 class InitialPath(StrictModel):
-    airspeed_m_s: float = Field(22.0, gt=0, le=60)
+    airspeed_m_s: float = Field(22.0, gt=0, le=60, description="airspeed along the initial path, m/s")
     waypoints_enu_m: list[Vec3] = Field(default_factory=list,
                                         description="empty: hold the initial heading and altitude")
-    max_bank_deg: float = Field(35.0, gt=0, le=60)
+    max_bank_deg: float = Field(35.0, gt=0, le=60, description="largest bank the path follower commands, deg")
 
 
 class Orbit(StrictModel):
     """Circle around the estimated target after lock (a stand-in until the NMPC loiter)."""
 
-    airspeed_m_s: float = Field(22.0, gt=0, le=60)
+    airspeed_m_s: float = Field(22.0, gt=0, le=60, description="airspeed on the circle, m/s")
     radius_m: float = Field(500.0, gt=20, le=5000, description="the paper's R")
     altitude_m: float = Field(500.0, gt=20, le=5000, description="the paper's H")
     clockwise: bool = Field(False, description="seen from above")
@@ -912,15 +599,14 @@ class NmpcConfig(StrictModel):
     airspeed_max_m_s: float = Field(28.0, gt=0.0, le=80.0, description="V_U upper bound")
     roll_rate_max_rad_s: float = Field(0.8, gt=0.0, le=10.0, description="|u_p| bound, rad/s")
     pitch_rate_max_rad_s: float = Field(0.3, gt=0.0, le=10.0, description="|u_q| bound, rad/s")
-    cbf: CbfConfig = Field(default_factory=CbfConfig)
+    cbf: CbfConfig = Field(default_factory=CbfConfig, description="the self-occlusion control barrier function")
     integrator: Literal["euler", "rk4"] = Field("euler", description="discretisation of the model")
     solver: Literal["rti_hpipm", "rti_qrqp", "fatrop", "ipopt"] = Field(
         "rti_hpipm", description="rti_*: SQP real-time iterations with that QP solver (hpipm: structured "
                                  "interior point; qrqp: comparison only); fatrop/ipopt: the full NLP to convergence")
     hessian: Literal["exact", "gauss_newton"] = Field(
-        "exact", description="rti_*: QP Hessian. exact: Hessian of the Lagrangian (gap multipliers from the adjoint "
-                             "recursion), eigenvalues clipped per stage block; gauss_newton: 2 J_r^T J_r (oscillates "
-                             "on large radius errors, kept for comparison)")
+        "exact", description="rti_*: the QP Hessian: exact (the Lagrangian's, eigenvalues clipped per stage block) "
+                             "or gauss_newton (2 J_r^T J_r; oscillates on large radius errors, for comparison)")
     hessian_min_eig: float = Field(1e-6, gt=0.0, le=1.0,
                                    description="exact Hessian: eigenvalue floor of each stage block")
     rti_iterations: int = Field(1, ge=1, le=50, description="SQP iterations per call once warm")
@@ -935,15 +621,13 @@ class NmpcConfig(StrictModel):
                                             "not applied, and a cold start stops at 90 % of it")
     budget: Literal["iterations", "wall_clock"] = Field(
         "iterations",
-        description="iterations: a solve is bounded by its iteration counts only, so a run is the same on any "
-                    "machine and load (same seed, same log); wall_clock: also by max_solve_ms of the wall "
-                    "clock, as on a real-time mission computer (results then depend on the machine)")
+        description="iterations: a solve is bounded by its iteration counts only (a run is the same on any machine); "
+                    "wall_clock: also by max_solve_ms of wall time (results then depend on the machine)")
     solve_ahead_s: float = Field(
         0.067, ge=0.0, le=1.0,
-        description="start each solve after a loiter's first this long before its time (at the first flight-"
-                    "software tick within it), from the state and target predicted to its time, and apply it at "
-                    "its time: a mission computer's compute delay, in which the solve runs in a process of its "
-                    "own while the loop goes on (controllers.nmpc_worker); 0: solve at its time, in place")
+        description="start each solve this long before its time, from the state predicted to it, in a process of its "
+                    "own, and apply it at its time (a mission computer's compute delay), s; 0: solve at its time, in "
+                    "place")
     reset_after_failures: int = Field(3, ge=1, le=1000,
                                       description="consecutive failed solves before the warm start is rebuilt")
     pitch_from: Literal["attitude", "flight_path"] = Field(
@@ -969,53 +653,33 @@ class SwitchConfig(StrictModel):
     altitude_tol_m: float = Field(15.0, gt=0, le=1000, description="|altitude - H| below this")
     dwell_s: float = Field(10.0, ge=0, le=3600, description="both tolerances held this long (counted from Phase "
                                                              "2's start on, alongside min_loiter_s)")
-    min_loiter_s: float = Field(20.0, ge=0, le=3600, description="no switch before this long in Phase 2")
+    min_loiter_s: float = Field(30.0, ge=0, le=3600, description="no switch before this long in Phase 2")
     approach_window_deg: float | None = Field(
         5.0, gt=0, le=180,
         description="bearing from the UAV to the target within this of the approach bearing plus the lead "
                     "(none: any bearing)")
-    approach_from: Literal["impact_heading", "closing", "closing_after_go_around"] = Field(
+    approach_from: Literal["impact_heading", "closing_after_go_around"] = Field(
         "closing_after_go_around",
-        description="the approach bearing: the impact heading; 'closing': the bearing the UAV closes on the "
-                    "target in at the end of the dive (its ground velocity along the impact direction at "
-                    "bpng.airspeed_m_s in the estimated wind, less the target's estimated velocity: "
-                    "controllers.phases.approach_bearing_deg), which a fast ship and a steep dive into a headwind "
-                    "turn tens of degrees from the impact heading; 'closing_after_go_around': the impact heading "
-                    "until a dive has gone round (go_around_m), the closing bearing after it")
+        description="the approach bearing: the impact heading; 'closing_after_go_around': the impact heading until "
+                    "a dive has gone round (go_around_m), then the bearing the UAV closes on the target in")
     go_around_m: float | None = Field(
         100.0, gt=0, le=10000,
-        description="in Phase 3, back to Phase 2 (the loiter, the switch armed again) once the range to the "
-                    "target estimate has grown this much above its least since the switch: a dive that is not "
-                    "closing (a steep dive after a fast ship into a headwind can hold its range, then lose it); "
-                    "none: never")
+        description="in Phase 3, back to the loiter (the switch armed again) once the range to the estimate has "
+                    "grown this much above its least since the switch (a dive that is not closing), m; none: never")
     go_around_stall_s: float | None = Field(
         20.0, gt=0, le=3600,
-        description="... and once this long after the switch the range has not fallen go_around_stall_fraction "
-                    "below its value at the switch: a dive that holds its range (from a wide ring round a fast "
-                    "ship the law's bias can cancel its PN term while the idle dive steepens; in the envelope "
-                    "such a dive met the sea 400 m short); none: never. Every dive that closed in the envelope "
-                    "and the terminal sweep had closed 4 % or more of its range by 20 s")
+        description="... or once this long after the switch the range has not fallen go_around_stall_fraction below "
+                    "its value at the switch (a dive that holds its range), s; none: never")
     go_around_stall_fraction: float = Field(
         0.02, ge=0, lt=1, description="see go_around_stall_s")
     approach_lead_deg: float = Field(
         5.0, ge=-90, le=90,
-        description="the window's centre lies this far past the approach bearing in the direction the UAV goes "
-                    "round the target: the middle of the terminal law's capture region from a loiter, which "
-                    "reaches from 10 deg before to 20 deg past (controllers/bpng.py)")
+        description="the window's centre lies this far past the approach bearing, in the direction the UAV goes "
+                    "round the target (the middle of the terminal law's capture region), deg")
     entry_depression_margin_deg: float | None = Field(
         5.0, ge=0, le=60,
-        description="the dive's entry ring: when the switch condition first holds and the ship lies more than "
-                    "|bpng.impact_flight_path_deg| - this below the horizon seen from the ring (atan(H / R)), "
-                    "the loiter first descends on its ring (at entry_descent_rate_m_s) to the altitude that "
-                    "puts it there, R tan(|theta_f| - this), no lower than entry_min_altitude_m, and the "
-                    "switch is then armed at that altitude. A dive that must end shallower than its line of "
-                    "sight at the switch dives under it and pulls up, the ship over the nose, where a belly "
-                    "camera's view is cut by the airframe; the margin starts the dive a little shallower than "
-                    "the path it must end on, so that it steepens with the ship below the wing (5: the ship "
-                    "seen >= 99 % after lock in 189 of the envelope's 192 runs at 1629-1631, against 184 at "
-                    "0). The loiter block must take an altitude offset "
-                    "(nmpc, orbit). None: the dive starts from the ring at H (the paper's; "
-                    "scenarios/paper_mission.yaml keeps it)")
+        description="the dive's entry ring: descend on the ring until the ship lies |impact_flight_path_deg| - this "
+                    "below the horizon, then arm the switch, deg; none: dive from the ring at H (the paper's)")
     entry_min_altitude_m: float = Field(
         100.0, gt=10, le=5000, description="see entry_depression_margin_deg: the entry ring's lowest altitude, m")
     entry_descent_rate_m_s: float = Field(
@@ -1040,18 +704,12 @@ class BpngConfig(StrictModel):
     min_tgo_s: float = Field(0.5, gt=0, le=10, description="floor of t_go = |r| / |V_p|, s")
     bias_angle_cap_deg: float | None = Field(
         90.0, gt=0, le=180,
-        description="the bias term uses min(theta, this): the law is the small-angle optimum, and from a "
-                    "loiter round a fast ship the UAV can start more than 90 deg off V_f, where the bias "
-                    "(away from V_f) cancels the PN term and the UAV flies straight on, away from the ship; "
-                    "none: the paper's law as printed")
+        description="the bias term uses min(theta, this), deg: far off V_f the small-angle law's bias cancels its PN "
+                    "term; none: the paper's law as printed")
     capture_turn_deg_s: float | None = Field(
         3.0, gt=0, le=90,
-        description="the capture guard: far off the nose (the look angle above capture_look_deg) the command turns "
-                    "the velocity toward the line of sight at this rate or more, the bias term scaled down where "
-                    "it would take that away, deg/s. From a loiter round a fast ship the LOS rate can be so low "
-                    "that the bias cancels PN and the UAV flies on beside the ship, its range held (the "
-                    "go-around's stall; docs/ENVELOPE.md, 'Dives that hold their range'); none: the "
-                    "law as printed")
+        description="capture guard: with the look angle above capture_look_deg, turn the velocity toward the line of "
+                    "sight at this rate or more (the bias scaled down), deg/s; none: the law as printed")
     capture_look_deg: float = Field(
         60.0, ge=0, le=180, description="the look angle (between the velocity and the line of sight) above which "
                                         "the capture guard acts, deg")
@@ -1059,29 +717,20 @@ class BpngConfig(StrictModel):
         25.0, gt=0, le=200, description="cap on |u| (direction kept), m/s^2, gravity not included")
     aim_at_contact: bool = Field(
         True,
-        description="steer to where the approach along the impact direction first meets the ship's outline "
-                    "(controllers.target_model), not to the aim point inside it: the law's impact angle is "
-                    "reached where the path ends, and a dive meets the deck, side or superstructure up to "
-                    "~20 m before the aim point")
+        description="steer to where the approach along the impact direction first meets the ship's outline, not to "
+                    "the aim point inside it (a dive meets the deck or superstructure first)")
     contact_standoff_m: float = Field(
         6.0, ge=0, le=100,
-        description="the steering point lies this much farther out than the outline's surface (the last "
-                    "metres are flown in the endgame, along the impact direction through the aim point). The "
-                    "outline is the class's: a ship unlike it may be met metres sooner (a ferry's long "
-                    "superstructure 13 m above the aim point, 0.4 s before it, where the class's outline says "
-                    "4 m), and the law, which meets the angles in its last second, is then cut short; 6 m "
-                    "finishes it that much sooner. scenarios/paper_mission.yaml, whose ship is the class, "
-                    "keeps 2")
+        description="the steering point lies this much farther out than the class outline's surface, m (a ship "
+                    "unlike the class may be met sooner; the law then finishes that much earlier)")
     endgame_tgo_s: float = Field(
         0.4, ge=0, le=10,
-        description="below this time to go to the steering point the law's command is dropped (see "
-                    "endgame_align_s): there the LOS rate of a near hit grows without bound, and chasing it "
-                    "(saturated, the bank swinging) undid up to 5 deg of the impact angle in the last 0.3 s")
+        description="below this time to go to the steering point the law's command is dropped for the endgame "
+                    "(endgame_align_s): a near hit's LOS rate grows without bound there, s; 0: no endgame")
     endgame_align_s: float | None = Field(
         0.25, gt=0, le=10,
-        description="in the endgame, turn the velocity onto V_f with this time constant (a = |V| theta / "
-                    "this, toward V_f, perpendicular to V, capped): the law is still finishing its turn "
-                    "there; none: fly straight (gravity compensated)")
+        description="in the endgame, turn the velocity onto V_f with this time constant (a = |V| theta / this, "
+                    "perpendicular to V, capped), s; none: fly straight (gravity compensated)")
     aim_height_m: float = Field(
         0.0, ge=-50, le=100,
         description="height of the aim point above the given target position (the ship's waterline "
@@ -1137,21 +786,23 @@ class IbvsConfig(StrictModel):
 
 
 class RatesStep(StrictModel):
-    airspeed_m_s: float = Field(gt=0, le=60)
-    roll_rate_deg_s: float = Field(0.0, ge=-200, le=200)
-    pitch_rate_deg_s: float = Field(0.0, ge=-200, le=200)
+    airspeed_m_s: float = Field(gt=0, le=60, description="commanded airspeed, m/s")
+    roll_rate_deg_s: float = Field(0.0, ge=-200, le=200, description="commanded roll rate, deg/s")
+    pitch_rate_deg_s: float = Field(0.0, ge=-200, le=200, description="commanded pitch rate, deg/s")
 
 
 class AccelStep(StrictModel):
-    airspeed_m_s: float = Field(gt=0, le=60)
+    airspeed_m_s: float = Field(gt=0, le=60, description="commanded airspeed, m/s")
     right_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, to the right")
     up_m_s2: float = Field(0.0, ge=-60, le=60, description="perpendicular to the velocity, upward")
 
 
 class ScriptStep(StrictModel):
     t_s: float = Field(ge=0, description="time from which this command holds")
-    rates: RatesStep | None = None
-    accel: AccelStep | None = None
+    rates: RatesStep | None = Field(None, description="roll and pitch rates and airspeed from this step on (give "
+                                                      "rates or accel)")
+    accel: AccelStep | None = Field(None, description="acceleration and airspeed from this step on (give rates or "
+                                                      "accel)")
     gimbal_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
         None, description="pan, tilt the gimbal is driven to from this step on (none: keep the last)")
 
@@ -1236,11 +887,8 @@ class AirframeConfig(StrictModel):
     0.12 m, high wing of 2.4 m span and 0.146 m chord, tails 0.6 m aft)."""
 
     enabled: bool = Field(
-        True, description="predict the ship's box with the part the airframe hides removed when the detected "
-                          "box touches the airframe's silhouette (the box-centre correction then subtracts the "
-                          "centre of the box a detector sees); false: the whole ship's box, as if the airframe "
-                          "were not there (the default before 2026-11-26). docs/ENVELOPE.md, \"The airframe's cut, "
-                          "predicted\"")
+        True, description="predict the ship's box with the part the airframe hides removed when the detected box "
+                          "touches the airframe's silhouette; false: the whole ship's box")
     fuselage_x_m: list[float] = Field(
         default_factory=lambda: [-0.65, 0.35], min_length=2, max_length=2,
         description="the fuselage cylinder's tail and nose, body x (forward), m")
@@ -1251,29 +899,16 @@ class AirframeConfig(StrictModel):
                                  [-0.6925, -0.5511, -0.004, 0.004, -0.2721, -0.05]],  # vertical tail
         max_length=32, description="the other parts as boxes [x0, x1, y0, y1, z0, z1], body FRD, m")
     cut_only_if_closer: bool = Field(
-        True, description="a heading's predicted box is cut only when the detected box's size is nearer the cut "
-                          "box's than the whole one's (a box next to the airframe's silhouette but whole keeps "
-                          "the whole prediction); false: cut whenever the detected box touches the silhouette")
+        True, description="cut a heading's predicted box only when the detected box's size is nearer the cut box's "
+                          "than the whole one's; false: cut whenever the detected box touches the silhouette")
     align_iterations: int = Field(
         3, ge=0, le=20,
-        description="cut the ship where the detection puts it in the image, not where the estimate does (see "
-                    "align_when): the predicted ship is moved onto the detected box by the sides its own outline "
-                    "makes, the move corrected this many times (AirframeShadow.aligned_cut), and its cut is "
-                    "moved back; 0: always cut at the estimate's position")
-    align_when: Literal["always", "course_unknown"] = Field(
-        "course_unknown",
-        description="align_iterations apply only while the ship's course is unknown (its heading from the box "
-                    "shapes alone, which can be tens of degrees off a turning ship's, and the cut at the "
-                    "estimate with it), or always (at envelope seeds 1618, 1621-1623 the cut at the estimate did "
-                    "as well or better once the course was known: within 3 m / 3 deg 42 -> 40 at 1621, 43 -> 40 "
-                    "at 1623)")
+        description="while the course is unknown, cut the ship where the detection puts it in the image (the "
+                    "predicted ship moved onto the box, the move corrected this many times); 0: cut at the estimate")
     max_hidden_share: float = Field(
         0.5, ge=0, le=1,
-        description="while the ship's course is unknown, skip a detection (reason airframe_hidden) when the "
-                    "airframe hides more than this share of the ship's pixels in the cut prediction (weighted "
-                    "over the headings): the fix then rests on the cut, and the cut on the box shapes' heading, "
-                    "which can be tens of degrees off; 1: never. With the course known too, at envelope seed "
-                    "1618 within 3 m / 3 deg went 49 -> 42 (a coast instead of a fix)")
+        description="while the course is unknown, skip a detection (airframe_hidden) when the airframe hides more "
+                    "than this share of the ship in the cut prediction; 1: never")
     grid_cells: int = Field(
         96, ge=8, le=1000, description="a box the airframe may cut is drawn on a grid of this many cells "
                                        "across its longer side (the cut's resolution)")
@@ -1291,18 +926,20 @@ class AirframeConfig(StrictModel):
 
 class Controllers(StrictModel):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
-    navigation: NavigationConfig = Field(default_factory=NavigationConfig)
-    script: list[ScriptStep] = Field(default_factory=list)
-    initial_path: InitialPath = Field(default_factory=InitialPath)
-    acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig)
+    navigation: NavigationConfig = Field(default_factory=NavigationConfig,
+        description="how GNSS fixes become the flight software's position")
+    script: list[ScriptStep] = Field(default_factory=list,
+        description="kind script: the timed commands flown in order")
+    initial_path: InitialPath = Field(default_factory=InitialPath,
+        description="Phase 1: the path flown until the lock")
+    acquisition: AcquisitionConfig = Field(default_factory=AcquisitionConfig,
+        description="the gimbal's raster search and the lock")
     estimator: EstimatorChoice = Field(
         default_factory=lambda: BlockChoice(use="ukf"),
-        description="the target estimator: ukf (the paper's, settings in ukf), ct_ukf (the UKF with the ship's "
-                    "turn rate and along-track acceleration, for manoeuvring ships: settings in ct_ukf and ukf), "
-                    "imm (the two mixed by the probability that the ship manoeuvres: settings in imm, ct_ukf "
-                    "and ukf), or a user's class")
+        description="the target estimator: ukf (the paper's; settings in ukf), ct_ukf (turn rate and along-track "
+                    "acceleration; ct_ukf), imm (the two mixed; imm), or a user's class 'module:Class'")
     after_lock: LoiterChoice = Field(
-        default_factory=lambda: BlockChoice(use="path"),
+        default_factory=lambda: BlockChoice(use="nmpc"),
         description="after the lock: keep the initial path (path), or loiter (Phase 2) with a circle follower "
                     "(orbit) or the paper's NMPC (nmpc), or a user's class")
     terminal: TerminalChoice = Field(
@@ -1311,19 +948,29 @@ class Controllers(StrictModel):
     pointing: PointingChoice = Field(
         default_factory=lambda: BlockChoice(use="ibvs"),
         description="the gimbal's tracking law: ibvs (the paper's, settings in ibvs), or a user's class")
-    orbit: Orbit = Field(default_factory=Orbit)
-    nmpc: NmpcConfig = Field(default_factory=NmpcConfig)
-    switch: SwitchConfig = Field(default_factory=lambda: SwitchConfig(enabled=False))
-    reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig)
-    bpng: BpngConfig = Field(default_factory=BpngConfig)
-    ukf: UkfConfig = Field(default_factory=UkfConfig)
-    ct_ukf: CtUkfConfig = Field(default_factory=CtUkfConfig)
-    imm: ImmConfig = Field(default_factory=ImmConfig)
-    turn_from_course: TurnFromCourseConfig = Field(default_factory=TurnFromCourseConfig)
-    target_model: ShipModelConfig = Field(default_factory=ShipModelConfig)
-    detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig)
-    ibvs: IbvsConfig = Field(default_factory=IbvsConfig)
-    airframe: AirframeConfig = Field(default_factory=AirframeConfig)
+    orbit: Orbit = Field(default_factory=Orbit, description="after_lock orbit: the circle follower's settings")
+    nmpc: NmpcConfig = Field(default_factory=NmpcConfig,
+        description="after_lock nmpc: the Phase 2 loiter's settings and solver")
+    switch: SwitchConfig = Field(default_factory=SwitchConfig, description="the Phase 2 -> 3 switch and the go-around")
+    reacquire: ReacquireConfig = Field(default_factory=ReacquireConfig,
+        description="what the gimbal does when the target is lost after the lock")
+    bpng: BpngConfig = Field(default_factory=BpngConfig,
+        description="terminal bpng: the Phase 3 guidance law's settings")
+    ukf: UkfConfig = Field(default_factory=UkfConfig,
+        description="the target UKF's noise, gate and start (also read by ct_ukf and imm)")
+    ct_ukf: CtUkfConfig = Field(default_factory=CtUkfConfig,
+        description="estimator ct_ukf: the manoeuvring-ship model's settings")
+    imm: ImmConfig = Field(default_factory=ImmConfig, description="estimator imm: the model mixing's settings")
+    turn_from_course: TurnFromCourseConfig = Field(default_factory=TurnFromCourseConfig,
+        description="a turn or zigzag found in a constant-velocity estimate's course")
+    target_model: ShipModelConfig = Field(default_factory=ShipModelConfig,
+        description="the ship class the perception corrects box centres with")
+    detection_gate: DetectionGateConfig = Field(default_factory=DetectionGateConfig,
+        description="which detections the estimator does not use")
+    ibvs: IbvsConfig = Field(default_factory=IbvsConfig,
+        description="pointing ibvs: the gimbal tracking law's settings")
+    airframe: AirframeConfig = Field(default_factory=AirframeConfig,
+        description="the UAV's own airframe, as the perception models it")
 
     @model_validator(mode="after")
     def _script(self):

@@ -18,13 +18,6 @@ estimates; this block decides when it starts and restarts:
   course), the state handed on has the filter's lag in the turn taken out
   and the turn rate (carried along the turn or the fitted course between
   fused detections), while ``/fsw/estimate`` stays the filter's own.
-* with ``slow_coast_speed_m_s`` (``detection_gate.slow_coast_velocity:
-  dive_start``) a slow ship's coast after the dive's last fused box (the
-  perception's gate says ``too_close``) flies the velocity estimated when the
-  dive began, from the position of that last box, when both velocities are
-  under that speed and no turn is handed on: the dive's changing view moves a
-  constant-velocity filter's velocity by its box-centre errors, which for a
-  slow ship are most of what it says. ``/fsw/estimate`` stays the filter's own.
 
 Its output, :class:`~controllers.messages.TargetState`, is what the phase
 logic, the guidance and the pointing read. It writes ``/fsw/estimate``, one
@@ -57,8 +50,7 @@ _NAN3.setflags(write=False)
 class Estimation:
     """The estimator's life cycle (see the module text); ``filter`` implements ``TargetEstimator``."""
 
-    def __init__(self, filter, min_range_m: float, lock_detections: int, recorder, turn_from_course=None,
-                 slow_coast_speed_m_s: float | None = None):
+    def __init__(self, filter, min_range_m: float, lock_detections: int, recorder, turn_from_course=None):
         self.filter = filter
         self.label = getattr(filter, "label", type(filter).__name__)  # its name in the events
         self.min_range_m = float(min_range_m)
@@ -70,12 +62,6 @@ class Estimation:
         # a turning ship through a constant-velocity filter (controllers.course_turn); None: off
         self._turn_cfg = turn_from_course if turn_from_course is not None and turn_from_course.enabled else None
         self.turn = CourseTurn(self._turn_cfg) if self._turn_cfg is not None else None
-        # a slow ship's coast on the dive's starting velocity (the module text); None: off
-        self.slow_coast_speed_m_s = slow_coast_speed_m_s
-        self.in_dive = False  # the terminal phase (the mission says so)
-        self._dive_vel: np.ndarray | None = None  # the estimated velocity when the dive began
-        self._fused: tuple[float, np.ndarray, np.ndarray] | None = None  # (t_s, pos, vel): the dive's last fused
-        self._coasting = False  # in the dive, the gate has said too_close since that last fused box
 
     # ------------------------------------------------------------------ steps
     def predict(self, nav: Measurements, cam: CameraMotion | None) -> TargetState:
@@ -97,8 +83,6 @@ class Estimation:
             result = FusionResult(not why, FusionReason.NOT_INITIALISED if why else FusionReason.INITIALISED)
         elif self._running:
             if fix.new:
-                if getattr(self.filter, "los_velocity_hold", None) is not None:  # (ukf.dive_los_velocity_hold_m)
-                    self.filter.los_velocity_hold = self.in_dive and (self.turn is None or self.turn.state(t) is None)
                 result = self.filter.update(fix, cam) if fix.use else FusionResult(False, fix.reason)
             if not self.filter.initialised:
                 self._record.event(f"{self.label} reset itself at t = {t:.2f} s (non-finite prediction: the "
@@ -108,10 +92,6 @@ class Estimation:
         est = self.filter.estimate() if self.filter.initialised else None
         if self.turn is not None and est is not None and result is not None and result.used:
             self._observe_turn(t, cam, est)
-        if self.slow_coast_speed_m_s is not None and self.in_dive and est is not None:
-            self._follow_coast(t, fix, result, est)
-        elif not self.in_dive and self._dive_vel is not None:  # a dive given up (a go-around): a new start
-            self._dive_vel, self._fused, self._coasting = None, None, False
         state, est = self._state(t, est)
         if est is not None:
             self._last = (t, np.array(est.pos_enu_m, float), np.array(est.vel_enu_m_s, float))
@@ -133,28 +113,6 @@ class Estimation:
                           closing_time_s(pos, vel, cam.pos_enu_m, cam.vel_enu_m_s))
         if self.turn.fitted:
             self._record.log(topics.FSW_COURSE_TURN, self.turn.status(t_s))
-
-    def _follow_coast(self, t_s: float, fix: DetectionFix, result: FusionResult | None, est) -> None:
-        """In the dive: keep its starting velocity, its last fused box's estimate, and whether the gate has
-        said too_close since (the coast)."""
-        if self._dive_vel is None:
-            self._dive_vel = np.array(est.vel_enu_m_s, dtype=float)
-        if result is not None and result.used:
-            self._fused = (t_s, np.array(est.pos_enu_m, dtype=float), np.array(est.vel_enu_m_s, dtype=float))
-            self._coasting = False
-        elif fix.new and fix.reason == FusionReason.TOO_CLOSE and self._fused is not None:
-            self._coasting = True
-
-    def _slow_coast(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """(position, velocity) of a slow ship's coast on the dive's starting velocity, or None when either
-        velocity is at or over ``slow_coast_speed_m_s``. Called only while ``_coasting`` (which only the
-        option sets, with the dive's starting velocity and its last fused box kept)."""
-        t0, pos, vel = self._fused
-        v = self._dive_vel
-        slow = self.slow_coast_speed_m_s
-        if math.hypot(float(v[0]), float(v[1])) >= slow or math.hypot(float(vel[0]), float(vel[1])) >= slow:
-            return None
-        return pos + v * (t_s - t0), v.copy()
 
     def _initialise(self, fix: DetectionFix, cam: CameraMotion) -> str:
         """Start the filter from this detection; '' when it did, else why not (e.g. the ray misses the sea)."""
@@ -198,9 +156,6 @@ class Estimation:
             turned = self.turn.state(t_s) if self.turn is not None else None
             if turned is not None:  # the turn found in the course, the filter's lag taken out
                 return TargetState(t_s, "estimator", turned[0], turned[1], vel_std, h, turned[2], 0.0), est
-            coast = self._slow_coast(t_s) if self._coasting else None
-            if coast is not None and turn == 0.0 and accel == 0.0:  # a slow ship's coast (the module text)
-                return TargetState(t_s, "estimator", coast[0], coast[1], vel_std, h), est
             return TargetState(t_s, "estimator", est.pos_enu_m, est.vel_enu_m_s, vel_std, h,
                                turn if math.isfinite(turn) else 0.0, accel if math.isfinite(accel) else 0.0), est
         if self._last is not None:

@@ -74,9 +74,7 @@ class FlightSoftware:
         self.perception = Perception(cfg.detection_gate, cfg.acquisition, ship, camera, self.recorder, airframe)
         self.estimation = Estimation(build_block("estimator", cfg.estimator, ctx, search_dirs),
                                      cfg.detection_gate.min_range_m, cfg.acquisition.lock_detections, self.recorder,
-                                     cfg.turn_from_course,
-                                     cfg.detection_gate.moving_speed_m_s
-                                     if cfg.detection_gate.slow_coast_velocity == "dive_start" else None)
+                                     cfg.turn_from_course)
         loiter = None if cfg.after_lock.use == NO_LOITER else \
             build_block("after_lock", cfg.after_lock, ctx, search_dirs)
         self.guidance = {1: PathGuidance(cfg.initial_path, initial_cfg), 2: loiter,
@@ -119,10 +117,7 @@ class FlightSoftware:
                                                      sw.entry_descent_rate_m_s * (nav.t_s - self.phase.descent_t_s))
         for e in events:
             self.recorder.event(e)
-        self.perception.in_dive = self.estimation.in_dive = self.phase.phase == 3
         if events and self.phase.phase == 3:
-            if self.cfg.target_model.size_fit.hold_in_terminal:
-                self.perception.ship.hold_size()
             self.perception.ship.layout.hold()  # (the airframe starts to cut the boxes)
 
     def _output(self, nav: Measurements, est: TargetState, fix: DetectionFix, guide: Guidance,

@@ -18,15 +18,7 @@ Per tick (:meth:`Perception.step`):
 4. **Box-centre correction** (``controllers.target_model``): the box centre
    moves over the ship with the view; the offset the ship model predicts for
    the estimated position and the plausible headings is removed, so that the
-   fix is the image of the point the estimator tracks. ``target_model.anchor``
-   (``box_centre`` by default) can take the fix, or half of it, from the
-   hull's lower edge instead: the detected centre moved down half the box's
-   height, less the hull alone's predicted lower-edge offset (and its centre's
-   across), everywhere or only in the dive (:attr:`Perception.in_dive`, set by
-   the mission). The superstructure, the part of a ship the class is likeliest
-   to have wrong, shows up and inward of the hull's near lower edge, so that
-   fix does not see it; it leans on the hull's size (the size fit's) instead. A
-   box off in size (it may be cut at that edge) keeps the centre's fix. The
+   fix is the image of the point the estimator tracks. The
    predicted boxes are those a detector would see: clipped to the image, and
    (``controllers.airframe``, unless ``airframe.enabled`` is false), when the
    detected box touches the UAV's own airframe in the image, less the part of
@@ -41,10 +33,7 @@ Per tick (:meth:`Perception.step`):
    height no plausible heading explains (``size_mismatch``) is, with
    ``size_mismatch_action: own_headings`` (the default), corrected over the
    headings all round whose size explains it, their spread as its pixel
-   variance, plus (``own_headings_doubt``, an option) the square of that correction's
-   distance from the estimated headings' (the box says the heading is wrong
-   or the ship is not the class, and only the first makes its own headings
-   right; the log says ``overridden: size_mismatch``), when it cannot be
+   variance (the log says ``overridden: size_mismatch``), when it cannot be
    a box cut short: when it is larger than every estimated heading's (no
    occlusion does that; a turn the estimate missed does), or when the
    estimated ship lies ``airframe_clearance_deg`` below the wing plane (the
@@ -70,9 +59,7 @@ Per tick (:meth:`Perception.step`):
    boxes disagree with the class (a ship of another size or layout than
    configured, not a passing occlusion): from then on the size gate compares
    a box with the class's prediction scaled by the median size ratio of the
-   last boxes (``class_mismatch_action: rescale``, the default: a box cut
-   short still stands out), or skips none for its size (``no_size_gate``), or
-   the fix is also the plain box centre (``plain_centre``), until the share
+   last boxes (a box cut short still stands out), until the share
    falls to ``class_mismatch_exit``. Both switches are events in the log.
 
 What the estimator then does with the fix (fused, innovation gate, ...) is
@@ -155,7 +142,6 @@ class Perception:
         self._size_off_count = 0  # how many of it are off
         self._ratios: deque = deque(maxlen=gate.class_check_window)  # log(detected / predicted) box sides
         self.class_mismatch = False
-        self.in_dive = False  # the terminal phase (the mission says so): target_model.anchor hull_bottom_in_dive
         self._taken_off_size = False  # this box, off in size, is used all the same (own headings, or its doubt)
         # camera poses (t, r_c, R_enu_from_cam) of the last ticks, for detections that arrive late
         self._poses: deque = deque(maxlen=max(2, int(math.ceil(gate.max_propagation_s / _POSE_MATCH_S)) + 2))
@@ -265,155 +251,109 @@ class Perception:
         (else None); the predicted boxes are then cut as the
         airframe would cut them (:meth:`_cut_by_airframe`; a box clear of it was not cut, whatever the
         prediction says)."""
-        tm = self.ship.cfg
         u, v = self._to_now(nav, cam, prior)
-        if not tm.enabled:
+        if not self.ship.cfg.enabled:
             return u, v, _NAN4, "", _ZERO22, _NO_NOISE
-        g = self.cfg
-        why, doubt = "", _NO_NOISE
         b = np.asarray(nav.det_bbox_px, dtype=float)
         courses, weights, course = self.ship.headings_and_course(prior.vel_enu_m_s, prior.vel_std_m_s)
-        single = len(courses) == 1
-        boxes, pred, own_used, est = None, _NAN4, False, None
-        known = course is not None or self.ship.shape.ready
+        headings = (courses, weights, len(courses) == 1, None)
         if fit_size:
-            restarts = self.ship.size.restarts
-            self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s,
-                                 course is not None)
-            if self.ship.size.restarts != restarts:
-                sf = self.ship.cfg.size_fit
-                self._event(f"perception: the size fit turned {sf.max_gated_in_a_row} boxes away in a row and "
-                            + ("keeps the class's outline from now on (size_fit.class_after_restarts)"
-                               if self.ship.size.retired else "starts again from the class's outline"))
+            self._learn_size(nav, cam, ref, courses, weights, b)
         scale = self.ship.size.scale
-        if known and np.isfinite(b).all():
+        pred, why, doubt, own_used = _NAN4, "", _NO_NOISE, False
+        if (course is not None or self.ship.shape.ready) and np.isfinite(b).all():
             boxes = predicted_boxes_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                        courses, scale)
             hidden = None
             if cut_by_airframe is not None and np.isfinite(boxes).all():
                 boxes, hidden = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, boxes,
                                                       course_known=course is not None)
-            if not np.isfinite(boxes).all():
-                boxes = None
-            else:
-                best = int(weights.argmax())
-                pred = boxes[best].copy()
+            if np.isfinite(boxes).all():
+                pred = boxes[int(weights.argmax())].copy()
                 if hidden is not None and course is None and \
                         float(np.dot(weights, hidden)) > self.airframe.cfg.max_hidden_share:
                     # the course unknown and so much of the ship behind the airframe that the cut decides
                     # the fix, and the cut the box shapes' heading (tens of degrees off a turning ship's):
                     # the estimate coasts
                     return u, v, pred, FusionReason.AIRFRAME_HIDDEN, _ZERO22, _NO_NOISE
-                sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
-                det = np.array([b[2] - b[0], b[3] - b[1]])
-                mismatch = self._no_heading_fits(det, sizes)
-                clear = self._clear_of_airframe(nav, cam, prior)
-                if clear or not g.class_check_clear_only:  # a box the airframe may have cut is no size evidence
-                    ratio = det / np.maximum(sizes[best], 1.0)
-                    if (ratio > 0.0).all():
-                        self._ratios.append(np.log(ratio))
-                    self._class_check(nav.t_s, mismatch)
-                off_against = None  # the predicted sizes the box is off, when the size gate turns it away
-                if self.class_mismatch:  # the class does not fit
-                    if g.class_mismatch_action == "plain_centre":
-                        return u, v, pred, "", _ZERO22, _NO_NOISE
-                    if g.class_mismatch_action == "rescale" and self._ratios:
-                        # the size gate against the class scaled by the boxes' typical size ratio: a box cut
-                        # short (occlusion) still stands out from the ship's usual boxes
-                        scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
-                        if self._no_heading_fits(det, scaled):
-                            off_against = scaled
-                elif mismatch:
-                    off_against = sizes
-                if off_against is not None:
-                    own = None
-                    if g.size_mismatch_action == "own_headings" and (
-                            self._larger_than_any(det, off_against) or clear):
-                        own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
-                    if own is not None:
-                        if g.own_headings_doubt:  # the estimate's correction, for the doubt below
-                            est = (courses, weights, single, boxes)
-                        courses, weights, boxes = own
-                        self._taken_off_size = own_used = True
-                        single, pred = False, boxes[int(weights.argmax())].copy()
-                        why = FusionReason.SIZE_MISMATCH
-                    elif g.size_mismatch_action == "deweight" or (
-                            g.size_mismatch_action == "own_headings" and g.maybe_cut_action == "deweight"):
-                        self._taken_off_size = True
-                        why, doubt = FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best])
-                    else:  # skip, or own_headings with no heading of its own
-                        return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
-        off = self._offset(cam, ref, prior, (courses, weights, single, boxes), scale, spread=True)
+                judged = self._size_checked(nav, cam, prior, ref, b, scale, (*headings[:3], boxes), pred)
+                if judged is None:  # skip, or own_headings with no heading of its own
+                    return u, v, pred, FusionReason.SIZE_MISMATCH, _ZERO22, _NO_NOISE
+                headings, pred, why, doubt, own_used = judged
+        off = self._offset(cam, ref, prior, headings, scale, spread=True)
         if off is None:
             return u, v, pred, why, _ZERO22, doubt
         off, spread = off
-        q = self._other_layout_share()
-        if q > 0.0:  # layout_fit.correction: mixture, the other layout's offset at its probability
-            other = self.ship.outlines[0] if self.ship.layout.other_end else self.ship.outlines[1]
-            ob = None
-            if boxes is not None:
-                ob = predicted_boxes_px(other, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, scale)
-                if cut_by_airframe is not None and np.isfinite(ob).all():
-                    ob, _ = self._cut_by_airframe(nav, cam, cut_by_airframe, ref, courses, scale, ob,
-                                                  course_known=course is not None, outline=other)
-                if not np.isfinite(ob).all():
-                    ob = None
-            if boxes is None or ob is not None:
-                o2 = self._offset(cam, ref, prior, (courses, weights, single, ob), scale, spread=True, outline=other)
-                if o2 is not None:
-                    d = o2[0] - off
-                    off = off + q * d
-                    spread = (1.0 - q) * spread + q * o2[1] + q * (1.0 - q) * np.outer(d, d)
         if own_used:  # the box's own headings: their spread is noise
             doubt = (float(spread[0, 0]), float(spread[1, 1]))
-            off_est = None if est is None else self._offset(cam, ref, prior, est, scale)
-            if off_est is not None:  # and how far the estimated headings' correction lies (one of the two is wrong)
-                d = off_est - off
-                doubt = (doubt[0] + float(d[0]) ** 2, doubt[1] + float(d[1]) ** 2)
-        u_fix, v_fix = float(u) - float(off[0]), float(v) - float(off[1])
-        share = self._bottom_share()
-        if share > 0.0 and not why and np.isfinite(b).all():  # (a box off in size may be cut at its lower edge)
-            hull = self.ship.outline.hull
-            hb = predicted_boxes_px(hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, scale)
-            ob = box_centre_offset_px(hull, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref, None,
-                                      prior.tracked_height_m, boxes_px=hb, courses_weights=(courses, weights),
-                                      scale=scale, anchor="bottom")  # (None when a box is not finite)
-            if ob is not None:  # the hull's centre across, its lower edge down (ShipModelConfig.anchor)
-                u_b = float(u) - float(ob[0])
-                v_b = float(v) + 0.5 * (float(b[3]) - float(b[1])) - float(ob[1])
-                u_fix += share * (u_b - u_fix)
-                v_fix += share * (v_b - v_fix)
-        return u_fix, v_fix, pred, why, spread, doubt
+        return float(u) - float(off[0]), float(v) - float(off[1]), pred, why, spread, doubt
 
-    def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False,
-                outline=None):
+    def _learn_size(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, weights,
+                    b: np.ndarray) -> None:
+        """Hand the box to the size fit (:meth:`~controllers.target_model.ShipModel.learn_size`); an event
+        when the fit starts again."""
+        restarts = self.ship.size.restarts
+        self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
+        if self.ship.size.restarts != restarts:
+            sf = self.ship.cfg.size_fit
+            self._event(f"perception: the size fit turned {sf.max_gated_in_a_row} boxes away in a row and "
+                        + ("keeps the class's outline from now on (size_fit.class_after_restarts)"
+                           if self.ship.size.retired else "starts again from the class's outline"))
+
+    def _size_checked(self, nav: Measurements, cam: CameraMotion, prior: TargetState, ref: np.ndarray,
+                      b: np.ndarray, scale, headings, pred: np.ndarray):
+        """The class check and the size gate on the box ``b`` against the predicted boxes of ``headings`` =
+        (courses, weights, one course, boxes): (the headings to correct over, the predicted box, the reason,
+        the centre's doubt, the box's own headings used) or None when the box is skipped."""
+        g = self.cfg
+        boxes, best = headings[3], int(headings[1].argmax())
+        sizes = boxes[:, 2:4] - boxes[:, 0:2]  # (width, height) of each heading's box
+        det = np.array([b[2] - b[0], b[3] - b[1]])
+        mismatch = self._no_heading_fits(det, sizes)
+        clear = self._clear_of_airframe(nav, cam, prior)
+        if clear or not g.class_check_clear_only:  # a box the airframe may have cut is no size evidence
+            ratio = det / np.maximum(sizes[best], 1.0)
+            if (ratio > 0.0).all():
+                self._ratios.append(np.log(ratio))
+            self._class_check(nav.t_s, mismatch)
+        off_against = self._off_against(det, sizes, mismatch)
+        if off_against is None:
+            return headings, pred, "", _NO_NOISE, False
+        own = None
+        if g.size_mismatch_action == "own_headings" and (self._larger_than_any(det, off_against) or clear):
+            own = self._own_headings(cam, ref, det, scale, off_against[best] / np.maximum(sizes[best], 1.0))
+        if own is not None:
+            courses, weights, boxes = own
+            self._taken_off_size = True
+            return ((courses, weights, False, boxes), boxes[int(weights.argmax())].copy(), FusionReason.SIZE_MISMATCH,
+                    _NO_NOISE, True)
+        if g.size_mismatch_action == "deweight" or (
+                g.size_mismatch_action == "own_headings" and g.maybe_cut_action == "deweight"):
+            self._taken_off_size = True
+            return headings, pred, FusionReason.SIZE_MISMATCH, _centre_doubt(det, off_against[best]), False
+        return None
+
+    def _off_against(self, det: np.ndarray, sizes: np.ndarray, mismatch: bool) -> np.ndarray | None:
+        """The predicted sizes the box ``det`` is off when the size gate turns it away, else None: the
+        headings' ``sizes`` while the boxes fit the class, else (the class check) those sizes scaled by the
+        boxes' typical size ratio (a box cut short, by an occlusion, still stands out from the ship's usual
+        boxes)."""
+        if not self.class_mismatch:
+            return sizes if mismatch else None
+        if not self._ratios:
+            return None
+        scaled = sizes * np.exp(np.median(np.array(self._ratios), axis=0))[None, :]
+        return scaled if self._no_heading_fits(det, scaled) else None
+
+    def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False):
         """:func:`~controllers.target_model.box_centre_offset_px` over ``headings`` = (courses, weights, one
-        course, their predicted boxes): the one course's offset, or the weighted mean over the courses.
-        ``outline``: the layout's (None: the one in use)."""
+        course, their predicted boxes): the one course's offset, or the weighted mean over the courses."""
         courses, weights, single, boxes = headings
-        outline = self.ship.outline if outline is None else outline
-        return box_centre_offset_px(outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
+        return box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
                                     float(courses[0]) if single else None, prior.tracked_height_m,
                                     self.ship.cfg.headings_when_unknown, boxes_px=boxes,
                                     courses_weights=None if single else (courses, weights), spread=spread,
                                     scale=scale)
-
-    def _other_layout_share(self) -> float:
-        """The weight of the layout not in use in the correction (``layout_fit.correction: mixture``; its
-        probability, :class:`~controllers.target_model.LayoutFit`), 0 with ``switch`` or the fit off."""
-        lf = self.ship.cfg.layout_fit
-        if lf.correction != "mixture" or not lf.enabled:
-            return 0.0
-        p = self.ship.layout.p_other_end
-        q = 1.0 - p if self.ship.layout.other_end else p
-        return q if math.isfinite(q) and 0.0 < q < 1.0 else 0.0
-
-    def _bottom_share(self) -> float:
-        """The share of the hull's lower edge in the fix (``target_model.anchor``), the rest the box centre's."""
-        a = self.ship.cfg.anchor
-        if a == "box_centre" or (a.endswith("_in_dive") and not self.in_dive):
-            return 0.0
-        return 0.5 if a.startswith("blend") else 1.0
 
     def _larger_than_any(self, det: np.ndarray, sizes: np.ndarray) -> bool:
         """The box (width, height) ``det`` is wider or taller than every one of the predicted ``sizes`` (n, 2)
@@ -424,24 +364,23 @@ class Perception:
         return bool(det[0] > big[0] * (1.0 + tol) + tol_px or det[1] > big[1] * (1.0 + tol) + tol_px)
 
     def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
-                         scale, boxes: np.ndarray, course_known: bool = True,
-                         outline=None) -> tuple[np.ndarray, np.ndarray]:
+                         scale, boxes: np.ndarray, course_known: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
         the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see; the share
         of each course's ship hidden, 0 where its box is kept whole). A course whose whole ship the airframe
         would hide keeps its box (the detection says the ship is not where that predicts). ``R``: the
-        camera's rotation in the body frame. ``outline``: the layout's (None: the one in use)."""
+        camera's rotation in the body frame."""
         air = self.airframe
         b = np.asarray(nav.det_bbox_px, dtype=float)
         det = b[2:4] - b[0:2]  # the detected box's width and height
-        aligned = air.cfg.align_iterations > 0 and (air.cfg.align_when == "always" or not course_known)
+        aligned = air.cfg.align_iterations > 0 and not course_known
         # (aligned: AirframeShadow.cut checks each moved box itself)
         union = np.concatenate([boxes[:, 0:2].min(axis=0), boxes[:, 2:4].max(axis=0)])
         hidden = np.zeros(len(boxes))
         if not aligned and not air.may_hide(R, union):  # (no ray of any course's box can meet the airframe)
             return boxes, hidden
         out = boxes.copy()
-        outline = self.ship.outline if outline is None else outline
+        outline = self.ship.outline
         several = len(boxes) > 1
         for i, course in enumerate(np.asarray(courses, dtype=float).tolist()):
             if several and not aligned and not air.may_hide(R, boxes[i]):
@@ -551,9 +490,8 @@ class Perception:
         share = self._size_off_count / len(window)
         if not self.class_mismatch and share >= g.class_mismatch_enter:
             self.class_mismatch = True
-            self.ship.shape.doubt_class()
             self._event(f"perception: {100 * share:.0f} % of the last {len(window)} boxes are off the ship class's "
-                        f"size: {g.class_mismatch_action.replace('_', ' ')} from now on")
+                        "size: rescale from now on")
         elif self.class_mismatch and share <= g.class_mismatch_exit:
             self.class_mismatch = False
             self._event(f"perception: the boxes fit the ship class again ({100 * share:.0f} % off): class "

@@ -117,8 +117,7 @@ def window_bearing_deg(state: PhaseState, sw: SwitchConfig, bpng: BpngConfig, wi
     """The approach bearing the switch's window is centred on (before the lead) this tick: the impact heading,
     or the closing bearing (:func:`approach_bearing_deg`) as ``sw.approach_from`` asks (by default once a
     dive has gone round), in Phase 2 with a target estimate."""
-    closing = sw.approach_from == "closing" or (sw.approach_from == "closing_after_go_around"
-                                                 and state.go_arounds > 0)
+    closing = sw.approach_from == "closing_after_go_around" and state.go_arounds > 0
     if not (closing and state.phase == 2 and target.known):
         return float(bpng.impact_heading_deg)
     return approach_bearing_deg(bpng.impact_heading_deg, bpng.impact_flight_path_deg, bpng.airspeed_m_s,

@@ -44,12 +44,6 @@ class's (the fit then finds the sizes that best explain the boxes with the
 class's layout).
 ``enabled: false`` turns it off (the paper's plain point model).
 
-``anchor`` other than ``box_centre`` (``controllers.perception``) takes the
-fix, or half of it, from a part that leaves the superstructure out: the hull
-alone (:attr:`ShipOutline.hull`) predicts the box's lower edge
-(``anchor="bottom"`` of :func:`box_centre_offset_px`), the hull's near
-waterline from any view from above, whatever stands on the deck.
-
 The outline is a priori knowledge of the target class (the paper's ship is a
 known 55 x 25 x 25 m vessel), configured with the flight software; nothing
 here reads the simulated ship (DESIGN.md section 1).
@@ -57,13 +51,12 @@ here reads the simulated ship (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.special
 
-from controllers.camera_model import PinholeCamera, depth_on_plane, translation_rates
+from controllers.camera_model import PinholeCamera, depth_on_plane
 from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
 from controllers.ukf import ground_from_pixel_jacobian
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
@@ -133,8 +126,6 @@ class ShipOutline:
         self.parts = [slice(0, n_hull)] + [slice(k, k + 8) for k in range(n_hull, len(pts), 8)]
         #: the outline without the mast (a detector's box often leaves a thin mast out: the size fit's boxes)
         self.body = _Points(self.points_ship_m[:n_body])
-        #: the hull alone (the same for both layouts: the correction's ``hull_bottom`` anchor)
-        self.hull = _Points(self.points_ship_m[:n_hull])
         #: boxes (lo, hi) a dive can strike: the hull (its bow taper ignored) and the solid superstructure
         #: (the mast is too thin to count on)
         self.solid_boxes_ship_m = [(np.array([-0.5 * L, -0.5 * W, 0.0]), np.array([0.5 * L, 0.5 * W, hh]))] + [
@@ -310,10 +301,6 @@ def predicted_boxes_px_numpy(outline: ShipOutline, camera: PinholeCamera, cam_po
     return box
 
 
-_CENTRE_FIT_MAX_DRIFT_M = 25.0  # the centre fit starts again when its reference is this far from the estimate
-_CENTRE_FIT_SIZE_TOL, _CENTRE_FIT_SIZE_TOL_PX = 0.1, 6.0  # a box the centre fit takes: its size explained thus
-
-
 class ShapeHeading:
     """The ship's heading from the sizes of its detected boxes: a posterior over ``cfg.headings`` headings.
 
@@ -332,24 +319,8 @@ class ShapeHeading:
     would have turned the ship to since the first (to the grid's step); the posterior over the heading now
     sums them, weighted by their likelihoods and a prior (``turn_rate_prior_zero`` on rate 0). ``memory_s``
     fades the evidence meanwhile, so that a turn no one rate fits (a zigzag) is weighed at the headings of
-    late. With ``turn_rate_switch_s`` the rates form a Markov chain (an interacting multiple model's mixing,
-    :meth:`_switch_rates`): between boxes each rate hands a share of its evidence to the rates' prior mixture,
-    so a zigzag, whose rate swings through the grid, is followed rate by rate, and the evidence for where its
-    bow is turns with it. Once the course is followed again, the likeliest rate's evidence is kept alone (the
+    late. Once the course is followed again, the likeliest rate's evidence is kept alone (the
     course turns the posterior from then on).
-
-    The sizes barely tell a still ship's bow from its stern (a box is much the same either way round). Where
-    its centre falls does (``centre_fit``, off by default): each heading's predicted box centre, at the
-    estimate, is off the detected one by the ship's shift from a fixed reference seen through this view
-    (``J delta``, ``J`` the image Jacobian of a horizontal shift of the ship; ``delta`` common to all headings)
-    plus that heading's misfit. A least-squares fit of one ``delta`` per heading over the recent detections
-    (exponential forgetting, ``centre_fit_time_s``; only boxes whose size some heading explains) leaves the
-    misfit's sum of squares, ``SS_h``; as the view closes or turns the right heading's centres follow the
-    detected ones and the wrong ones' drift off (a superstructure aft pulls the box centre aft more and more
-    as the range closes: the reverse heading predicts the pull the other way). While the course is unknown
-    (:meth:`headings`) each heading and its opposite share their weight by their size weights times
-    ``exp(-k SS_h / (2 s^2))`` (``k`` tempers the count to ``centre_fit_max_effective`` detections; ``s`` is
-    ``centre_fit_sigma_px``, or the best heading's own misfit per box side when larger).
 
     The box sizes come from the flight software's coarse outline (a priori knowledge of the ship class) and
     its own estimate of where the ship is: nothing here reads the simulated ship.
@@ -357,16 +328,6 @@ class ShapeHeading:
 
     def __init__(self, cfg: ShapeHeadingConfig, outline: ShipOutline, camera: PinholeCamera, edge_px: float = 6.0):
         self.cfg = cfg
-        # the centre fit's normal equations (forgetting): sum J^T J (2 x 2, shared), per heading sum J^T y (n, 2)
-        # and sum |y|^2 (n), y = detected - predicted box centre; the count of detections in them
-        self._c_jj = np.zeros((2, 2))
-        self._c_jy = np.zeros((cfg.headings, 2))
-        self._c_yy = np.zeros(cfg.headings)
-        self._c_n = 0.0
-        self._c_ref = np.zeros(3)  # the fixed reference the fitted shift is from
-        # the boxes have disagreed with the ship class (the perception's class check): the centre fit, which
-        # reads the class's layout into where the box centres fall, is off from then on (doubt_class())
-        self.class_doubted = False
         self.outline = outline
         self.camera = camera
         self.edge_px = float(edge_px)
@@ -412,7 +373,26 @@ class ShapeHeading:
         pred = predicted_boxes_px(self.outline, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, self.courses_enu_rad)
         if not np.all(np.isfinite(pred)):
             return False
-        dt = t_s - self._last_t if self.updates else 0.0
+        self._move_on(t_s - self._last_t if self.updates else 0.0, course_enu_rad)
+        size_det = np.array([b[2] - b[0], b[3] - b[1]])
+        size_now = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
+        for j, (lb, shift) in enumerate(zip(self._loglik_bias, self._shifts())):
+            # rate j's evidence at grid index k is for the heading courses[k + shift] now (to the grid's step)
+            size_pred = size_now if not shift else np.roll(size_now, -shift, axis=0)
+            scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
+            r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
+            lb -= np.log1p(0.5 * r * r)
+            self._loglik_rate[j] = np.sum(_logsumexp_rows(lb), axis=1)
+        self.updates += 1
+        self._count += 1.0
+        self._weights = self._axis = None
+        self._last_t = t_s
+        return True
+
+    def _move_on(self, dt: float, course_enu_rad: float | None) -> None:
+        """Before a box ``dt`` after the last one: turn the posterior with the followed course, or (the course
+        not followed) turn each rate's evidence by its rate and fade it (``memory_s``)."""
+        c = self.cfg
         if c.follow_course:
             if course_enu_rad is not None and self._course is not None and self.updates:
                 most = math.radians(c.follow_course_max_rate_deg_s) * dt
@@ -430,99 +410,6 @@ class ShapeHeading:
                 for lb in self._loglik_bias:
                     lb *= f
                 self._count *= f
-            if c.turn_rate_switch_s is not None and len(self._rot) > 1:
-                self._switch_rates(1.0 - math.exp(-dt / c.turn_rate_switch_s))
-        size_det = np.array([b[2] - b[0], b[3] - b[1]])
-        size_now = np.stack([pred[:, 2] - pred[:, 0], pred[:, 3] - pred[:, 1]], axis=1)
-        for j, (lb, shift) in enumerate(zip(self._loglik_bias, self._shifts())):
-            # rate j's evidence at grid index k is for the heading courses[k + shift] now (to the grid's step)
-            size_pred = size_now if not shift else np.roll(size_now, -shift, axis=0)
-            scaled = size_pred[None, :, :] * (1.0 + self.size_biases)[:, None, None]  # (biases, headings, 2)
-            if j == 0 and c.centre_fit and np.any(np.all(
-                    np.abs(size_det[None, None, :] - scaled)
-                    <= _CENTRE_FIT_SIZE_TOL * scaled + _CENTRE_FIT_SIZE_TOL_PX, axis=2)):
-                # (a box no heading's size explains, at any of the size biases, is cut short or wrong: its
-                # centre would mislead the fit)
-                self._add_centres(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, b, pred)
-            r = (size_det[None, None, :] - scaled) / (c.sigma_fraction * scaled + c.sigma_px)
-            lb -= np.log1p(0.5 * r * r)
-            self._loglik_rate[j] = np.sum(_logsumexp_rows(lb), axis=1)
-        self.updates += 1
-        self._count += 1.0
-        self._weights = self._axis = None
-        self._last_t = t_s
-        return True
-
-    def _switch_rates(self, p: float) -> None:
-        """The rates' Markov step (``turn_rate_switch_s``): each rate keeps ``1 - p`` of its own evidence and
-        takes ``p`` of the rates' prior mixture, heading by heading now, for each size bias and box side
-        (the sides' bias grids are kept apart as in the likelihood; mixing them apart is the approximation).
-        Every rate's evidence is then at the headings now, bar each rate's turn of less than a grid step, which
-        is kept for the next step. The rates' marginals (``_loglik_rate``) are left to :meth:`update`, which
-        works them out again once the box is in."""
-        step = 2.0 * math.pi / self.cfg.headings
-        shifts = self._shifts()
-        a = np.stack([lb if not s else np.roll(lb, s, axis=1) for lb, s in zip(self._loglik_bias, shifts)])
-        top = a.max(axis=0)
-        prob = np.exp(a - top)  # (rates, biases, headings, 2), each element's largest 1
-        prior = np.exp(self._log_rate_prior)
-        mixture = np.tensordot(prior / prior.sum(), prob, axes=1)
-        a = np.log((1.0 - p) * prob + p * mixture) + top
-        self._loglik_bias = list(a)
-        self._rot -= np.asarray(shifts, dtype=float) * step
-
-    def _add_centres(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box: np.ndarray,
-                     pred: np.ndarray) -> None:
-        """Add one detection to the centre fit (forgetting what came before by its age).
-
-        The shift fitted is the ship's from a fixed reference (``_c_ref``, the estimate when the fit started),
-        not from the estimate itself: the estimate follows the corrected box centres, and so the headings the
-        correction weighs, which made whichever end it leaned to fit well. Nor from a point moved with the
-        estimated velocity: a still ship's estimate drifts by up to 0.8 m/s in a dive, the same way. A ship
-        that moves while its course is unknown (under ``min_speed_for_course_m_s``) moves a few metres in the
-        forgetting time; the fit starts again when the reference is ``_CENTRE_FIT_MAX_DRIFT_M`` from the
-        estimate."""
-        ref = np.asarray(ref_enu_m, dtype=float)
-        R_ce = np.asarray(R_enu_from_cam, dtype=float).T
-        q = R_ce @ (ref - np.asarray(cam_pos_enu_m, dtype=float))
-        if not q[2] > 1.0:
-            return
-        if not self._c_n or float(np.hypot(*(self._c_ref[:2] - ref[:2]))) > _CENTRE_FIT_MAX_DRIFT_M:
-            self._c_jj[:] = 0.0  # (re)start from the estimate
-            self._c_jy[:] = 0.0
-            self._c_yy[:] = 0.0
-            self._c_n = 0.0
-            self._c_ref = ref.copy()
-        cam = self.camera
-        # d(u, v)/d(east, north) of the ship's image: the feature rates of a unit east and north shift (the camera
-        # frame's columns of R_ce), in pixels
-        rates = translation_rates(q[0] / q[2], q[1] / q[2], q[2], R_ce[:, :2].T)  # (east, north) x (x1, x2)
-        jac = (rates * np.array([cam.fx, cam.fy])).T
-        if self._c_n:
-            f = math.exp(-max(t_s - self._last_t, 0.0) / self.cfg.centre_fit_time_s)
-            self._c_jj *= f
-            self._c_jy *= f
-            self._c_yy *= f
-            self._c_n *= f
-        # the predicted boxes are at the estimate; moved to the reference to first order (J (ref - estimate))
-        y = (0.5 * np.array([box[0] + box[2], box[1] + box[3]]) - jac @ (self._c_ref[:2] - ref[:2]))[None, :] \
-            - 0.5 * (pred[:, 0:2] + pred[:, 2:4])
-        self._c_jj += jac.T @ jac
-        self._c_jy += y @ jac
-        self._c_yy += np.einsum("ij,ij->i", y, y)
-        self._c_n += 1.0
-
-    def centre_misfit_px2(self) -> np.ndarray | None:
-        """Each heading's centre-fit sum of squares ``SS_h`` (px^2) after its own best shift, or None before the
-        fit can tell (fewer than three detections in it, or no shift fitted)."""
-        if self._c_n < 3.0:
-            return None
-        try:
-            inv = np.linalg.inv(self._c_jj)
-        except np.linalg.LinAlgError:
-            return None
-        ss = self._c_yy - np.einsum("ij,jk,ik->i", self._c_jy, inv, self._c_jy)
-        return np.maximum(ss, 0.0) if np.all(np.isfinite(ss)) else None
 
     def turn(self, angle_rad: float) -> None:
         """The ship has turned by ``angle_rad`` (counter-clockwise): the evidence for each heading moves to the
@@ -611,30 +498,10 @@ class ShapeHeading:
         return None if w is None else _plausible(self.courses_enu_rad, w, self.cfg.min_weight)
 
     def heading_weights(self) -> np.ndarray | None:
-        """The weight of every heading of the grid (:attr:`courses_enu_rad`; the sizes' weights with the
-        centres sharing each heading's and its opposite's between them), or None while not ready."""
+        """The weight of every heading of the grid (:attr:`courses_enu_rad`), or None while not ready."""
         if not self.ready:
             return None
-        w = self.weights()
-        c = self.cfg
-        ss = self.centre_misfit_px2() if c.centre_fit and not self.class_doubted else None
-        n = len(w)
-        if ss is not None and n % 2 == 0:
-            # the centres only share each heading's and its opposite's weight between them (bow or stern);
-            # the axis stays the sizes'
-            k = min(1.0, c.centre_fit_max_effective / self._c_n)
-            # the misfit's scale: the configured one, or the best heading's own per box side when larger (a ship
-            # unlike the class fits no heading well; its headings' misfits then differ by its unlike parts)
-            s2 = max(c.centre_fit_sigma_px ** 2, float(ss.min()) / max(2.0 * self._c_n - 2.0, 1.0))
-            # each heading's centre likelihood over its opposite's, exp(-k (SS_h - SS_opp) / (2 s2)), times their
-            # size weights' ratio: this heading's share of the pair
-            d = 0.5 * k * (ss - np.roll(ss, n // 2)) / s2
-            wo = np.roll(w, n // 2)
-            pair = w + wo
-            share = w / np.maximum(w + wo * np.exp(np.clip(d, -50.0, 50.0)), 1e-300)
-            w = pair * share
-            w = w / w.sum()
-        return w
+        return self.weights()
 
     def reverse_log_ratio(self, course_enu_rad: float) -> float | None:
         """The log of the posterior's weight at the reverse of ``course_enu_rad`` over its weight at it (the
@@ -648,12 +515,6 @@ class ShapeHeading:
         lw = _logsumexp_rows(self._tempered_log_weights())  # (headings,): the posterior's log, unnormalised
         k = int(round(float(course_enu_rad) / (2.0 * math.pi / n))) % n
         return float(lw[(k + n // 2) % n] - lw[k])
-
-    def doubt_class(self) -> None:
-        """The boxes disagree with the ship class: its layout no longer tells the bow from the stern by where
-        the box centres fall (the centre fit is off for the rest of the flight; a ship of another layout, a
-        bridge forward, fits the class's reverse heading and would be turned end for end)."""
-        self.class_doubted = True
 
     def off_axis_rad(self, course_enu_rad: float) -> float:
         """How far (rad, 0..pi/2) a direction lies off the ship's axis."""
@@ -751,7 +612,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
                          ref_enu_m, course_enu_rad: float | None, tracked_height_m: float,
                          headings_when_unknown: int = 8, boxes_px: np.ndarray | None = None,
                          courses_weights: tuple[np.ndarray, np.ndarray] | None = None,
-                         spread: bool = False, scale=None, anchor: str = "centre"):
+                         spread: bool = False, scale=None):
     """Expected (detected box centre - image of the tracked point), pixels (2,), or None.
 
     ``ref_enu_m``: the ship's waterline centre (estimated); the tracked point is
@@ -766,8 +627,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
     instead of ``headings_when_unknown`` equal ones. ``spread``: return ``(offset, cov)`` instead, ``cov``
     (2 x 2, px^2) the weighted covariance of the offsets over those headings: how far the averaged offset can
     be from the one of the ship's real heading (zeros for one known course); ``None`` as above. ``scale``:
-    the outline's (:func:`predicted_box_px`; ``boxes_px`` must be of it too). ``anchor``: ``"centre"``, or
-    ``"bottom"``: the v offset is of the box's lower edge (``v_max``), the u offset still of its centre.
+    the outline's (:func:`predicted_box_px`; ``boxes_px`` must be of it too).
     """
     R_ce = np.asarray(R_enu_from_cam, dtype=float).T
     ref = np.asarray(ref_enu_m, dtype=float)
@@ -784,8 +644,6 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if not np.isfinite(b).all():
             return None
         offsets = 0.5 * (b[:, 0:2] + b[:, 2:4]) - uv_tracked  # (n, 2): the box centres' (u, v) offsets
-        if anchor == "bottom":
-            offsets[:, 1] = b[:, 3] - uv_tracked[1]
         mean = _weighted_mean_rows(offsets, weights)
         return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean
     if course_enu_rad is not None:
@@ -801,7 +659,7 @@ def box_centre_offset_px(outline: ShipOutline, camera: PinholeCamera, cam_pos_en
         if box is None or not np.all(np.isfinite(box)):
             return None
         offsets.append((0.5 * (box[0] + box[2]) - uv_tracked[0],
-                        (box[3] if anchor == "bottom" else 0.5 * (box[1] + box[3])) - uv_tracked[1]))
+                        0.5 * (box[1] + box[3]) - uv_tracked[1]))
     offsets = np.array(offsets)
     mean = _weighted_mean_rows(offsets, weights)
     return (mean, _weighted_cov_rows(offsets, weights, mean)) if spread else mean
@@ -828,8 +686,7 @@ class ShipSize:
     fit is off, not the boxes); a box's noise grows as it gets small (``box_px_std`` over its size); a box at
     the image's edge is not taken at all. After ``min_updates`` boxes the perception corrects with the fitted
     outline (:attr:`scale`, the whole outline scaled); before, with the class's, and for good once the fit has
-    started again ``class_after_restarts`` times (:attr:`retired`). With ``hold_in_terminal``
-    the fit is held from the terminal dive on (:meth:`hold`).
+    started again ``class_after_restarts`` times (:attr:`retired`).
 
     The ranges come from the estimate, so the fitted scale carries its range error (1 % at 500 m for 5 m):
     harmless to the correction, which scales with it.
@@ -849,18 +706,13 @@ class ShipSize:
         self.gated = 0
         self.gated_in_a_row = 0
         self.restarts = 0
-        self.held = False  # learning stopped (:meth:`hold`)
         self.retired = False  # the class's outline for good (class_after_restarts)
         self._last_t = -math.inf  # when the last box was weighed
 
-    def hold(self) -> None:
-        """Stop learning: from now on boxes leave the fit as it is (``hold_in_terminal``)."""
-        self.held = True
-
     def takes_boxes(self, t_s: float | None = None) -> bool:
-        """Whether a box at ``t_s`` would be looked at: the fit on, not held nor retired, ``1 / rate_hz`` after
-        the last box weighed (None: no rate limit)."""
-        return self.cfg.enabled and not self.held and not self.retired and (
+        """Whether a box at ``t_s`` would be looked at: the fit on, not retired, ``1 / rate_hz`` after the last
+        box weighed (None: no rate limit)."""
+        return self.cfg.enabled and not self.retired and (
             t_s is None or t_s - self._last_t >= 1.0 / self.cfg.rate_hz - 1e-9)
 
     @property
@@ -876,12 +728,10 @@ class ShipSize:
         return np.exp(self.x[:3])
 
     def update(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course_enu_rad: float, box_px,
-               t_s: float | None = None, heading_std_rad: float = 0.0) -> bool:
+               t_s: float | None = None) -> bool:
         """Take one detected box seen with the ship on ``course_enu_rad`` (its waterline centre ``ref_enu_m``,
         estimated) at ``t_s`` (None: whenever, no rate limit); True when it moved the fit. A box within
-        ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at. ``heading_std_rad`` > 0: the
-        heading is that unsure, and the log sizes predicted at it +- that angle (their mean square difference
-        from the heading's own) are added to the box's noise."""
+        ``1 / rate_hz`` of the last one weighed (taken or gated) is not looked at."""
         cfg = self.cfg
         if not self.takes_boxes(t_s):
             return False
@@ -918,13 +768,6 @@ class ShipSize:
         y = np.log(det_size) - logs[0] - mast
         Rn = np.diag(cfg.box_std ** 2 + (cfg.box_px_std / det_size) ** 2)  # small far boxes weigh less
         Rn = Rn + np.outer(mast, mast)
-        if heading_std_rad > 0.0:
-            for c in (course_enu_rad - heading_std_rad, course_enu_rad + heading_std_rad):
-                pb = predicted_box_px(self.outline.body, cam, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, c, s0)
-                if pb is None or not np.isfinite(pb).all() or (pb[2:4] - pb[0:2] <= 1.0).any():
-                    return False
-                d = np.log((pb[2:4] - pb[0:2]) * cfg.box_scale) - logs[0]
-                Rn = Rn + 0.5 * np.outer(d, d)
         S = J @ self.P @ J.T + Rn
         det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         if not det > 0.0:
@@ -1011,8 +854,8 @@ class LayoutFit:
         None when unknown, or a function that gives it, asked only when the box is taken; its estimated
         velocity ``vel_enu``, which the ground points are taken relative to; ``shape_log_ratio``: a function of
         the course that gives the box shapes' log ratio for the other end, or None, :meth:`ShapeHeading.
-        reverse_log_ratio`); ``scale``: the sizes both layouts are projected at (None: the class's), or a tuple
-        of each layout's own (``size_fit.per_layout``); True when the layout in use changed."""
+        reverse_log_ratio`); ``scale``: the sizes both layouts are projected at (None: the class's); True when
+        the layout in use changed."""
         c = self.cfg
         if vel_enu is not None and c.enabled and not self.held:
             ve, vn = float(vel_enu[0]), float(vel_enu[1])
@@ -1039,16 +882,15 @@ class LayoutFit:
         det = np.array([b[2] - b[0], b[3] - b[1]])
         plane = float(ref[2]) + tracked_height_m
         points = []
-        scales = scale if isinstance(scale, tuple) else (scale, scale)
-        for outline, sc in zip(self.outlines, scales):
-            box = predicted_boxes_px(outline, cam, cam_pos, R, ref, [course_enu_rad], sc)[0]
+        for outline in self.outlines:
+            box = predicted_boxes_px(outline, cam, cam_pos, R, ref, [course_enu_rad], scale)[0]
             if not np.isfinite(box).all():
                 return False
             size = box[2:4] - box[0:2]
             if not ((det > 0.5 * size).all() and (det < 2.0 * size).all()):  # cut short, or not this ship
                 return False
             off = box_centre_offset_px(outline, cam, cam_pos, R, ref, course_enu_rad, tracked_height_m,
-                                       boxes_px=box[None, :], scale=sc)
+                                       boxes_px=box[None, :], scale=scale)
             if off is None:
                 return False
             g = self._ground(uv - off, cam_pos, R, plane)
@@ -1159,72 +1001,6 @@ class LayoutFit:
         return False
 
 
-#: the box-centre track's residuals are correlated over about this long (the superstructure's pull turns with the
-#: view): its slope's std counts one independent point per this many seconds of the window
-_TRACK_CORRELATION_S = 10.0
-
-
-class BoxCentreTrack:
-    """The ship's horizontal velocity from its plain detected box centres: each box's centre ray met with the
-    tracked point's plane, a straight line fitted to those ground points over the last ``window_s`` (least
-    squares, east and north apart). Nothing the box-centre correction does moves these points, so the end of
-    the ship it picks cannot feed back into this velocity as it does into the estimator's. The superstructure
-    pulls the box centre toward itself by an amount that turns with the view, which over a loiter lap largely
-    cancels; the slope's std counts one independent point per ``_TRACK_CORRELATION_S`` of the window."""
-
-    def __init__(self, camera: PinholeCamera, window_s: float, rate_hz: float = 3.0, edge_px: float = 6.0):
-        self.camera = camera
-        self.window_s = float(window_s)
-        self.rate_hz = float(rate_hz)
-        self.edge_px = float(edge_px)
-        self._t: list[float] = []
-        self._g: list[tuple[float, float]] = []
-        self._lo = 0  # the window's first point
-        self._fit: tuple[np.ndarray, float] | None = None  # velocity()'s answer until the next point
-
-    def observe(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, plane_z: float, box_px) -> bool:
-        """Take one box (u0, v0, u1, v1) unless too soon after the last one, at the image border or not
-        finite, or its centre's ray does not come down to the plane; True when taken."""
-        if self._t and t_s - self._t[-1] < 1.0 / self.rate_hz - 1e-9:
-            return False
-        b = np.asarray(box_px, dtype=float)
-        if not np.isfinite(b).all() or _at_image_border(self.camera, b, self.edge_px):
-            return False
-        hit = _pixel_on_plane(self.camera, 0.5 * (b[0:2] + b[2:4]), np.asarray(cam_pos_enu_m, dtype=float),
-                              np.asarray(R_enu_from_cam, dtype=float), float(plane_z))
-        if hit is None:
-            return False
-        g = hit[0]
-        self._fit = None
-        self._t.append(float(t_s))
-        self._g.append((float(g[0]), float(g[1])))
-        while self._t[self._lo] < t_s - self.window_s:
-            self._lo += 1
-        if self._lo > 4096:  # drop what left the window
-            del self._t[:self._lo], self._g[:self._lo]
-            self._lo = 0
-        return True
-
-    def velocity(self) -> tuple[np.ndarray, float] | None:
-        """(east, north velocity, m/s; its std, m/s: the larger axis's) of the line through the window's points,
-        or None before the window holds half of ``window_s`` and 20 points. (Worked out once per point taken:
-        the correction asks for it with every detection.)"""
-        if self._fit is not None:
-            return self._fit
-        t = np.asarray(self._t[self._lo:])
-        if len(t) < 20 or t[-1] - t[0] < 0.5 * self.window_s:
-            return None
-        g = np.asarray(self._g[self._lo:])
-        tau = t - t.mean()
-        stt = float(tau @ tau)
-        v = (tau @ (g - g.mean(axis=0))) / stt
-        r = g - g.mean(axis=0) - np.outer(tau, v)
-        n_eff = min(float(len(t)), (t[-1] - t[0]) / _TRACK_CORRELATION_S)
-        var = float(np.max(np.mean(r * r, axis=0))) * len(t) / max(n_eff, 1.0) / stt
-        self._fit = (v, math.sqrt(var))
-        return self._fit
-
-
 @dataclass(frozen=True, slots=True)
 class ShipHeadingStatus:
     """The ship's heading as the box shapes tell it (:class:`ShapeHeading`), for the log."""
@@ -1243,7 +1019,6 @@ class ShipHeadingStatus:
     layout_in_use: str  # the layout the correction uses: "class" or "other_end"
     turn_rate_deg_s: float  # the most likely of heading_from_shape.turn_rates_deg_s (clockwise seen from above)
     layout_shape_log_odds: float  # the box shapes' part of layout_other_end's log-odds (LayoutFit.shape_evidence)
-    ends_unsure: bool  # the shapes' best end has come and gone (ends_unsure_flips): bow and stern count alike
 
 
 class ShipModel:
@@ -1260,24 +1035,12 @@ class ShipModel:
         self.cfg = cfg
         self.outlines = (ShipOutline(cfg), ShipOutline(cfg, other_end=True))  # the class's layout, the other end
         self.shape = ShapeHeading(cfg.heading_from_shape, self.outlines[0], camera, edge_px)
-        #: the size fits: one, which goes on with the layout in use, or one per layout (size_fit.per_layout)
-        self.sizes = tuple(ShipSize(cfg.size_fit, o, camera, edge_px)
-                           for o in (self.outlines if cfg.size_fit.per_layout else self.outlines[:1]))
-        self.size = self.sizes[0]  # the fit the correction uses (the layout in use's)
+        #: the size fit, which goes on with the layout in use (:meth:`follow_layout`)
+        self.size = ShipSize(cfg.size_fit, self.outlines[0], camera, edge_px)
         self.layout = LayoutFit(cfg.layout_fit, self.outlines, camera, cfg.layout_fit.pixel_noise_px, edge_px)
         self._course_known_since = math.nan  # since when the course has been known without a break
         self._now = math.nan  # the time of the latest box (observe_box)
         self._held = (math.nan, math.nan)  # the course last followed and when (held_course_spread_deg_s)
-        # the shapes' likeliest heading (grid index) at the last box they took, the times it turned end for end
-        # within ends_unsure_window_s, and whether the shapes are taken not to tell bow from stern (latched)
-        self._last_best: int | None = None
-        self._flips: deque[float] = deque()
-        self._axes: deque[tuple[float, float]] = deque()  # (t, the shapes' axis) at the size fit's boxes
-        self.ends_unsure = False
-        sh = cfg.heading_from_shape
-        # the plain box centres' velocity (end_velocity_source: box_centres), for which end of the axis is the bow
-        self.track = BoxCentreTrack(camera, sh.end_velocity_window_s, sh.rate_hz, edge_px) \
-            if sh.end_from_velocity_std_floor_m_s is not None and sh.end_velocity_source == "box_centres" else None
 
     @property
     def outline(self) -> ShipOutline:
@@ -1312,8 +1075,7 @@ class ShipModel:
           speed, at least ``fuse_min_course_std_deg``), so each sharpens the other;
         * course known, shapes not ready: the course alone;
         * course unknown: the headings the shapes allow (weighed by the course last followed while it is
-          recent, and by which end the estimated velocity moves toward, :meth:`_velocity_end_weights`), else
-          ``headings_when_unknown`` equal ones.
+          recent), else ``headings_when_unknown`` equal ones.
         """
         course = self.course(vel_enu, vel_std_m_s)
         sh = self.cfg.heading_from_shape
@@ -1327,17 +1089,8 @@ class ShipModel:
                 return np.array([course]), np.ones(1), course
             return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), course)
         held = self._held_course_weights()
-        ends = self._velocity_end_weights(vel_enu, vel_std_m_s)
-        if held is not None or ends is not None or (self.ends_unsure and self.shape.ready):
-            # the shapes' headings weighed by the course last followed and by which end the velocity moves, a
-            # heading and its opposite alike once the shapes are taken not to tell them apart
-            w = self.shape.heading_weights()
-            if held is not None:
-                w = w * held
-            if ends is not None:
-                w = w * ends
-            if self.ends_unsure and len(w) % 2 == 0:
-                w = _with_opposite(w)
+        if held is not None:  # the shapes' headings weighed by the course last followed
+            w = self.shape.heading_weights() * held
             if w.sum() > 0.0:
                 return (*_plausible(self.shape.courses_enu_rad, w, sh.min_weight), None)
         shaped = self.shape.headings()
@@ -1360,90 +1113,25 @@ class ShipModel:
             return None
         return _course_likelihood(self.shape.courses_enu_rad, course, math.radians(sig))
 
-    def _velocity_end_weights(self, vel_enu, vel_std_m_s: float) -> np.ndarray | None:
-        """The probability, for each of the shapes' headings (:attr:`ShapeHeading.courses_enu_rad`), that the
-        ship's velocity has a positive component along it (a ship moves bow first): ``Phi(v . u / s)``, ``v``
-        the horizontal velocity (``end_velocity_source``: the plain box centres' (:class:`BoxCentreTrack`), or
-        the estimated one, ``vel_enu``), ``u`` the heading's unit vector, ``s`` the velocity's std
-        (``vel_std_m_s`` for the estimate's) and ``end_from_velocity_std_floor_m_s`` in quadrature. A heading's
-        and its opposite's sum to 1. None when off, before the shapes are ready or the box centres' track is,
-        or for a velocity std that is not a number."""
-        floor = self.cfg.heading_from_shape.end_from_velocity_std_floor_m_s
-        if floor is None or not self.shape.ready:
-            return None
-        if self.track is not None:  # the plain box centres' velocity, not the estimator's
-            fit = self.track.velocity()
-            if fit is None:
-                return None
-            vel_enu, vel_std_m_s = fit
-        if not math.isfinite(vel_std_m_s):
-            return None
-        c = self.shape.courses_enu_rad
-        along = float(vel_enu[0]) * np.cos(c) + float(vel_enu[1]) * np.sin(c)
-        return scipy.special.ndtr(along / math.hypot(vel_std_m_s, floor))
-
     def learn_size(self, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, courses, weights, box_px,
-                   t_s: float | None = None, course_known: bool = True) -> bool:
+                   t_s: float | None = None) -> bool:
         """Feed one detected box to the size fit (:class:`ShipSize`) at the weighted circular mean of the
         headings ``courses`` (weights ``weights``, :meth:`headings_and_course`; finer than their 5-deg grid)
         when the heading is sure: the box
         shapes' posterior (with a known course fused in) concentrated to a mean resultant length of at least
         ``_SIZE_FIT_MIN_RESULTANT``. Never a course alone: a still ship's estimated velocity gives one for
-        seconds after the lock, any way round. ``course_known``: the ship's course is known (with
-        ``size_fit.course_unknown: hold`` the fit takes no box while it is not). True when the box moved the fit."""
+        seconds after the lock, any way round. True when the box moved the fit."""
         if not self.shape.ready or len(courses) == 1 or not self.size.takes_boxes(t_s):
             return False  # (the rate first: the heading's concentration is not worked out for nothing)
-        sf = self.cfg.size_fit
-        if not course_known and sf.course_unknown == "hold":
-            return False
-        if not course_known and sf.course_unknown_steady_s > 0.0 and t_s is not None and \
-                not self._axis_steady(float(t_s), courses, weights):
-            return False
         resultant = complex(np.dot(weights, np.exp(1j * np.asarray(courses))))
         if abs(resultant) < _SIZE_FIT_MIN_RESULTANT:
             return False
-        doubt = math.radians(sf.course_unknown_heading_std_deg) \
-            if not course_known and sf.course_unknown == "doubt" else 0.0
         course = math.atan2(resultant.imag, resultant.real)
-        moved = [fit.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course, box_px, t_s, doubt)
-                 for fit in self.sizes]
-        return moved[self.sizes.index(self.size)]
-
-    def _layout_scales(self):
-        """The sizes the layout fit weighs the layouts at: the one fit's for both, or each layout's own
-        (``size_fit.per_layout``)."""
-        if len(self.sizes) == 1:
-            return self.size.scale
-        return tuple(fit.scale for fit in self.sizes)
+        return self.size.update(cam_pos_enu_m, R_enu_from_cam, ref_enu_m, course, box_px, t_s)
 
     def follow_layout(self) -> None:
-        """After the layout in use has changed: the one size fit goes on with it from where it stands, or (with
-        ``size_fit.per_layout``) the correction takes that layout's own fit."""
-        if len(self.sizes) == 1:
-            self.size.outline = self.outline
-        else:
-            self.size = self.sizes[1 if self.layout.other_end else 0]
-
-    def hold_size(self) -> None:
-        """Stop every size fit learning (``size_fit.hold_in_terminal``)."""
-        for fit in self.sizes:
-            fit.hold()
-
-    def _axis_steady(self, t_s: float, courses, weights) -> bool:
-        """Record the shapes' axis now (the headings' mean axis: bow and stern alike) and say whether it has
-        stayed within ``size_fit.course_unknown_steady_deg`` of it for ``course_unknown_steady_s``
-        (:meth:`learn_size`, while the course is unknown)."""
-        sf = self.cfg.size_fit
-        axis = 0.5 * float(np.angle(np.dot(weights, np.exp(2j * np.asarray(courses)))))
-        hist = self._axes
-        hist.append((t_s, axis))
-        while hist and hist[0][0] < t_s - sf.course_unknown_steady_s - 5.0:
-            hist.popleft()
-        tol = math.radians(sf.course_unknown_steady_deg)
-        recent = [a for t, a in hist if t >= t_s - sf.course_unknown_steady_s]
-        if hist[0][0] > t_s - sf.course_unknown_steady_s:
-            return False  # not watched for long enough yet
-        return all(abs((a - axis + 0.5 * math.pi) % math.pi - 0.5 * math.pi) <= tol for a in recent)
+        """After the layout in use has changed: the size fit goes on with it from where it stands."""
+        self.size.outline = self.outline
 
     def observe_box(self, t_s: float, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px, vel_enu,
                     vel_std_m_s: float, tracked_height_m: float = 0.0) -> ShipHeadingStatus | None:
@@ -1452,11 +1140,8 @@ class ShipModel:
         for the log when the shapes took the box, else None."""
         if self.cfg.enabled and self.layout.observe(t_s, cam_pos_enu_m, R_enu_from_cam, ref_enu_m, box_px,
                                                     lambda: self.course(vel_enu, vel_std_m_s), tracked_height_m,
-                                                    self._layout_scales(), vel_enu, self.shape.reverse_log_ratio):
+                                                    self.size.scale, vel_enu, self.shape.reverse_log_ratio):
             self.follow_layout()
-        if self.track is not None:
-            self.track.observe(t_s, cam_pos_enu_m, R_enu_from_cam, float(np.asarray(ref_enu_m)[2]) + tracked_height_m,
-                               box_px)
         sh = self.shape
         self._now = float(t_s)
         follow = self._course_to_follow(t_s, vel_enu, vel_std_m_s)
@@ -1466,7 +1151,6 @@ class ShipModel:
             return None
         w = sh.weights()
         k = int(np.argmax(w))
-        self._count_end_flip(float(t_s), k, len(w))
         course = self.course(vel_enu, vel_std_m_s)
         sz = self.size
         return ShipHeadingStatus(t_s, heading_deg_from_course_enu(float(sh.courses_enu_rad[k])), float(w[k]),
@@ -1475,25 +1159,7 @@ class ShipModel:
                                  np.exp(sz.theta), sz.updates, sz.scale is not None, self.layout.p_other_end,
                                  "other_end" if self.layout.other_end else "class",
                                  float(sh.cfg.turn_rates_deg_s[int(np.argmax(sh.rate_weights()))]),
-                                 self.layout.shape_evidence(), self.ends_unsure)
-
-    def _count_end_flip(self, t_s: float, best: int, n: int) -> None:
-        """Count the shapes' likeliest heading (grid index ``best`` of ``n``) turning end for end since the last
-        box they took (a jump of over 135 deg; counted once the shapes are ready), and latch
-        :attr:`ends_unsure` at ``ends_unsure_flips`` such turns within ``ends_unsure_window_s``."""
-        sh = self.cfg.heading_from_shape
-        if sh.ends_unsure_flips <= 0 or self.ends_unsure:
-            return
-        if not self.shape.ready:
-            self._last_best = best
-            return
-        last, self._last_best = self._last_best, best
-        if last is None or min((best - last) % n, (last - best) % n) * 360.0 / n <= 135.0:
-            return
-        self._flips.append(t_s)
-        while self._flips and self._flips[0] <= t_s - sh.ends_unsure_window_s:
-            self._flips.popleft()
-        self.ends_unsure = len(self._flips) >= sh.ends_unsure_flips
+                                 self.layout.shape_evidence())
 
     def _course_to_follow(self, t_s: float, vel_enu, vel_std_m_s: float) -> float | None:
         """The estimated velocity's course when the box shapes' posterior may follow it

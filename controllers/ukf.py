@@ -45,19 +45,8 @@ class's): a point seen higher or lower meets the target plane displaced along
 the line of sight by its height error over tan of the elevation, so far out
 at a shallow elevation it dominates (``box_centre_height_std_m``:
 :func:`height_consider_cov`). The state and the filter's covariance (``cov``)
-are unchanged by any of them. With ``consider_update: latest_view`` the
-three are those of the latest fused box's view alone, so one box fused with a
-large doubt sets the std, though it barely moved the estimate;
-``latest_undoubted`` takes them from the latest box fused without a doubt
-(``DetectionFix.centre_noise_px2`` zero). With
-``gain_weighted`` the std carries the estimate's own systematic error as a
-factor ``F`` (2 x 3, m; the covariance ``F F^T``) over three fixed unit errors
-(the box centre's two pixel axes, the height): each fused box moves ``F``
-towards its own factor by ``G = K_h J^-1`` (``K_h`` the gain's horizontal
-position rows for the pixel columns, ``J`` the view's pixel-to-plane
-Jacobian), the move the update gives the estimate for the difference between
-the box's error and the one the state carries, errors being fully correlated
-from box to box (:func:`_consider_blend`).
+are unchanged by any of them. The three are those of the latest fused box's
+view alone.
 
 Interfaces: :class:`UkfTargetEstimator` implements the flight software's
 estimator Protocol (``controllers.blocks.TargetEstimator``), so a second filter
@@ -79,7 +68,6 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf as _dpotrf
@@ -567,54 +555,6 @@ def _sqrt_spd2(a: float, b: float, c: float) -> tuple[float, float, float]:
     return (a + sd) * n, b * n, (c + sd) * n
 
 
-def _consider_blend(prev: np.ndarray, box: np.ndarray, K_h: np.ndarray, J) -> np.ndarray:
-    """The estimate's systematic error factor after fusing a box whose own factor is ``box`` (both 2 x 3, m),
-    the errors fully correlated from box to box. The state carries the pixel error ``J^-1 prev`` of the boxes
-    before; the new box's is ``J^-1 box``; the update moves the estimate by the gain's horizontal position rows
-    for the pixel columns (``K_h``, m/px) times their difference: ``prev + G (box - prev)``, ``G = K_h J^-1``
-    (``J`` the box's view's pixel-to-plane Jacobian, m/px). ``box`` alone before any error is carried
-    (``prev`` zero), or without a view (``J`` None) or a finite ``G``."""
-    if J is None or not prev.any():
-        return box
-    (a, b), (c, d) = J
-    det = a * d - b * c
-    if not (math.isfinite(det) and abs(det) > 0.0):
-        return box
-    G = K_h @ (np.array([[d, -b], [-c, a]]) / det)
-    if not np.all(np.isfinite(G)):
-        return box
-    return prev + G @ (box - prev)
-
-
-def _los_velocity_axis(rel: np.ndarray, n: int) -> np.ndarray:
-    """The unit state direction (n,) of the target's velocity along the horizontal line of sight ``rel`` (camera
-    to target, ENU); zeros when the line of sight is vertical."""
-    e = np.zeros(n)
-    h = math.hypot(float(rel[0]), float(rel[1]))
-    if h > 1e-6:
-        e[5], e[6] = float(rel[0]) / h, float(rel[1]) / h
-    return e
-
-
-def velocity_spread_m_s(history) -> float:
-    """The RMS of horizontal velocities' deviation from their mean (m/s); ``history``: (t, east, north) rows."""
-    v = np.asarray(history, dtype=float)[:, 1:3]
-    return float(np.sqrt(np.mean(np.sum((v - v.mean(axis=0)) ** 2, axis=1))))
-
-
-def _hold_component(x: np.ndarray, P: np.ndarray, x_opt: np.ndarray, P_opt: np.ndarray,
-                    e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A Schmidt (consider) update from an optimal one: the gain ``K`` with its component along the unit state
-    direction ``e`` removed, ``K' = M K``, ``M = I - e e^T``. With ``A = K S K^T = P - P_opt``, the covariance
-    for that gain, ``P - K' P_xz^T - P_xz K'^T + K' S K'^T`` (``P_xz = K S``), is ``P - M A - A M^T + M A
-    M^T``; the state moves by ``M (x_opt - x)``. With ``e`` zero it is the optimal update."""
-    M = np.eye(len(x)) - np.outer(e, e)
-    A = P - P_opt
-    MA = M @ A
-    P_new = P - MA - MA.T + MA @ M.T
-    return x + M @ (x_opt - x), 0.5 * (P_new + P_new.T)
-
-
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
     """:func:`controllers.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the plane)."""
     R = R_enu_from_cam
@@ -690,15 +630,6 @@ class UkfTargetEstimator:
         self.updates = 0
         self.initialisations = 0
         self._last_nis_det = (math.nan, math.nan)  # the last update's chi-square and pixel-rows determinant
-        # dive_los_velocity_hold_m may act: the estimation block sets it in the terminal dive while no turn or
-        # periodic course is handed on (a ship seen to manoeuvre keeps learning its velocity); None while the
-        # option is off, so that the block has nothing to work out
-        self.los_velocity_hold: bool | None = False if c.dive_los_velocity_hold_m > 0.0 else None
-        # (t, east, north velocity) after each update outside the hold's range, over its window: the hold acts
-        # only for a ship whose velocity held steady there (dive_los_velocity_hold_max_spread_m_s); None: no
-        # such condition
-        self._vel_hist: deque[tuple[float, float, float]] | None = \
-            deque() if c.dive_los_velocity_hold_m > 0.0 and c.dive_los_velocity_hold_max_spread_m_s > 0.0 else None
 
     # ------------------------------------------------------------ properties
     @property
@@ -781,8 +712,6 @@ class UkfTargetEstimator:
         self._motion = None
         self._innov = np.full(2, np.nan)
         self._innov_t = math.nan
-        if self._vel_hist is not None:
-            self._vel_hist.clear()
 
     def initialise(self, fix: DetectionFix, motion: CameraMotion) -> None:
         """Start from one detection (its box centre ``u_px, v_px``): r_q on the plane along its ray, V_q = 0
@@ -873,7 +802,7 @@ class UkfTargetEstimator:
         gating = c.innovation_gate > 0.0 and self._rejects_in_a_row < c.innovation_gate_max_rejects
         core = self._core
         try:
-            y, nis, x_new, P_new, det, K_h = self._update(core.current_sigma_points(), core._x, core._P, z, r,
+            y, nis, x_new, P_new, det, _ = self._update(core.current_sigma_points(), core._x, core._P, z, r,
                                                           cam.fx, cam.fy, cam.cx, cam.cy, motion.R_enu_from_cam,
                                                           motion.height_m, c.target_plane_height_m)
             core.last_nis = nis
@@ -882,11 +811,7 @@ class UkfTargetEstimator:
             if rejected and c.innovation_gate_box_bias:
                 rejected = self._gate_box_bias_nis(fix, core, z, r, motion) > c.innovation_gate
             if not rejected:
-                if self.los_velocity_hold and rng <= c.dive_los_velocity_hold_m and self._steady_before_hold():
-                    x_new, P_new = _hold_component(core._x, core._P, x_new, P_new, _los_velocity_axis(rel, len(x_new)))
                 core.set_posterior(x_new, P_new)
-                if self._vel_hist is not None and rng > c.dive_los_velocity_hold_m:
-                    self._remember_velocity(float(x_new[5]), float(x_new[6]))
         except FloatingPointError:
             self.divergence_resets += 1
             self.reset()
@@ -900,32 +825,9 @@ class UkfTargetEstimator:
         self._innov = y[:2].copy()
         self._innov_t = self._t
         self._motion = motion
-        # latest_undoubted keeps the factor it has through a box fused with its doubt as noise (the estimate's
-        # error stays); otherwise the factor is this box's, or (gain_weighted) the estimate's blend with it
-        if not (c.consider_update == "latest_undoubted" and (extra_u or extra_v) and self._consider_factor.any()):
-            box, J = self._box_bias_factor(fix, motion)
-            if c.consider_update == "gain_weighted":
-                box = _consider_blend(self._consider_factor, box, K_h, J)
-            self._set_consider(box)
+        self._set_consider(self._box_bias_factor(fix, motion)[0])  # the latest fused box's view
         self.updates += 1
         return FusionResult(True, FusionReason.USED, self._innov.copy(), ratio)
-
-    def _remember_velocity(self, ve: float, vn: float) -> None:
-        """Keep this update's horizontal velocity in the history of dive_los_velocity_hold_window_s."""
-        h = self._vel_hist
-        h.append((self._t, ve, vn))
-        while h and h[0][0] < self._t - self.cfg.dive_los_velocity_hold_window_s:
-            h.popleft()
-
-    def _steady_before_hold(self) -> bool:
-        """The ship's estimated velocity held steady before the hold's range: the RMS of the history's
-        deviation from its mean at or under dive_los_velocity_hold_max_spread_m_s (True with no such condition;
-        False with fewer than two velocities remembered)."""
-        if self._vel_hist is None:
-            return True
-        if len(self._vel_hist) < 2:
-            return False
-        return velocity_spread_m_s(self._vel_hist) <= self.cfg.dive_los_velocity_hold_max_spread_m_s
 
     def _gate_box_bias_nis(self, fix: DetectionFix, core, z, r, motion: CameraMotion) -> float:
         """The normalised innovation squared with the box centre's systematic error (``box_centre_bias_frac``

@@ -50,21 +50,24 @@ class DetectorConfig(StrictModel):
 
 class RenderConfig(StrictModel):
     rate_hz: float = Field(1.0, ge=0, le=30, description="full-frame renders per second in the log (0: none)")
-    width_px: int = Field(320, ge=16, le=1920)
-    height_px: int = Field(180, ge=16, le=1080)
-    jpeg_quality: int = Field(85, ge=10, le=100)
+    width_px: int = Field(320, ge=16, le=1920, description="rendered image width, px")
+    height_px: int = Field(180, ge=16, le=1080, description="rendered image height, px")
+    jpeg_quality: int = Field(85, ge=10, le=100, description="JPEG quality of the logged image (10-100)")
 
 
 class CameraConfig(StrictModel):
-    width_px: int = Field(1280, ge=16, le=4096)
-    height_px: int = Field(720, ge=16, le=4096)
+    width_px: int = Field(1280, ge=16, le=4096, description="image width, px")
+    height_px: int = Field(720, ge=16, le=4096, description="image height, px")
     hfov_deg: float = Field(60.0, gt=1, lt=170, description="horizontal field of view; square pixels")
     rate_hz: float = Field(30.0, gt=0, le=240, description="frame rate of the detector")
     roi_margin_px: int = Field(8, ge=0, le=200, description="margin around the projected ship box")
     max_roi_rays: int = Field(2048, ge=64, le=4_000_000, description="ray budget of one detection frame")
-    gimbal: GimbalConfig = Field(default_factory=GimbalConfig)
-    detector: DetectorConfig = Field(default_factory=DetectorConfig)
-    render: RenderConfig = Field(default_factory=RenderConfig)
+    gimbal: GimbalConfig = Field(default_factory=GimbalConfig,
+        description="the pan-tilt gimbal: mount, limits, start angles")
+    detector: DetectorConfig = Field(default_factory=DetectorConfig,
+        description="the simulated ship detector: noise, misses, latency")
+    render: RenderConfig = Field(default_factory=RenderConfig,
+        description="the rendered camera image logged for the viewers (rate_hz 0: none)")
 
     @model_validator(mode="after")
     def _rate(self):

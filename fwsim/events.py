@@ -53,13 +53,14 @@ class _Timed(_Start):
 class DetectorBlackout(_Timed):
     """The detector reports nothing (its frames still run, its noise stream unchanged)."""
 
-    kind: Literal["detector_blackout"]
+    kind: Literal["detector_blackout"] = Field(description="detector_blackout: the detector sees nothing for a while")
 
 
 class FalseDetections(_Timed):
     """Clutter: at ``rate_hz`` (on average) a frame's detection is a box somewhere else in the image."""
 
-    kind: Literal["false_detections"]
+    kind: Literal["false_detections"] = Field(description="false_detections: the detector reports boxes where no "
+                                                          "ship is")
     rate_hz: float = Field(gt=0.0, le=240.0, description="clutter boxes per second, on average")
     box_px: tuple[float, float] = Field((12.0, 120.0), description="range of the boxes' side, px")
 
@@ -73,20 +74,20 @@ class FalseDetections(_Timed):
 class GnssOutage(_Timed):
     """The receiver gives no new fix: the last one is held (with its time), the flight software dead-reckons."""
 
-    kind: Literal["gnss_outage"]
+    kind: Literal["gnss_outage"] = Field(description="gnss_outage: no GNSS fix for a while")
 
 
 class GimbalStuck(_Timed):
     """The gimbal's joints stay where they are, whatever is commanded."""
 
-    kind: Literal["gimbal_stuck"]
+    kind: Literal["gimbal_stuck"] = Field(description="gimbal_stuck: the gimbal's joints hold for a while")
 
 
 class WindGust(_Timed):
     """A 1 - cos gust (JSBSim's cosine gust, local frame): up to ``velocity_enu_m_s`` at mid-duration, back
     to nothing at the end."""
 
-    kind: Literal["wind_gust"]
+    kind: Literal["wind_gust"] = Field(description="wind_gust: a gust added to the wind for a while")
     velocity_enu_m_s: _Vec3 = Field(description="the gust's peak air velocity, world ENU (m/s)")
 
     @model_validator(mode="after")
@@ -101,7 +102,7 @@ class TargetManoeuvre(_Start):
     changes to ``speed_m_s`` at ``accel_m_s2`` (either may be left out), then holds them. The event ends
     when both are reached."""
 
-    kind: Literal["target_manoeuvre"]
+    kind: Literal["target_manoeuvre"] = Field(description="target_manoeuvre: the ship changes its motion")
     course_deg: float | None = Field(None, ge=-360.0, le=360.0, description="new course, clockwise from North")
     speed_m_s: float | None = Field(None, ge=0.0, le=25.0, description="new speed over ground")
     turn_rate_deg_s: float = Field(1.5, gt=0.0, le=10.0, description="rate of the turn")

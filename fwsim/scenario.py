@@ -112,7 +112,7 @@ class World(StrictModel):
 
 class Initial(StrictModel):
     pos_enu_m: Vec3 = Field(description="UAV position in the world ENU frame")
-    airspeed_m_s: float = Field(gt=0, le=60)
+    airspeed_m_s: float = Field(gt=0, le=60, description="airspeed at the start, m/s")
     heading_deg: float = Field(ge=-360, le=360, description="clockwise from North")
     flight_path_deg: float = Field(0.0, ge=-60, le=30, description="positive climbing")
     trim: bool = Field(True, description="trim with JSBSim's trim before the run")
@@ -145,24 +145,28 @@ def start_epoch_ns(text: str) -> int:
 
 
 class Scenario(StrictModel):
-    name: str
-    description: str = ""
-    seed: int = Field(0, ge=0)
-    duration_s: float = Field(gt=0, le=7200)
-    rates: Rates = Field(default_factory=Rates)
-    aircraft: Aircraft = Field(default_factory=Aircraft)
-    world: World = Field(default_factory=World)
-    initial: Initial
-    stop: Stop = Field(default_factory=Stop)
-    target: TargetConfig = Field(default_factory=TargetConfig)
-    camera: CameraConfig = Field(default_factory=CameraConfig)
-    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
-    controllers: Controllers = Field(default_factory=Controllers)
+    name: str = Field(description="the scenario's name (the log's and the batch run's)")
+    description: str = Field("", description="a line saying what the scenario flies")
+    seed: int = Field(0, ge=0,
+        description="the seed of every random draw (sensor noise, detector misses); the same seed flies the same run")
+    duration_s: float = Field(gt=0, le=7200,
+        description="the run ends after this much sim time (or earlier, at impact or a stop condition), s")
+    rates: Rates = Field(default_factory=Rates, description="the simulation, flight-software and log rates")
+    aircraft: Aircraft = Field(default_factory=Aircraft, description="the UAV's JSBSim model")
+    world: World = Field(default_factory=World, description="the world's geodetic origin, wind and turbulence")
+    initial: Initial = Field(description="the UAV's start: position, airspeed, heading")
+    stop: Stop = Field(default_factory=Stop, description="conditions that end the run early")
+    target: TargetConfig = Field(default_factory=TargetConfig, description="the ship: size, layout, start and motion")
+    camera: CameraConfig = Field(default_factory=CameraConfig,
+        description="the gimbal camera, its detector and the rendered image")
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig,
+        description="the GNSS, IMU, air data and altimeter models")
+    controllers: Controllers = Field(default_factory=Controllers,
+        description="the flight software: which blocks fly the mission and their settings")
     events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.events)")
-    start_time: str | None = Field(None, description=(
-        "the date and time (ISO 8601; UTC unless it names an offset) at which the log's clock starts, so Foxglove "
-        "shows real dates; sim time stays in the messages. Default: the run's wall-clock start. Set it for logs "
-        "that are the same byte for byte run after run"))
+    start_time: str | None = Field(None, description="the date and time (ISO 8601; UTC unless it names an offset) "
+                                                     "the log's clock starts at; sim time stays in the messages; "
+                                                     "none: the run's wall-clock start")
 
     @field_validator("start_time")
     @classmethod

@@ -153,10 +153,10 @@ class TargetConfig(StrictModel):
     """The ship (scenario section ``target:``); ``TargetConfig.model_validate({})`` is the paper's ship."""
 
     kind: Literal["ship"] = Field("ship", description="target type")
-    type: ShipType = Field("bridge_aft", description=(
-        "the ship's layout, scaled to length_m, width_m, height_m: bridge_aft (the paper's ship: deckhouse, "
-        "wheelhouse and funnel aft of midships), bridge_forward (a supply vessel: superstructure forward, open "
-        "deck aft), patrol_boat (a low hull, a cabin amidships, a mast), ferry (decks over most of the length)"))
+    type: ShipType = Field("bridge_aft", description="the ship's layout, scaled to length_m, width_m, height_m: "
+                                                     "bridge_aft (the paper's ship), bridge_forward (superstructure "
+                                                     "forward), patrol_boat (cabin amidships), ferry (decks over "
+                                                     "most of the length)")
     length_m: float = Field(55.0, gt=0, le=500, description="overall length (bow to stern)")
     width_m: float = Field(25.0, gt=0, le=100, description="beam (overall width)")
     height_m: float = Field(25.0, gt=0, le=100, description="height of the highest point above the waterline")

@@ -163,8 +163,8 @@ def test_the_airframe_settings_are_checked():
     # the default since 2026-11-26 (docs/ENVELOPE.md, "The airframe's cut, predicted")
     assert Controllers().airframe.enabled is True
     assert Controllers.model_validate({"airframe": {"enabled": False}}).airframe.enabled is False
-    with pytest.raises(ValueError, match="align_when"):
-        Controllers.model_validate({"airframe": {"align_when": "sometimes"}})
+    with pytest.raises(ValueError, match="align_iterations"):
+        Controllers.model_validate({"airframe": {"align_iterations": -1}})
 
 
 def test_the_perception_corrects_a_cut_box_by_the_cut():
@@ -283,30 +283,34 @@ def _perception(airframe, fsw_cam):
 
 def test_the_cut_is_made_where_the_detection_puts_the_ship():
     """With the estimate 4-8 m off the ship (as it can be at the end of a dive), the cut made where the
-    detection puts the ship in the image (``align_iterations``; here with the course known too,
-    ``align_when: always``) fixes a cut box nearer the tracked point than the cut made where the estimate
-    puts it, whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
-    from controllers.messages import TargetState
+    detection puts the ship in the image (``align_iterations``, while the course is unknown; here on the
+    ship's own heading) fixes a cut box nearer the tracked point than the cut made where the estimate puts it,
+    whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
+    from controllers.target_model import box_centre_offset_px, predicted_boxes_px
     from controllers.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
     course = math.radians(90.0 - 30.0)
-    vel = 6.0 * np.array([math.cos(course), math.sin(course), 0.0])
     views = [v for v in _dive_views() if v[3].visible_px and 0.05 <= v[3].occluded_fraction <= 0.5]
     assert len(views) >= 15
 
     def errors(off) -> np.ndarray:  # (views, [aligned, at the estimate]) fix errors, px
-        prior = TargetState(0.0, "estimator", np.array([off[0], off[1], h]), vel, 0.05, h)
+        ref = np.array([off[0], off[1], 0.0])
         out = []
         for cp, Rc, R_fc, frame, _ in views:
             meas, motion, truth = _detection(cp, Rc, R_fc, np.asarray(frame.bbox_px, dtype=float), h)
             row = []
             for n in (3, 0):
-                air = AirframeShadow(AirframeConfig(enabled=True, align_iterations=n, align_when="always"),
-                                     fsw_cam, MOUNT)
-                fix = _perception(air, fsw_cam).step(meas, motion, prior)
-                row.append(float(np.hypot(fix.u_px - truth[0], fix.v_px - truth[1])))
+                perc = _perception(AirframeShadow(AirframeConfig(enabled=True, align_iterations=n), fsw_cam, MOUNT),
+                                   fsw_cam)
+                outline = perc.ship.outline
+                boxes = predicted_boxes_px(outline, fsw_cam, cp, Rc, ref, [course])
+                R = perc._touching_airframe(meas)
+                if R is not None:  # cut as the perception cuts a box while the course is unknown
+                    boxes, _ = perc._cut_by_airframe(meas, motion, R, ref, [course], None, boxes, course_known=False)
+                o = box_centre_offset_px(outline, fsw_cam, cp, Rc, ref, course, h, boxes_px=boxes)
+                row.append(float(np.hypot(meas.det_u_px - o[0] - truth[0], meas.det_v_px - o[1] - truth[1])))
             out.append(row)
         return np.array(out)
 

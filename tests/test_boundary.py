@@ -48,6 +48,7 @@ def test_flight_software_runs_on_measurements_alone():
 name: b
 duration_s: 10
 initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
+controllers: {after_lock: path, switch: {enabled: false}}   # the initial path alone
 """)
     fsw = FlightSoftware(s.controllers, s.initial, s.camera)
     for k in range(30):
@@ -71,7 +72,7 @@ def test_a_detection_above_the_horizon_does_not_stop_the_flight_software():
 name: b
 duration_s: 10
 initial: {pos_enu_m: [0, 0, 500], airspeed_m_s: 22, heading_deg: 0}
-controllers: {acquisition: {lock_detections: 1}}
+controllers: {acquisition: {lock_detections: 1}, after_lock: path, switch: {enabled: false}}
 camera: {gimbal: {initial_tilt_rad: 0.5}}
 """)
     fsw = FlightSoftware(s.controllers, s.initial, s.camera)
@@ -244,8 +245,8 @@ def test_a_dive_that_holds_its_range_goes_round_after_the_stall_time():
 
 
 def test_the_window_is_placed_by_the_closing_bearing_after_a_go_around():
-    """approach_from: the impact heading always, the closing bearing always, or (the default) the impact heading
-    until a dive has gone round and the closing bearing after it; the impact heading without an estimate."""
+    """approach_from: the impact heading always, or (the default) the impact heading until a dive has gone
+    round and the closing bearing after it; the impact heading without an estimate."""
     bp = BpngConfig(impact_heading_deg=64.35, impact_flight_path_deg=-58.5, airspeed_m_s=22.0)
     ship_vel = 9.9 * np.array([math.sin(math.radians(84.5)), math.cos(math.radians(84.5)), 0.0])
     ship = TargetState(0.0, "estimator", np.zeros(3), ship_vel, 0.1, 0.0)
@@ -258,5 +259,4 @@ def test_the_window_is_placed_by_the_closing_bearing_after_a_go_around():
     assert window_bearing_deg(first, default, bp, wind, ship) == 64.35
     assert window_bearing_deg(later, default, bp, wind, ship) == closing
     assert window_bearing_deg(later, default, bp, wind, unknown) == 64.35
-    assert window_bearing_deg(first, SwitchConfig(approach_from="closing"), bp, wind, ship) == closing
     assert window_bearing_deg(later, SwitchConfig(approach_from="impact_heading"), bp, wind, ship) == 64.35

@@ -304,61 +304,6 @@ def test_bow_and_stern_count_alike_unless_told_apart():
     np.testing.assert_allclose(folded, 0.5 * (told + np.roll(told, half)), rtol=0, atol=1e-12)
 
 
-def _dive_shares(ship_heading_deg: float, az_deg: tuple[float, float], estimate_error, cfg: ShapeHeadingConfig,
-                 n: int = 60, class_doubted: bool = False) -> tuple[float, float]:
-    """A dive on a still ship (range 700 -> 150 m, elevation 35 -> 60 deg, the bearing turning from az_deg[0] to
-    az_deg[1] relative to the bow, as BPNG swings onto its impact heading), ray-cast boxes at 3 Hz, the
-    estimate off by ``estimate_error(f)`` (ENU, m; f the dive's fraction): the headings' (true, reversed)
-    weights, each within 10 deg, while the course is unknown (ShapeHeading.headings). ``class_doubted``: the
-    perception's class check has fired before the dive (ShapeHeading.doubt_class)."""
-    ship = Ship(TargetConfig(heading_deg=ship_heading_deg))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    pos, R = ship.pose(0.0)
-    sh = ShapeHeading(cfg, ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
-    if class_doubted:
-        sh.doubt_class()
-    for k in range(n):
-        f = k / (n - 1)
-        az = ship_heading_deg + az_deg[0] + (az_deg[1] - az_deg[0]) * f
-        cp, Rc, frame = _look_from(cam, Pose(R, pos), 700.0 - 550.0 * f, 35.0 + 25.0 * f, az)
-        assert sh.update(k / 3.0, cp, Rc, np.asarray(estimate_error(f), dtype=float), frame.bbox_px)
-    courses, w = sh.headings()
-    deg = (90.0 - np.degrees(courses)) % 360.0
-    return (float(sum(x for d, x in zip(deg, w) if _deg_off(d, ship_heading_deg) <= 10.0)),
-            float(sum(x for d, x in zip(deg, w) if _deg_off(d, ship_heading_deg + 180.0) <= 10.0)))
-
-
-@pytest.mark.parametrize("ship_heading_deg, az_deg", [(0.0, (50.0, 90.0)), (37.0, (-40.0, 0.0)),
-                                                       (90.0, (-40.0, 0.0))])
-def test_the_box_centres_tell_a_still_ships_bow_from_its_stern_in_a_dive(ship_heading_deg, az_deg):
-    """The sizes of a still ship's boxes barely tell its bow from its stern in a dive's short arc; where its box
-    centre falls as the view closes and turns does: the reverse heading puts the superstructure's pull on the
-    box centre the other way. The estimate's error (2 m here, or one that drifts 4 m along the ship during the
-    dive, as a correction split between bow and stern drives it) is fitted out."""
-    steady = lambda f: [2.0, -1.0, 0.0]  # noqa: E731
-    drifting = lambda f: [0.0, -4.0 * f, 0.0]  # noqa: E731
-    sizes_true, sizes_rev = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig())  # (off: default)
-    assert sizes_true < 0.8 and sizes_rev > 0.2  # the sizes alone leave it open
-    for err in (steady, drifting):
-        true, rev = _dive_shares(ship_heading_deg, az_deg, err, ShapeHeadingConfig(centre_fit=True))
-        assert true > 0.95 and rev < 0.05
-        assert true + rev == pytest.approx(sizes_true + sizes_rev, abs=0.05)  # the axis is still the sizes'
-    # once the boxes have disagreed with the class, its layout is not read into the centres: the sizes' shares
-    doubted = _dive_shares(ship_heading_deg, az_deg, steady, ShapeHeadingConfig(centre_fit=True), class_doubted=True)
-    assert doubted == pytest.approx((sizes_true, sizes_rev), abs=1e-12)
-
-
-def test_the_centre_fit_leaves_a_sure_heading_and_the_known_course_alone():
-    """Seen from astern the sizes already tell the heading; the centre fit agrees. A known course is fused
-    with the sizes' weights (weights()), which the centre fit does not touch."""
-    on = ShapeHeadingConfig(centre_fit=True)
-    true, rev = _dive_shares(0.0, (160.0, 200.0), lambda f: [1.0, 1.0, 0.0], on)
-    assert true > 0.95
-    sh = _shape_from(ring_views(130.0, range(0, 60, 5)), on)
-    sh_off = _shape_from(ring_views(130.0, range(0, 60, 5)))
-    np.testing.assert_array_equal(sh.weights(), sh_off.weights())
-
-
 def turning_ship_views(rate_deg_s: float, h0_deg: float = 20.0, lap_s: float = 60.0, hz: float = 3.0):
     """A lap of the loiter ring round a ship turning at ``rate_deg_s`` (clockwise seen from above: its heading
     grows): (t, cam_pos, R_enu_cam, box, the ship's course counter-clockwise from East, rad) at ``hz``."""
@@ -473,46 +418,6 @@ def zigzagging_slow_ship_views(h0_deg: float, amplitude_deg: float = 30.0, perio
         2.0 * math.pi * t / period_s))
 
 
-@pytest.mark.parametrize("h0_deg", [30.0, 200.0])
-def test_switching_turn_rates_follow_a_slow_zigzag_bow_first(h0_deg):
-    """A slow ship zigzagging +-30 deg over 90 s turns at no one rate for long. With the rates held for good,
-    its boxes add up at headings it does not have, and the posterior's best heading wanders tens of degrees off
-    and, part of the time, to the stern; with the rates switching (a Markov chain, 20 s a rate) it keeps within
-    15 deg of the heading (p90 after the first minute) and the bow forward."""
-    views_ = list(zigzagging_slow_ship_views(h0_deg))
-    stats = {}
-    for switch in (None, 20.0):
-        sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, memory_s=120.0, turn_rate_switch_s=switch),
-                          ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
-        off = []
-        for t, cp, Rc, box, heading in views_:
-            assert sh.update(t, cp, Rc, np.zeros(3), box, None)
-            if t >= 60.0:
-                off.append(_deg_off(90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))])),
-                                    heading))
-        off = np.array(off)
-        stats[switch] = (float(np.percentile(np.minimum(off, 180.0 - off), 90)), float(np.mean(off > 90.0)))
-    assert stats[20.0][0] <= 15.0 and stats[20.0][1] <= 0.05, stats
-    assert stats[None][0] > 25.0, stats
-
-
-def test_switching_turn_rates_leave_a_still_ship_and_a_followed_course_alone():
-    """The switch is the rates' Markov step: a still ship's heading stays to a bin with it, and with the course
-    followed (no rates weighed) the posterior is the same as without it."""
-    sh = ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, turn_rate_switch_s=20.0),
-                      ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
-    for t, cp, Rc, box, heading in slow_turning_ship_views(0.0, h0_deg=37.0):
-        sh.update(t, cp, Rc, np.zeros(3), box, None)
-    assert _deg_off(90.0 - math.degrees(float(sh.courses_enu_rad[int(np.argmax(sh.weights()))])), 37.0) <= 5.0
-    views_ = list(turning_ship_views(1.5))
-    one, switching = (ShapeHeading(ShapeHeadingConfig(turn_rates_deg_s=_RATES, turn_rate_switch_s=s),
-                                   ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
-                      for s in (None, 20.0))
-    for t, cp, Rc, box, course in views_:
-        assert one.update(t, cp, Rc, np.zeros(3), box, course) and switching.update(t, cp, Rc, np.zeros(3), box, course)
-    np.testing.assert_array_equal(switching.weights(), one.weights())
-
-
 def test_turn_rates_must_be_distinct_and_bounded():
     from pydantic import ValidationError
     for bad in ((0.0, 0.0), (0.0, 45.0), ()):
@@ -579,8 +484,7 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
     counter-clockwise from East, while it moved along 60 deg: as a ship of the other layout looks to the
     class). While the course is followed the headings are the course's side; when it is lost (the speed dips
     under 1.5 m/s) they stay on that side, the held course's std 3 deg growing 1.5 deg/s, until it spans the
-    circle (118 s), and then the shapes alone say 240 again. Off (0), the shapes alone at once. (The slow
-    velocity's own say on the bow, end_from_velocity_std_floor_m_s, is off here: the next test has it.)"""
+    circle (118 s), and then the shapes alone say 240 again. Off (0), the shapes alone at once."""
     from controllers.config import ShapeHeadingConfig
 
     def best(ship, vel):
@@ -589,8 +493,7 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
 
     along = 3.0 * np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
     for spread in (1.5, 0.0):
-        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(held_course_spread_deg_s=spread,
-                                                                    end_from_velocity_std_floor_m_s=None))
+        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(held_course_spread_deg_s=spread))
         ship = _ship_with_shape(210.0, cfg=cfg)  # the shapes: bow 210 deg from North, course 240 deg ENU
         assert _deg_off(best(ship, np.zeros(3)), 240.0) <= 5.0
         views_ = list(ring_views(210.0, range(0, 360, 10)))
@@ -606,66 +509,6 @@ def test_a_lost_course_holds_the_shapes_to_the_side_it_pointed():
             cp, Rc, box = views_[21]
             ship.observe_box(119.0 + 120.0, cp, Rc, np.zeros(3), box, slow, 0.1)
         assert _deg_off(best(ship, slow), 240.0) <= 10.0  # the shapes alone
-
-
-def test_a_slow_ships_velocity_says_which_end_is_the_bow():
-    """The box shapes put the bow at 240 deg (counter-clockwise from East) on a ship moving slowly (under
-    min_speed_for_course_m_s: no course) along 60 deg, as the shapes of a ship unlike the class may: its
-    velocity (end_from_velocity_std_floor_m_s 0.25) turns the headings to the end it moves toward, and leaves
-    the shapes' axis. A still ship's velocity nudges neither end; moving across the axis, the ends stay the
-    shapes'; off (None, the default), the shapes alone. A heading's and its opposite's weights from the
-    velocity sum to 1 (checked against the normal distribution's integral)."""
-    from controllers.config import ShapeHeadingConfig
-
-    def best(ship, vel, std=0.1):
-        courses, weights, course = ship.headings_and_course(vel, std)
-        assert course is None
-        return math.degrees(float(courses[int(np.argmax(weights))])) % 360.0
-
-    u = np.array([math.cos(math.radians(60.0)), math.sin(math.radians(60.0)), 0.0])
-    across = np.array([math.cos(math.radians(150.0)), math.sin(math.radians(150.0)), 0.0])
-    ship = _ship_with_shape(210.0, cfg=ShipModelConfig(  # the shapes: bow 210 deg from North, 240 deg ENU
-        heading_from_shape=ShapeHeadingConfig(end_from_velocity_std_floor_m_s=0.25, end_velocity_source="estimate")))
-    assert _deg_off(best(ship, np.zeros(3)), 240.0) <= 5.0
-    assert _deg_off(best(ship, 1.0 * u), 60.0) <= 5.0  # 1 m/s along 60 deg: that end
-    assert _deg_off(best(ship, 0.4 * u, std=0.1), 60.0) <= 5.0
-    assert _deg_off(best(ship, 1.0 * u, std=50.0), 240.0) <= 5.0  # a velocity nothing is known of: the shapes
-    assert _deg_off(best(ship, 1.0 * across), 240.0) <= 5.0  # across the axis: the shapes' end and axis
-    assert _deg_off(best(ship, -1.0 * across), 240.0) <= 5.0
-    w = ship._velocity_end_weights(0.7 * u, 0.2)
-    n = len(w)
-    assert np.allclose(w + np.roll(w, n // 2), 1.0)
-    c = ship.shape.courses_enu_rad
-    sig = math.hypot(0.2, ship.cfg.heading_from_shape.end_from_velocity_std_floor_m_s)
-    for k in (0, 12, 30):  # P(along > 0) for along ~ N(v . u_k, sig^2), by the error function
-        mean = 0.7 * math.cos(float(c[k]) - math.radians(60.0))
-        assert math.isclose(float(w[k]), 0.5 * (1.0 + math.erf(mean / (sig * math.sqrt(2.0)))), rel_tol=1e-9)
-    assert ship._velocity_end_weights(u, math.nan) is None
-    off = _ship_with_shape(210.0)  # the default: off
-    assert off.cfg.heading_from_shape.end_from_velocity_std_floor_m_s is None
-    assert _deg_off(best(off, 1.0 * u), 240.0) <= 5.0
-
-
-def test_the_plain_box_centres_track_a_slow_ship_round_a_loiter_lap():
-    """The box centres' straight line (BoxCentreTrack), over a lap of ray-cast boxes of the class's ship (its
-    superstructure aft pulls each box centre toward it, a pull that goes round with the view): a ship moving at
-    0.67 m/s, still or moving across, gets its velocity within 0.15 m/s, and that error within 3 of the
-    track's own std; before half the window, no velocity."""
-    from controllers.target_model import BoxCentreTrack
-
-    views_ = list(ring_views(30.0, range(0, 360, 5)))  # 72 boxes, one every 1.67 s: a lap in 120 s
-    for v in (np.array([0.6, -0.3]), np.zeros(2), np.array([-0.3, -0.6])):
-        track = BoxCentreTrack(PinholeCamera.from_config(CAM_CFG), 120.0)
-        for k, (cp, Rc, box) in enumerate(views_):
-            t = 1.67 * k
-            moved = cp + np.array([v[0] * t, v[1] * t, 0.0])  # the ship at v t: the camera moved with it
-            assert track.observe(t, moved, Rc, 0.0, box)
-            if t < 55.0:
-                assert track.velocity() is None
-        fit, std = track.velocity()
-        err = float(np.hypot(*(fit - v)))
-        assert err < 0.15 and 0.0 < std and err < 3.0 * math.sqrt(2.0) * std
-    assert not track.observe(1000.0, cp, Rc, 0.0, np.array([0.0, 10.0, 50.0, 40.0]))  # at the image border
 
 
 def _perception(ship: ShipModel, size_mismatch_action: str = "skip") -> Perception:
@@ -883,22 +726,6 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
         assert np.all(np.abs(fit.theta) < math.log(1.13)) and fit.scale[2] < 1.11, (az, fit.scale)
 
 
-def test_a_held_size_fit_takes_no_more_boxes():
-    from controllers.target_model import ShipSize
-    ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    pose = Pose(*reversed(ship.pose(0.0)))
-    fit = ShipSize(SizeFitConfig(min_updates=0), ShipOutline(ShipModelConfig()), PinholeCamera.from_config(CAM_CFG))
-    views_ = [_look_from(cam, pose, 700.0, 35.0, az) for az in range(0, 360, 20)]
-    for cp, Rc, frame in views_[:9]:
-        assert fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px)
-    x, P = fit.x.copy(), fit.P.copy()
-    fit.hold()
-    for cp, Rc, frame in views_[9:]:
-        assert not fit.update(cp, Rc, np.zeros(3), math.radians(50.0), frame.bbox_px)
-    assert np.array_equal(fit.x, x) and np.array_equal(fit.P, P) and fit.updates == 9
-
-
 def test_the_size_fit_weighs_boxes_at_its_rate():
     """Consecutive frames carry nearly the same information: with times given, a box within 1 / rate_hz of the
     last one weighed is not looked at (without times, every box is)."""
@@ -1030,39 +857,6 @@ def test_the_perception_corrects_with_the_fitted_size():
     assert fit_err < 0.6 * class_err, (fit_err, class_err)
 
 
-def test_per_layout_size_fits_learn_side_by_side_and_the_correction_takes_the_layouts_own():
-    """``size_fit.per_layout``: round a bridge-forward ship (the other end's layout) 28 % taller than the class,
-    a fit with each layout learns from the same boxes, each at its own outline, so their sizes differ, and the
-    correction uses the fit of the layout in use; when that layout changes the correction takes the other
-    layout's fit as it stands. With one fit (the default) the change hands the same fit the other outline."""
-    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 32.0, ship_type="bridge_forward")
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
-    ships = {per: ShipModel(ShipModelConfig(size_fit=SizeFitConfig(per_layout=per, min_updates=0)), fsw_cam)
-             for per in (False, True)}
-    percs = {per: _perception(ship) for per, ship in ships.items()}
-    for k, az in enumerate(list(range(0, 360, 5)) * 2):
-        t = 0.5 * k
-        meas, motion, _, _ = _ring_detection(cam, pose, t, az)
-        for perc in percs.values():
-            perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
-    one, two = ships[False], ships[True]
-    assert len(one.sizes) == 1 and len(two.sizes) == 2
-    cls, other = two.sizes
-    assert cls.outline is two.outlines[0] and other.outline is two.outlines[1]
-    assert cls.updates == other.updates >= 8, (cls.updates, other.updates)  # both took the same boxes
-    assert two.size is two.sizes[1 if two.layout.other_end else 0]
-    weighed = two._layout_scales()  # the layout fit weighs each layout at its own fit's sizes
-    assert np.array_equal(weighed[0], cls.scale) and np.array_equal(weighed[1], other.scale)
-    # each layout reads the boxes its own way: the heights differ
-    assert abs(math.log(other.scale[2] / cls.scale[2])) > 0.03, (cls.scale, other.scale)
-    for end, fit in ((False, cls), (True, other)):  # the layout fit's choice, either way
-        for ship in (one, two):
-            ship.layout.other_end = end
-            ship.follow_layout()
-        assert two.size is fit and np.array_equal(two.size.scale, fit.scale)
-        assert one.size is one.sizes[0] and one.size.outline is one.outlines[int(end)]
-
-
 def test_the_perception_says_when_its_size_fit_gives_way_to_the_class():
     """A size fit sure of a wrong size, fed by the perception round the ring, turns the boxes away, starts again
     and (``class_after_restarts: 1``, the default) keeps the class's outline: an event says so, once."""
@@ -1102,7 +896,6 @@ def test_boxes_off_the_class_turn_the_class_check_on_with_the_size_fit_off():
         reasons.append(fix.reason or fix.overridden)
     n = gate.class_check_window
     assert perc.class_mismatch and any("off the ship class's size" in e for e in rec.texts), rec.texts
-    assert perc.ship.shape.class_doubted  # the centre fit is off from then on
     assert reasons[:n].count(FusionReason.SIZE_MISMATCH) > n // 2  # skipped for their size until then
     assert reasons[-20:].count(FusionReason.SIZE_MISMATCH) < 5  # and taken after
 
@@ -1301,47 +1094,6 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     assert own_err < 0.7 * wrong_err, errs  # 6.6 against 11.0 px
 
 
-def test_a_box_corrected_over_its_own_headings_doubts_it_by_the_estimates_correction():
-    """``own_headings_doubt`` (an option, off by default): a box no estimated heading explains says that the
-    heading is wrong or that the ship is not the class, and its own headings' correction is right only in the
-    first case. So
-    the fix (the same either way) carries, besides the own headings' spread, the square of its distance from
-    the estimated course's correction in each axis: the filter leans on it as little as that distance says.
-    The ship points north while the estimate says east (test_a_box_the_estimated_course_cannot_explain_is_
-    corrected_over_its_own_headings)."""
-    from controllers.ukf import CameraMotion
-    cam = PinholeCamera.from_config(CAM_CFG)
-    h = UkfConfig().target_plane_height_m
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
-    assert not DetectionGateConfig().own_headings_doubt  # (an option: docs/ENVELOPE.md, "A fresh seed, 1656")
-
-    def perception(doubt: bool) -> Perception:
-        p = Perception(DetectionGateConfig(maybe_cut_action="skip", own_headings_doubt=doubt),
-                       AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), cam), cam)
-        p.lock.locked = True
-        return p
-    on, off_ = perception(True), perception(False)
-    outline = ShipOutline(ShipModelConfig())
-    own = 0
-    for cp, Rc, box in ring_views(0.0, range(0, 360, 30), elevation_deg=40.0, rng_m=400.0):
-        motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-        meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
-                            det_valid=True, det_u_px=float(0.5 * (box[0] + box[2])),
-                            det_v_px=float(0.5 * (box[1] + box[3])), det_bbox_px=box)
-        a, b = on.step(meas, motion, prior), off_.step(meas, motion, prior)
-        assert (a.use, a.u_px, a.v_px, a.overridden) == (b.use, b.u_px, b.v_px, b.overridden)
-        if not (a.use and a.overridden == FusionReason.SIZE_MISMATCH):
-            assert a.centre_noise_px2 == b.centre_noise_px2
-            continue
-        own += 1
-        est = box_centre_offset_px(outline, cam, cp, Rc, np.zeros(3), 0.0, h)  # the eastward course's offset
-        du, dv = (meas.det_u_px - est[0]) - a.u_px, (meas.det_v_px - est[1]) - a.v_px
-        assert a.centre_noise_px2 == pytest.approx((b.centre_noise_px2[0] + du * du, b.centre_noise_px2[1] + dv * dv),
-                                                   rel=1e-9, abs=1e-9)
-        assert max(abs(du), abs(dv)) > 1.0  # the two corrections differ by pixels here
-    assert own >= 3, own
-
-
 def test_a_moving_ship_s_boxes_are_taken_closer_in():
     """``detection_gate.moving_min_range_m``: a ship estimated to move at ``moving_speed_m_s`` or more has its
     boxes taken down to that range (the coast after the last box flies its velocity); a still or slow one's
@@ -1467,132 +1219,6 @@ def test_the_perception_corrects_with_the_layout_the_box_centres_fit():
     assert fit_err < 0.8 * class_err, (fit_err, class_err)
 
 
-def test_the_mixture_of_layouts_corrects_part_way_and_says_how_far_off_that_may_be():
-    """``layout_fit.correction: mixture``: the box centre is corrected by the two layouts' offsets weighted by
-    their probabilities, and the spread between them (``q (1 - q) d d^T``) goes into the fix's offset spread,
-    which the reported std carries. With the other end at probability 0.35 the fix lies 0.35 of the way from
-    the class's correction to the other end's; with ``switch`` it is the class's alone, its spread zero (one
-    known course)."""
-    from controllers.config import LayoutFitConfig
-    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 25.0, 40.0, "patrol_boat")
-    course = math.radians(90.0 - 40.0)
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
-    meas, motion, cp, Rc = _ring_detection(cam, pose, 0.0, 70.0, rng_m=600.0, elevation_deg=35.0)
-    fixes, models = {}, {}
-    for mode in ("switch", "mixture"):
-        models[mode] = ShipModel(ShipModelConfig(layout_fit=LayoutFitConfig(correction=mode)), fsw_cam)
-        models[mode].layout.p_other_end = 0.35
-        fixes[mode] = _perception(models[mode]).step(meas, motion, prior)
-    outlines = models["switch"].outlines
-    o_class, o_other = (box_centre_offset_px(o, fsw_cam, cp, Rc, np.zeros(3), course, h) for o in outlines)
-    d = o_other - o_class
-    sw, mx = fixes["switch"], fixes["mixture"]
-    assert np.allclose([sw.u_px - mx.u_px, sw.v_px - mx.v_px], 0.35 * d, atol=1e-6), (sw, mx, d)
-    assert np.linalg.norm(d) > 3.0  # (the two layouts' corrections differ here by pixels)
-    assert np.array_equal(sw.offset_spread_px2, np.zeros((2, 2)))
-    assert np.allclose(mx.offset_spread_px2, 0.35 * 0.65 * np.outer(d, d), atol=1e-9)
-
-
-def test_the_hull_s_lower_edge_offset_is_the_hull_box_s_bottom():
-    """``anchor="bottom"``: the u offset is the box centre's, the v offset the box's lower edge's, both against
-    the tracked point's image; for one course and averaged over several."""
-    fsw_cam = PinholeCamera.from_config(CAM_CFG)
-    hull = ShipOutline(ShipModelConfig()).hull
-    ship = Ship(TargetConfig(heading_deg=40.0))
-    cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
-    cp, Rc, _ = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 400.0, 40.0, 70.0)
-    h = UkfConfig().target_plane_height_m
-    p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
-    tracked = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
-    courses = np.radians([10.0, 50.0, 200.0])
-    boxes = predicted_boxes_px(hull, fsw_cam, cp, Rc, np.zeros(3), courses)
-    for i, c in enumerate(courses):
-        off = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), float(c), h, anchor="bottom")
-        centre = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), float(c), h)
-        assert off[0] == pytest.approx(centre[0])
-        assert off[1] == pytest.approx(boxes[i, 3] - tracked[1])
-        assert off[1] > centre[1] + 5.0  # the lower edge lies below the centre
-    w = np.array([0.2, 0.5, 0.3])
-    mean = box_centre_offset_px(hull, fsw_cam, cp, Rc, np.zeros(3), None, h, boxes_px=boxes,
-                                courses_weights=(courses, w), anchor="bottom")
-    assert mean[1] == pytest.approx(float(w @ (boxes[:, 3] - tracked[1])))
-
-
-@pytest.mark.parametrize("elevation_deg", [30.0, 50.0])
-def test_the_hull_s_lower_edge_does_not_see_the_superstructure(elevation_deg):
-    """Two ships of the class's hull and size, one with its superstructure aft (the class's layout), one with it
-    forward: from a dive's views all round, the box centres corrected with the class's whole outline differ
-    between them by several pixels on average (the superstructure's place moves the box centre), the fixes
-    from the hull's lower edge by about 2 px (the hulls' bows taper a little differently; the ray cast's
-    box edges are quantised to its stride), and the fixes from the hull's lower edge land within the stride
-    of the tracked point's image for both."""
-    fsw_cam = PinholeCamera.from_config(CAM_CFG)
-    outline = ShipOutline(ShipModelConfig())
-    h = UkfConfig().target_plane_height_m
-    heading = 40.0
-    course = math.radians(90.0 - heading)
-    scenes = []
-    for kind in ("bridge_aft", "bridge_forward"):
-        ship = Ship(TargetConfig(type=kind, heading_deg=heading))
-        scenes.append((Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh), Pose(*reversed(ship.pose(0.0)))))
-    diff_centre, diff_bottom, err_bottom = [], [], []
-    for az in range(0, 360, 20):
-        fixes = []
-        for cam, pose in scenes:
-            cp, Rc, frame = _look_from(cam, pose, 350.0, elevation_deg, az + 2.5)
-            b = frame.bbox_px
-            centre = np.array([0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])])
-            oc = box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), course, h)
-            ob = box_centre_offset_px(outline.hull, fsw_cam, cp, Rc, np.zeros(3), course, h, anchor="bottom")
-            bottom = np.array([centre[0], b[3]]) - ob
-            p = Rc.T @ (np.array([0.0, 0.0, h]) - cp)
-            tracked = np.array([fsw_cam.fx * p[0] / p[2] + fsw_cam.cx, fsw_cam.fy * p[1] / p[2] + fsw_cam.cy])
-            err_bottom.append(float(np.hypot(*(bottom - tracked))) / frame.stride_px)
-            fixes.append((centre - oc, bottom))
-        diff_centre.append(float(np.hypot(*(fixes[0][0] - fixes[1][0]))))
-        diff_bottom.append(float(np.hypot(*(fixes[0][1] - fixes[1][1]))))
-    assert np.mean(diff_centre) > 3.0, diff_centre
-    assert np.mean(diff_bottom) < 2.5, diff_bottom  # 1.7 and 1.9 px (the centres: 9.2 and 4.6 px)
-    assert np.mean(diff_bottom) < 0.5 * np.mean(diff_centre)
-    assert np.max(err_bottom) < 1.5, err_bottom
-
-
-def test_the_dive_s_fix_blends_the_hull_s_lower_edge_in():
-    """``anchor: blend_in_dive``: the perception's fix is the box centre corrected with the whole outline until
-    the mission says the dive has begun (``in_dive``), then the mean of that and the fix from the hull's lower
-    edge; ``box_centre`` (the default) keeps the first in the dive, ``hull_bottom_in_dive`` takes the second."""
-    from controllers.ukf import CameraMotion
-    cam, pose, fsw_cam, h, vel = _moving_ship_scene(55.0, 25.0, 25.0)
-    course = math.atan2(vel[1], vel[0])
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel, 0.1, h)
-    cp, Rc, frame = _look_from(cam, pose, 400.0, 40.0, 100.0)
-    b = frame.bbox_px
-    outline = ShipOutline(ShipModelConfig())
-    c = np.array([0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])])
-    by_centre = c - box_centre_offset_px(outline, fsw_cam, cp, Rc, np.zeros(3), course, h)
-    by_bottom = np.array([c[0], b[3]]) - box_centre_offset_px(outline.hull, fsw_cam, cp, Rc, np.zeros(3), course,
-                                                              h, anchor="bottom")
-    assert np.hypot(*(by_centre - by_bottom)) > 1.0  # (the two differ, so the test tells them apart)
-    motion = CameraMotion(0.0, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
-    meas = Measurements(0.0, cp, np.zeros(3), np.zeros(3), np.zeros(3), 22.0, float(cp[2]), det_new=True,
-                        det_valid=True, det_u_px=float(c[0]), det_v_px=float(c[1]), det_bbox_px=b)
-
-    def fix(anchor, in_dive):
-        cfg = ShipModelConfig(anchor=anchor, size_fit=SizeFitConfig(enabled=False))
-        perc = _perception(ShipModel(cfg, fsw_cam))
-        perc.in_dive = in_dive
-        f = perc.step(meas, motion, prior)
-        assert f.use and not f.reason
-        return np.array([f.u_px, f.v_px])
-
-    np.testing.assert_allclose(fix("blend_in_dive", False), by_centre, atol=1e-6)
-    np.testing.assert_allclose(fix("blend_in_dive", True), 0.5 * (by_centre + by_bottom), atol=1e-6)
-    np.testing.assert_allclose(fix("box_centre", True), by_centre, atol=1e-6)
-    assert ShipModelConfig().anchor == "box_centre"
-    np.testing.assert_allclose(fix("hull_bottom_in_dive", True), by_bottom, atol=1e-6)
-    np.testing.assert_allclose(fix("hull_bottom_in_dive", False), by_centre, atol=1e-6)
-
-
 def _shapes_round(ship_type: str, elevation_deg: float = 40.0, heading: float = 40.0):
     """A ShapeHeading (the class's outline) fed the ray-cast boxes of a still ship of ``ship_type`` seen from round
     a ring (700 m, a lap in 4 min), its course given and followed: the posterior, and the course (ENU, rad)."""
@@ -1668,100 +1294,3 @@ def test_the_layout_fit_weighs_the_box_shapes_evidence_too():
         assert logit(fit.p_other_end) - logit(prior) == pytest.approx(want, abs=0.05), (ratio, fit.p_other_end)
     assert fit_with(4.0).other_end  # the default weight 1: -1.39 + 4 > logit(0.9) = 2.2
 
-
-def test_a_ship_whose_shapes_turn_end_for_end_gets_bow_and_stern_alike():
-    """ends_unsure_flips: boxes of the class's ship at 30 deg from North, then at 210 (as a ship the class's
-    outline reads either way round looks: its shapes' best end comes and goes). The shapes' likeliest heading
-    turns end for end as the evidence changes sides; at the third such turn within the window the model takes
-    the shapes not to tell this ship's ends apart, for good, and while the course is unknown a heading and its
-    opposite then weigh alike (the axis stays the shapes'). With the boxes of one end only, or the option off
-    (0), or a window too short to hold three turns, the ends stay the shapes' own."""
-    from controllers.config import ShapeHeadingConfig
-    a = list(ring_views(30.0, range(0, 360, 20)))
-    b = list(ring_views(210.0, range(0, 360, 20)))
-
-    def fly(blocks, flips=3, window_s=120.0):
-        cfg = ShipModelConfig(heading_from_shape=ShapeHeadingConfig(
-            ends_unsure_flips=flips, ends_unsure_window_s=window_s, held_course_spread_deg_s=0.0))
-        ship = ShipModel(cfg, PinholeCamera.from_config(CAM_CFG))
-        t, status = 0.0, None
-        for views_ in blocks:
-            for cp, Rc, box in views_:
-                status = ship.observe_box(t, cp, Rc, np.zeros(3), box, np.zeros(3), 0.1) or status
-                t += 0.4
-        return ship, status
-
-    def weight_at(ship, course_deg):
-        courses, weights = ship.headings(np.zeros(3))
-        near = [w for c, w in zip(np.degrees(courses), weights) if _deg_off(c, course_deg) < 1.0]
-        return near[0] if near else 0.0
-
-    ship, status = fly([a, b, a])
-    assert ship.ends_unsure and status.ends_unsure
-    assert status.best_heading_deg == pytest.approx(30.0)  # the log's best heading is the shapes' own
-    w60, w240 = weight_at(ship, 60.0), weight_at(ship, 240.0)  # 30 and 210 deg from North, ENU
-    assert w60 > 0.1 and w60 == pytest.approx(w240)
-    for blocks, kw in (([a, a, a], {}), ([a, b, a], {"flips": 0}), ([a, b, a], {"window_s": 0.5})):
-        ship, status = fly(blocks, **kw)
-        assert not ship.ends_unsure and not status.ends_unsure
-        assert weight_at(ship, 60.0) > weight_at(ship, 240.0) + 0.1  # the shapes' own end (the last boxes')
-
-
-def test_a_size_fit_held_or_in_doubt_while_the_course_is_unknown():
-    """``size_fit.course_unknown``: round a still ship (no course; the heading from its box shapes alone) with
-    ``hold`` the fit takes no box, where with ``learn`` it takes them at the shapes' heading; with ``doubt`` it
-    takes them too, but each with the sizes at the heading +- 30 deg in its noise, and ends less sure. Round the
-    same ship on a 3 m/s course all three fit alike."""
-    cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
-    fits = {}
-    for moving in (False, True):
-        prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), vel if moving else np.zeros(3), 0.1, h)
-        for mode in ("learn", "hold", "doubt"):
-            perc = _perception(ShipModel(ShipModelConfig(size_fit=SizeFitConfig(course_unknown=mode)), fsw_cam))
-            for k, az in enumerate(list(range(0, 360, 5)) * 2):
-                t = 0.5 * k
-                meas, motion, cp, Rc = _ring_detection(cam, pose, t, az)
-                perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
-            fits[moving, mode] = perc.ship.size
-    learn, hold, doubt = (fits[False, m] for m in ("learn", "hold", "doubt"))
-    assert learn.updates > 30 and hold.updates == 0 and doubt.updates > 30, (learn.updates, doubt.updates)
-    assert np.trace(doubt.P) > 1.5 * np.trace(learn.P), (np.diag(doubt.P), np.diag(learn.P))
-    for mode in ("hold", "doubt"):
-        assert fits[True, mode].updates == fits[True, "learn"].updates > 30
-        assert np.array_equal(fits[True, mode].x, fits[True, "learn"].x)
-
-
-def test_the_size_fit_waits_for_a_steady_axis_while_the_course_is_unknown():
-    """``size_fit.course_unknown_steady_s``: the shapes' axis (bow and stern alike) must have stayed within
-    ``course_unknown_steady_deg`` for that long. Watched for less: not steady; a heading turned end for end:
-    still steady; a swing of 30 deg: not steady until the window has passed it."""
-    cfg = ShipModelConfig(size_fit=SizeFitConfig(course_unknown_steady_s=20.0, course_unknown_steady_deg=10.0))
-    ship = ShipModel(cfg, PinholeCamera.from_config(CAM_CFG))
-    courses = np.radians(np.arange(0.0, 360.0, 5.0))
-
-    def weights_at(deg):
-        w = np.exp(-0.5 * ((np.degrees(courses) - deg + 180.0) % 360.0 - 180.0) ** 2 / 4.0 ** 2)
-        return w / w.sum()
-
-    steady = {t: ship._axis_steady(t, courses, weights_at(40.0 if t % 2 else 220.0)) for t in range(0, 30)}
-    assert not any(steady[t] for t in range(20)) and all(steady[t] for t in range(20, 30)), steady
-    swung = {t: ship._axis_steady(t, courses, weights_at(70.0)) for t in range(30, 60)}
-    assert not any(swung[t] for t in range(30, 50)) and all(swung[t] for t in range(50, 60)), swung
-
-
-def test_a_still_ship_s_size_fit_with_a_steady_axis_still_learns():
-    """Round a still ship of the class's layout (its shapes' axis steady) the size fit with
-    course_unknown_steady_s takes boxes once the axis has held for that long: fewer than without (23 of the
-    60 here), but it learns."""
-    cam, pose, fsw_cam, h, vel = _moving_ship_scene(47.0, 20.0, 32.0)
-    prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
-    updates = {}
-    for steady_s in (0.0, 20.0):
-        sf = SizeFitConfig(course_unknown_steady_s=steady_s)
-        perc = _perception(ShipModel(ShipModelConfig(size_fit=sf), fsw_cam))
-        for k, az in enumerate(list(range(0, 360, 5)) * 2):
-            t = 0.5 * k
-            meas, motion, cp, Rc = _ring_detection(cam, pose, t, az)
-            perc.step(meas, motion, dataclasses.replace(prior, t_s=t))
-        updates[steady_s] = perc.ship.size.updates
-    assert updates[0.0] > updates[20.0] > 10, updates
