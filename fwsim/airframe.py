@@ -3,7 +3,7 @@
 It loads an aircraft from the project's ``aircraft/`` folder (whatever the
 working directory), sets initial conditions from the world ENU frame, trims
 with JSBSim's own trim, applies actuator commands and returns the truth state
-in the project's frames (DESIGN.md section 4).
+in the project's frames (docs/design/architecture.md, "Frames and conventions").
 
 The world ENU frame maps to JSBSim's WGS84 geodetic coordinates through a
 ``frames.GeoOrigin`` anchored on the sea surface: z is the altitude above sea

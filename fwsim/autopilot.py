@@ -15,7 +15,7 @@ Two command modes, both used by the paper:
     and tracks the body rates that realise them (exact kinematics, with the
     yaw part going to the rudder). In wings-level flight p = u_p and q = u_q.
 
-(b) ``AccelCommand`` (what BPNG needs, DESIGN.md section 5): airspeed and an
+(b) ``AccelCommand`` (what BPNG needs, docs/design/algorithms.md): airspeed and an
     acceleration perpendicular to the velocity. Bank-to-turn: the specific
     force the wing must make is f = a_perp - g_perp (gravity compensated);
     the bank about the velocity is chosen so the lift points along f

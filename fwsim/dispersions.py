@@ -1,6 +1,6 @@
 """Dispersions of a batch spec: scenario fields drawn from distributions, reproducibly.
 
-In a batch entry (docs/TOOLS.md)::
+In a batch entry (docs/guide/batches.md)::
 
     seed: 2024                          # top level of the spec: the draws' seed (default 0)
     runs:

@@ -1,6 +1,6 @@
 """Rotations, quaternions and frame helpers: every frame convention of the project.
 
-Conventions (DESIGN.md section 4):
+Conventions (docs/design/architecture.md, "Frames and conventions"):
   * world frame: ENU (x East, y North, z Up), metres;
   * body frame: FRD (x forward, y right wing, z down);
   * camera frame: z along the optical axis, x right, y down;

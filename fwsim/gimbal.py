@@ -1,6 +1,6 @@
 """Pan-tilt (PT) camera gimbal: kinematics, joint limits and rate limits.
 
-Conventions (DESIGN.md section 4, paper "PT Camera Model"):
+Conventions (docs/design/architecture.md, "Frames and conventions", paper "PT Camera Model"):
   * body frame FRD; the mount frame M has the body axes and its origin at the
     mount offset ``r_c/p`` (``GimbalConfig.mount_offset_frd_m``, body FRD, m);
   * pan-then-tilt. Pan ``theta_p`` rotates about the mount z axis (down):
@@ -61,7 +61,7 @@ _TiltAngle = Annotated[float, Field(ge=-_HALF_PI, le=_HALF_PI)]
 
 
 class GimbalConfig(StrictModel):
-    """Pan-tilt gimbal parameters (paper's gimbal table; DESIGN.md section 5). All angles in rad."""
+    """Pan-tilt gimbal parameters (paper's gimbal table; docs/design/algorithms.md). All angles in rad."""
 
 
     mount_offset_frd_m: list[_Offset] = Field(

@@ -5,7 +5,7 @@ time in seconds). Vectors are numpy arrays of float64; field names carry their
 frame and unit (``pos_enu_m``, ``body_rates_frd_rad_s``). NaN marks a field
 that is not valid in this message (PX4's convention).
 
-Frames (DESIGN.md section 4):
+Frames (docs/design/architecture.md, "Frames and conventions"):
   * world: ENU, metres, origin on the sea surface where the target starts;
   * body: FRD; Euler angles roll, pitch, yaw are the aerospace ones relative to
     NED (yaw clockwise from North).

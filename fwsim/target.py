@@ -1,10 +1,10 @@
 """The ship target: configuration, motion (truth) and mesh.
 
-This is the truth side of the harness (DESIGN.md section 1): the flight
+This is the truth side of the harness (docs/design/architecture.md, "Two rules"): the flight
 software never sees a :class:`Ship`; the camera ray-casts its mesh and the log
 records its :class:`TargetState` for scoring.
 
-Frames (DESIGN.md section 4):
+Frames (docs/design/architecture.md, "Frames and conventions"):
   * world: ENU, metres; the ship floats on the sea plane z = 0;
   * ship body frame: x = bow (forward), y = port (left), z = up, origin at the
     waterline centre of the hull (midships, on the centre line, z = 0). Its

@@ -1,4 +1,4 @@
-"""Every topic and frame name of a run's log, in one place (docs/LOGS.md says what each carries).
+"""Every topic and frame name of a run's log, in one place (docs/guide/logs.md says what each carries).
 
 The loop, the flight software's blocks, the metrics, the figures and both
 Rerun views name topics from here; nothing else spells them out.

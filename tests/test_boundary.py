@@ -1,4 +1,4 @@
-"""Flight software never reads truth (DESIGN.md section 1)."""
+"""Flight software never reads truth (docs/design/architecture.md, "Two rules")."""
 import ast
 import math
 from pathlib import Path

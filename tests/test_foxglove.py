@@ -104,7 +104,7 @@ def test_the_flown_paths_are_line_strips_that_join_up(paper_log):
 
 
 def test_what_rerun_makes_of_the_mcap_directly(paper_log, tmp_path):
-    """docs/LOGS.md 'Opening the MCAP in Rerun': Rerun's own MCAP loader turns the Foxglove topics into its
+    """docs/guide/logs.md 'Opening the MCAP in Rerun': Rerun's own MCAP loader turns the Foxglove topics into its
     archetypes; the JSON topics stay raw message blobs (the plots come through `fwsim replay`)."""
     import re
     import shutil

@@ -1,7 +1,7 @@
 """The departure ablation: each of fwsim's departures from the paper switched off alone, and all of them.
 
 Every variant flies the paper mission and the terminal sweep (scenarios/batches/terminal_sweep.yaml), as one
-``fwsim.batch`` of ``1 + 42`` runs per variant, and the tool prints a Markdown table (the README's):
+``fwsim.batch`` of ``1 + 42`` runs per variant, and the tool prints a Markdown table (docs/design/departures.md's):
 
     python tools/ablation.py --workers 2 --out runs/ablation           # ~25 min on 2 cores
     python tools/ablation.py --only endgame,bias_cap                  # some rows only

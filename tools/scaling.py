@@ -1,4 +1,4 @@
-"""Scaling figures for the README's speed section: batch workers, and memory over a long loiter.
+"""Scaling figures for docs/results/speed.md: batch workers, and memory over a long loiter.
 
     python tools/scaling.py batch              # the 8-seed paper-mission spec on 1 worker, then on 2
     python tools/scaling.py loiter             # a 1-hour loiter (no switch): peak memory, log size

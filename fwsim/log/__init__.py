@@ -1,4 +1,4 @@
-"""Run logs: one MCAP file per simulation run (see docs/LOGS.md).
+"""Run logs: one MCAP file per simulation run (see docs/guide/logs.md).
 
 Write with :class:`LogWriter`, read back with :func:`read_log`, which returns a
 :class:`RunLog`.

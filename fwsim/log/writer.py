@@ -1,4 +1,4 @@
-"""LogWriter: one MCAP file per simulation run (topics: docs/LOGS.md)."""
+"""LogWriter: one MCAP file per simulation run (topics: docs/guide/logs.md)."""
 from __future__ import annotations
 
 import logging
