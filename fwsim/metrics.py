@@ -119,15 +119,17 @@ METRICS: tuple[MetricSpec, ...] = (
             ("impact_metrics", "", "neither", "set only when the log's scenario does not read with this fwsim "
                                               "version: why the miss, hit and angles are left out"),
             ("switch_time_s", "s", "neither", "start of the last Phase 3 (the dive that ended the run)"),
-            ("go_arounds", "count", "lower", "dives before the last one that did not close and went back to the loiter"),
+            ("go_arounds", "count", "lower", "dives before the last one that did not close and went back to "
+                                              "the loiter"),
             ("impact_time_s", "s", "neither", "time of the impact (hull or sea contact) that ended the run"),
-            ("miss_distance_m", "m", "lower", "closest approach of the UAV's centre of gravity to the ship's aim point, "
-                                              "the path continued straight for 3 s past an impact"),
+            ("miss_distance_m", "m", "lower", "closest approach of the UAV's centre of gravity to the ship's aim "
+                                              "point, the path continued straight for 3 s past an impact"),
             ("miss_bow_m", "m", "zero", "that closest approach's offset towards the bow (ship frame)"),
             ("miss_port_m", "m", "zero", "that closest approach's offset to port (ship frame)"),
             ("miss_up_m", "m", "zero", "that closest approach's offset upwards (ship frame)"),
             ("impact_fpa_deg", "deg", "neither", "flight-path angle of the velocity at impact (negative: descending)"),
-            ("impact_heading_deg", "deg", "neither", "course of the velocity at impact, from north clockwise, 0 to 360"),
+            ("impact_heading_deg", "deg", "neither", "course of the velocity at impact, from north clockwise, "
+                                                     "0 to 360"),
             ("impact_fpa_error_deg", "deg", "zero", "impact flight-path angle minus the commanded one "
                                                     "(controllers.bpng.impact_flight_path_deg)"),
             ("impact_heading_error_deg", "deg", "zero", "impact course minus the commanded one "
@@ -153,7 +155,8 @@ METRICS: tuple[MetricSpec, ...] = (
                                                   "from lock + 5 s"),
             ("pixel_err_rms_px_v", "px", "lower", "RMS vertical offset of the detection from the image centre, "
                                                   "from lock + 5 s"),
-            ("pixel_err_max_px", "px", "lower", "largest offset of the detection from the image centre, from lock + 5 s"),
+            ("pixel_err_max_px", "px", "lower", "largest offset of the detection from the image centre, "
+                                                "from lock + 5 s"),
             ("ibvs_recentre_time_s", "s", "lower", "time from the lock until the detection stays within 20 px of "
                                                    "the image centre")),
     *_specs("estimator",
@@ -270,7 +273,36 @@ def metrics_doc() -> str:
         lines += [f"| `{s.name}` | {s.unit or 'text'} | {_BETTER_TEXT[s.better]} | {s.description} |"
                   for s in METRICS if s.group == group]
         lines.append("")
-    return "\n".join(lines)
+    return "\n".join(lines + list(_DOC_NOTES))
+
+
+_DOC_NOTES = (
+    "## How they are scored", "",
+    "- **Terminal phase.** The terminal metrics are scored when the flight software reached Phase 3 (or, flying "
+    "a script with no phases, when the run ended at an impact). A run that never did has no miss distance and "
+    "no impact angles (`—`, `null`), counts as not hit, and `terminal_note` says where it ended, e.g. `no "
+    "terminal phase: the run ended in phase 2 (loiter:nmpc) after 30.0 s (duration reached)`. A dive that "
+    "did not end at an impact keeps its miss distance (the closest approach so far) but has no impact angles.",
+    "- **Miss distance.** The closest approach of the UAV's centre of gravity to the ship's aim point (midships, "
+    f"half-way up the hull), with the path continued straight along the final velocity for {MISS_EXTENSION_S:g} s "
+    "past an impact, so that it says where the guidance was taking the UAV, not where the hull or the sea "
+    "stopped it. The ship's pose comes from the logged ship states.",
+    f"- **Estimator convergence.** From the estimator's own reported uncertainty, not from truth: the first "
+    f"estimate after which the larger horizontal position std stays under {CONVERGED_STD_M:g} m. "
+    "`estimator_pos_err_within_2std_fraction` checks that std against the truth: about 0.86 or more for an "
+    "honest filter; well below, the filter is overconfident and its convergence comes too early.",
+    f"- **Pixel errors** are scored from the lock plus {PIXEL_SETTLE_S:g} s (the camera recentres the ship after "
+    f"the lock); **loiter errors** from Phase 2's start plus {LOITER_SETTLE_S:g} s to the switch.", "",
+    "## Comparing runs", "",
+    "`fwsim compare BASELINE RUN` checks a run against a baseline's tolerances. A change beyond the tolerance "
+    "is *improved* in the better direction (reported; it fails only with `--strict`), a *REGRESSION* in the "
+    "worse one or outside a bound, and *CHANGED* for a metric with no better direction, a text that differs or a "
+    "value on one side only. The regression baselines (`tests/baselines/`) are checked strictly: a baseline "
+    "records behaviour, so an improvement is refreshed on purpose with `python tools/refresh_baselines.py`.", "",
+    "`fwsim compare A B --ab` says, per metric, whether B is better or worse than A, by how much (B − A, and "
+    "relative to A), and ends with a count: `B better on N, worse on M, same on K`. Same means equal to rounding "
+    "(or within `--tolerances`).", "",
+)
 
 
 def convergence_index(std_m) -> int:

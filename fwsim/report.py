@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["wilson_interval", "Report", "summarise", "within", "write_report", "ReportError", "never_dived", "row_value",
-           "provenance", "seed_ranges"]
+__all__ = ["wilson_interval", "Report", "summarise", "within", "write_report", "ReportError", "never_dived",
+           "row_value", "provenance", "seed_ranges"]
 
 Z95 = 1.959963984540054  # the standard normal's 97.5th percentile
 
