@@ -82,12 +82,12 @@ def never_dived(row: dict) -> bool:
 
 def _why_no_dive(row: dict) -> str:
     """Where a run that never dived ended, without its times (so that runs group): e.g. ``ended in phase 2
-    (loiter:nmpc) (duration reached)``."""
+    (loiter:nmpc), duration reached``."""
     note = str(row.get("terminal_note") or "")
     if not note:
         return f"ended without a switch ({str(row.get('reason') or '')[:60]})"
-    text = note.split(": ", 1)[-1].removeprefix("the run ")
-    return re.sub(r" (after|at t =) [0-9.]+ s", "", text)
+    text = re.sub(r" (after|at t =) [0-9.]+ s", "", note.split(": ", 1)[-1].removeprefix("the run "))
+    return re.sub(r" \(([^()]*)\)$", r", \1", text)  # the end reason after a comma
 
 
 def _finite(rows: list[dict], key: str) -> np.ndarray:
@@ -138,7 +138,7 @@ class Report:
         n = sum(self.never_dived.values())
         if not n:
             return []
-        why = "; ".join(f"{k}: {v}" for k, v in self.never_dived.items())
+        why = "; ".join(f"{k} ({v})" for k, v in self.never_dived.items())
         return [("never dived (no miss distance, not a hit)", f"{n} of {self.runs} runs: {why}")]
 
     def headline(self) -> list[tuple[str, str]]:
@@ -286,7 +286,8 @@ def _miss_scatter(rows: list[dict], rep: Report) -> str:
            title="closest approach to the aim point, ship frame")
     ax.axhline(0, color="0.8", lw=0.8)
     ax.axvline(0, color="0.8", lw=0.8)
-    ax.legend(loc="upper right", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper right", fontsize=8)
     return _png(fig)
 
 

@@ -163,7 +163,7 @@ def test_summary_hit_is_a_bool_and_runs_that_never_dived_are_told(pool_batch):
     assert {r["hit"] for r in table} == {"false"} and {r["miss_distance_m"] for r in table} == {""}
     rep = summarise(data["rows"])
     assert rep.hits == 0 and rep.hit_probability == 0.0 and rep.dived == 0
-    assert rep.never_dived == {"ended in phase 0 (script) (duration reached)": len(done)}
+    assert rep.never_dived == {"ended in phase 0 (script), duration reached": len(done)}
     assert dict(rep.headline())["miss distance CEP50 / CEP90"] == "— (no run dived)"
 
 

@@ -97,12 +97,12 @@ def test_runs_that_never_dived_are_counted_and_explained_not_scored():
     rep = summarise(rows)
     assert rep.runs == 9 and rep.hits == 4 and rep.dived == 5  # the 4 hits and r4 (dived, missed by 30 m)
     assert rep.cep50_m == pytest.approx(2.0)  # over the runs that dived only: the same as without them
-    assert rep.never_dived == {"ended in phase 2 (loiter:nmpc) (duration reached)": 2,
-                               "ended in phase 1 (acquisition:search) (duration reached)": 1}
+    assert rep.never_dived == {"ended in phase 2 (loiter:nmpc), duration reached": 2,
+                               "ended in phase 1 (acquisition:search), duration reached": 1}
     head = dict(rep.headline())
     assert head["never dived (no miss distance, not a hit)"].startswith("3 of 9 runs: ended in phase 2")
     assert head["miss distance CEP50 / CEP90"].endswith("over the 5 runs that dived")
-    assert rep.outcomes["no dive: ended in phase 2 (loiter:nmpc) (duration reached)"] == 2
+    assert rep.outcomes["no dive: ended in phase 2 (loiter:nmpc), duration reached"] == 2
     # none dived: no CEP of 1000 m, no mean nan: a dash and why
     only = summarise([_no_dive(0), _no_dive(1)])
     head = dict(only.headline())
