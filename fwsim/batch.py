@@ -717,7 +717,7 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
             ray.shutdown()
         result.rows = [rows[j.id] for j in jobs if j.id in rows]
         result.files = write_summary(result.rows, out_dir, {
-            "name": name, "spec": str(Path(spec_path).resolve()),
+            "name": name, **spec_record(spec_path),
             **({"changes": changes.describe()} if changes else {}), "fwsim_version": fwsim.__version__,
             "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "runs": len(jobs), "finished": len(result.rows),
@@ -729,6 +729,18 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
 
 
 # -- summary files ----------------------------------------------------------
+
+def spec_record(spec_path: str | Path) -> dict[str, str]:
+    """What the summary records of the spec flown (``fwsim report`` shows it): its path, SHA-256 and text."""
+    import hashlib
+    path = Path(spec_path).resolve()
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return {"spec": str(path)}
+    return {"spec": str(path), "spec_sha256": hashlib.sha256(data).hexdigest(),
+            "spec_text": data.decode("utf-8", "replace")}
+
 
 def columns_of(rows: list[dict[str, Any]]) -> list[str]:
     """Base columns, then ``set.*`` override and ``case.*`` argument columns, then metric columns (first-seen

@@ -75,7 +75,7 @@ def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float,
 
 #: metrics of a terminal case that the sweep reports
 CASE_KEYS = ["hit", "miss_distance_m", "impact_fpa_error_deg", "impact_heading_error_deg", "switch_time_s",
-             "impact_time_s", "ukf_pos_err_max_after_convergence_m", "target_in_fov_fraction_after_lock"]
+             "impact_time_s", "estimator_pos_err_max_after_convergence_m", "target_in_fov_fraction_after_lock"]
 #: the sweep's batch spec (its cases are the terminal_case arguments)
 SWEEP_SPEC = SCENARIO_DIR / "batches" / "terminal_sweep.yaml"
 _ARGS = ("theta_f_deg", "psi_f_deg", "ship_heading_deg", "ship_speed_m_s")
@@ -118,7 +118,7 @@ def sweep_rows(batch_rows: list[dict], bounds=(3.0, 3.0)) -> list[dict]:
     for r in batch_rows:
         row = {k: r.get(f"case.{k}") for k in _ARGS}
         row.update(wall_s=r.get("wall_time_s"), end=r.get("reason"), log=r.get("log"))
-        row.update({k: float(r.get(k, math.nan)) for k in CASE_KEYS})
+        row.update({k: math.nan if r.get(k) is None else float(r[k]) for k in CASE_KEYS})  # None: no value
         row["ok"] = bool(r.get("status") == "completed" and row["hit"] == 1.0 and row["miss_distance_m"] <= bounds[0]
                          and abs(row["impact_fpa_error_deg"]) <= bounds[1]
                          and abs(row["impact_heading_error_deg"]) <= bounds[1])

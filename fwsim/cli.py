@@ -6,7 +6,8 @@
     fwsim run SCENARIO --profile                # plus where the wall time went, block by block
     fwsim bench [--json] [--quick] [SCENARIO]
     fwsim batch SPEC.yaml [--workers N] [--out DIR] [--resume] [--ray auto|local|ADDRESS]
-    fwsim compare BASELINE RUN [--tolerances FILE]
+    fwsim compare BASELINE RUN [--tolerances FILE] [--strict]
+    fwsim compare A B --ab                      # which run is better, metric by metric
     fwsim plot LOG [--out DIR] [--only a,b]
     fwsim replay LOG [--rrd OUT.rrd]
     fwsim report BATCH_OUT                      # a batch's statistics: report.html and a headline
@@ -196,9 +197,19 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
     console.print(f"sim time {result.sim_time_s:.1f} s, wall time {result.wall_time_s:.2f} s, "
                   f"real-time factor {result.real_time_factor:.1f}x")
     console.print(f"log: {result.log_path}")
+    console.print(f"result: {_result(result.log_path)}")
     if result.blocks is not None:
         _print_blocks(f"where the time went: {scenario.name}", result.blocks, result.wall_time_s, result.sim_time_s)
     return 0 if result.status == "completed" else 1
+
+
+def _result(log_path: Path) -> str:
+    """The one-line result of a flown run (``fwsim.metrics.result_line``), from its log."""
+    from fwsim.metrics import result_line, terminal_metrics
+    try:
+        return result_line(terminal_metrics(log_path))
+    except Exception as exc:  # noqa: BLE001 - a log that cannot be scored: say so, the run itself is done
+        return f"not scored ({type(exc).__name__}: {short(exc, 120)})"
 
 
 def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
@@ -215,7 +226,7 @@ def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
 
 
 def cmd_metrics(args) -> int:
-    from fwsim.metrics import compute_metrics
+    from fwsim.metrics import compute_metrics, metrics_json
     path = Path(args.log)
     log = _flight_log(path)
     if log is None:
@@ -226,10 +237,33 @@ def cmd_metrics(args) -> int:
         print(f"error: {path}: not a readable fwsim log: {short(exc, 200)}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(m, indent=2, allow_nan=True))
+        print(metrics_json(m))
         return 0
-    _print_table(f"metrics: {path.name}", m)
+    _print_metrics(f"metrics: {path.name}", m)
     return 0
+
+
+NOTES = ("terminal_note", "impact_metrics")  # text that explains a group's missing values: on its heading line
+
+
+def _print_metrics(title: str, m: dict) -> None:
+    """The metrics grouped as the table in fwsim.metrics lists them, with their units; "—" for no value, and a
+    group's note (why its values are missing) on the group's heading line."""
+    from fwsim.metrics import METRIC, format_value, grouped
+    groups = grouped(m)
+    width = max((len(k) for _, rows in groups for k, _ in rows), default=0) + 2
+    lines = [title]
+    for group, rows in groups:
+        notes = [str(v) for k, v in rows if k in NOTES and v]
+        lines.append(f"{group}" + "".join(f" — {n}" for n in notes))
+        for name, value in rows:
+            if name in NOTES:
+                continue
+            unit = METRIC[name].unit if name in METRIC else ""
+            text = format_value(value)
+            cell = f"{text:>12}" if isinstance(value, (int, float)) or value is None else f"  {text}"
+            lines.append(f"  {name:<{width}}{cell}" + (f" {unit}" if unit not in ("", "bool") else ""))
+    print("\n".join(lines))
 
 
 def cmd_bench(args) -> int:
@@ -348,9 +382,11 @@ def cmd_batch(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from fwsim.compare import compare_files
+    from fwsim.compare import ab_files, compare_files
     try:
-        cmp = compare_files(args.baseline, args.run, args.tolerances, any_runs=args.any)
+        if args.ab:
+            return _print_ab(ab_files(args.baseline, args.run, args.tolerances, any_runs=args.any))
+        cmp = compare_files(args.baseline, args.run, args.tolerances, any_runs=args.any, strict=args.strict)
     except (ValueError, KeyError) as exc:  # a file that is not a readable log, metrics file or baseline
         print(f"error: {short(exc, 300)}", file=sys.stderr)
         return 2
@@ -359,12 +395,29 @@ def cmd_compare(args) -> int:
     for name, justify in (("metric", "left"), ("baseline", "right"), ("run", "right"), ("diff", "right"),
                           ("tolerance", "left"), ("verdict", "left")):
         table.add_column(name, justify=justify, no_wrap=name != "verdict")
-    colours = {"ok": "green", "REGRESSION": "bold red", "missing": "bold red", "new": "yellow", "ignored": "dim"}
+    colours = {"ok": "green", "improved": "cyan", "REGRESSION": "bold red", "CHANGED": "bold red",
+               "missing": "bold red", "new": "yellow", "ignored": "dim"}
     for row, check in zip(cmp.rows(), cmp.checks):
-        table.add_row(*row[:5], f"[{colours[check.verdict]}]{row[5]}[/]")
+        colour = "bold red" if check.fails(cmp.strict) else colours[check.verdict]
+        table.add_row(*row[:5], f"[{colour}]{row[5]}[/]")
     out.print(table)
     out.print(cmp.summary_line())
     return 0 if cmp.ok else 1
+
+
+def _print_ab(ab) -> int:
+    """The A/B table: per metric A, B, B - A, relative, which is better; then the count. Exit 0."""
+    out = _console()
+    table = Table(title=f"A {ab.a_label}\nB {ab.b_label}")
+    for name in ("metric", "A", "B", "B - A", "relative", "verdict"):
+        table.add_column(name, justify="left" if name in ("metric", "verdict") else "right", no_wrap=True)
+    colours = {"B better": "green", "B worse": "red", "same": "dim"}
+    for row in ab.text_rows():
+        colour = colours.get(row[5], "yellow")
+        table.add_row(*row[:5], f"[{colour}]{row[5]}[/]")
+    out.print(table)
+    out.print(ab.summary_line())
+    return 0
 
 
 def cmd_plot(args) -> int:
@@ -397,6 +450,7 @@ def cmd_report(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     _print_table(f"fwsim report: {rep.name}", dict(rep.headline()))
+    _print_table("what was flown", dict(rep.flown))
     console.print(f"report: {path}")
     return 0
 
@@ -445,10 +499,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "'spawn' a viewer, 'connect' to a running one (default rerun+http://127.0.0.1:9876/proxy; "
                         "ADDR: a port, HOST:PORT or a rerun+http:// URL), or 'save' into an .rrd file")
     r.set_defaults(func=cmd_run)
-    m = sub.add_parser("metrics", help="print the metrics computed from a log")
-    m.add_argument("log", help="MCAP log of a run")
-    m.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    m.set_defaults(func=cmd_metrics)
+    _add_metrics_parser(sub)
     b = sub.add_parser("bench", help="measure simulation speed on this machine")
     b.add_argument("--json", action="store_true", help="print JSON instead of a table")
     b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
@@ -477,13 +528,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="fly only the runs of these scenario seeds (30, s30, 30,59, 10-14; repeatable), each the "
                          "same draw as in the whole batch: a batch's failing runs flown again with a --set change")
     ba.set_defaults(func=cmd_batch)
-    c = sub.add_parser("compare", help="compare a run's metrics with a baseline; exit 1 on a regression")
-    c.add_argument("baseline", help="baseline: a log (.mcap), metrics (.json) or baseline file (.yaml)")
-    c.add_argument("run", help="run: a log (.mcap), metrics (.json) or baseline file (.yaml)")
-    c.add_argument("--tolerances", help="YAML of per-metric tolerances (overrides the baseline's own)")
-    c.add_argument("--any", action="store_true",
-                   help="compare even when the two flew different scenarios, seeds or durations")
-    c.set_defaults(func=cmd_compare)
+    _add_compare_parser(sub)
     pl = sub.add_parser("plot", help="PNG figures from a log")
     pl.add_argument("log", help="MCAP log of a run")
     pl.add_argument("--out", help="folder for the PNGs (default: <log>_plots/ beside the log)")
@@ -499,6 +544,29 @@ def build_parser() -> argparse.ArgumentParser:
                     help="draw the UAV this many times life size (default 10)")
     rp.set_defaults(func=cmd_replay)
     return p
+
+
+def _add_metrics_parser(sub) -> None:
+    m = sub.add_parser("metrics", help="print the metrics computed from a log, grouped (docs/guide/metrics.md)")
+    m.add_argument("log", help="MCAP log of a run")
+    m.add_argument("--json", action="store_true", help="print strict JSON instead of a table (null: no value)")
+    m.set_defaults(func=cmd_metrics)
+
+
+def _add_compare_parser(sub) -> None:
+    c = sub.add_parser("compare", help="compare a run's metrics with a baseline (exit 1 on a regression), or two "
+                                       "runs with --ab")
+    c.add_argument("baseline", help="baseline (or A): a log (.mcap), metrics (.json) or baseline file (.yaml)")
+    c.add_argument("run", help="run (or B): a log (.mcap), metrics (.json) or baseline file (.yaml)")
+    c.add_argument("--tolerances", help="YAML of per-metric tolerances (overrides the baseline's own)")
+    c.add_argument("--any", action="store_true",
+                   help="compare even when the two flew different scenarios, seeds or durations")
+    c.add_argument("--strict", action="store_true",
+                   help="fail on an improvement beyond the tolerance too (by default it is reported, not failing)")
+    c.add_argument("--ab", action="store_true",
+                   help="A/B: say per metric which run is better (by the metric's direction) and by how much, "
+                        "then count; no pass or fail")
+    c.set_defaults(func=cmd_compare)
 
 
 def _check_environment() -> None:
@@ -522,6 +590,19 @@ def main(argv: list[str] | None = None) -> int:
         from fwsim._entry import exit_code
         print("interrupted", file=sys.stderr)
         return exit_code(exc)
+    except BrokenPipeError:  # the reader went away (`fwsim metrics LOG --json | head -1`): end quietly
+        return _closed_pipe()
+
+
+def _closed_pipe() -> int:
+    """After a write to a closed stdout: point stdout at /dev/null (so the flush at exit does not fail again)
+    and exit 141, as a shell reports a process ended by SIGPIPE."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 128 + 13  # SIGPIPE
 
 
 if __name__ == "__main__":

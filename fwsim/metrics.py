@@ -1,5 +1,12 @@
 """Scores computed from a log (never from the objects of a live run).
 
+Every metric is listed once in :data:`METRICS` (name, group, unit, which way is
+better, a one-line definition): ``fwsim metrics`` prints them grouped in that
+order, ``docs/guide/metrics.md`` is generated from it
+(``python tools/gen_metrics_doc.py``), and ``fwsim compare`` takes the
+better direction from it. A metric without a value for the run (the ship never
+locked, the run never dived) is ``None`` (``null`` in JSON, ``—`` in tables).
+
 Inner-loop tracking errors are RMS over every logged tick of the
 ``/autopilot/status`` topic (set-point minus what the loop saw).
 
@@ -11,13 +18,16 @@ estimator's own reported uncertainty, not from truth: the first time after
 which the estimate's horizontal position standard deviation (as logged:
 for the UKFs the filter's covariance plus the box centre's systematic
 error, ``controllers.ukf``) stays below ``CONVERGED_STD_M``. So that std is
-checked against the truth too: ``ukf_pos_err_within_2std_fraction`` is the
+checked against the truth too: ``estimator_pos_err_within_2std_fraction`` is the
 share of estimates whose horizontal error is within twice that std. For an honest (consistent) filter it is about
 86 % or more (1 - exp(-2) for a round two-dimensional Gaussian error; more when
 one axis's std is the larger); well below, the filter is overconfident, and its
 "convergence" comes too early.
 
-Terminal phase: ``miss_distance_m`` is the closest approach of the UAV's
+Terminal phase: scored when the flight software reached Phase 3 (or, flying a
+script with no phases, when the run ended at an impact); otherwise the terminal
+metrics are ``None`` and ``terminal_note`` says why (the phase the run ended
+in). ``miss_distance_m`` is the closest approach of the UAV's
 centre of gravity to the ship's aim point (target.aim_point_ship_m: midships,
 half-way up the hull, inside it), with the path continued straight along the
 final velocity for ``MISS_EXTENSION_S`` past an impact: a run ends when the
@@ -25,8 +35,8 @@ UAV reaches the hull or the sea, and the miss distance should measure where
 the guidance was taking it; ``miss_bow_m``, ``miss_port_m`` and ``miss_up_m``
 are that closest approach's offset in the ship's frame (towards the bow, to
 port, up). The ship's aim point comes from the logged ship states
-(/target/state), so a ship moved by an event scores where it really was. ``hit`` is 1 when the run's last state is
-inside the hull or superstructure. ``switch_time_s`` is the start of the last
+(/target/state), so a ship moved by an event scores where it really was. ``hit`` is true when the run's last
+state is inside the hull or superstructure. ``switch_time_s`` is the start of the last
 Phase 3 (the dive that ended the run); ``go_arounds`` counts the dives before
 it that did not close and went back to the loiter (``switch.go_around_m``,
 ``switch.go_around_stall_s``).
@@ -41,8 +51,11 @@ the longest stretch between frames that saw it.
 """
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,6 +67,242 @@ from fwsim.yamlfile import short
 CONVERGED_STD_M = 5.0
 MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
 PIXEL_SETTLE_S = 5.0  # pixel errors are scored from lock + this (IBVS recentres the target after the lock)
+#: loiter errors are scored from Phase 2 start + this, to the switch (or to the descent to the dive's entry ring)
+LOITER_SETTLE_S = 60.0
+TERMINAL_PHASE = 3
+
+#: which way is better: a smaller value, a larger one, a value nearer zero (a signed error), or no way
+BETTER = ("lower", "higher", "zero", "neither")
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    """One metric: its name, group, unit ("" for text), which way is better (:data:`BETTER`), a one-line
+    definition."""
+
+    name: str
+    group: str
+    unit: str
+    better: str
+    description: str
+
+
+def _specs(group: str, *rows: tuple[str, str, str, str]) -> tuple[MetricSpec, ...]:
+    return tuple(MetricSpec(name, group, unit, better, text) for name, unit, better, text in rows)
+
+
+_FUSION_REASONS = (
+    ("used", "neither", "fused into the estimate"),
+    ("initialised", "neither", "started (or restarted) the estimator"),
+    ("acquiring", "neither", "before the lock: counted toward it"),
+    ("not_initialised", "lower", "the estimator was down and this detection did not start it"),
+    ("no_camera_pose", "lower", "no gimbal encoders: the ray was unknown"),
+    ("too_close", "neither", "the ship was closer than detection_gate.min_range_m"),
+    ("overflowing_box", "neither", "the box spanned the image: the ship was larger than the frame"),
+    ("size_mismatch", "lower", "no heading of the ship model explained the box's size"),
+    ("airframe_hidden", "lower", "course unknown and too much of the ship hidden by the airframe"),
+    ("innovation_gate", "lower", "the estimator's chi-square test rejected it"),
+    ("rejected", "lower", "the estimator could not use it (e.g. its ray missed the sea plane)"),
+    ("estimator_reset", "lower", "the estimator diverged on it and reset itself"),
+)
+
+#: every metric, grouped, in the order ``fwsim metrics`` prints them
+METRICS: tuple[MetricSpec, ...] = (
+    *_specs("outcome",
+            ("status", "", "neither", "how the run ended: completed, failed or interrupted"),
+            ("end_reason", "", "neither", "why the run ended, e.g. `hit the ship at t = 176.88 s`, `duration reached`"),
+            ("hit", "bool", "higher", "the UAV's last state is inside the ship's hull or superstructure"),
+            ("flight_time_s", "s", "neither", "simulated time from the first to the last UAV state")),
+    *_specs("terminal",
+            ("terminal_note", "", "neither", "why the terminal metrics have no value (no terminal phase, or a dive "
+                                             "that did not end at an impact); absent when they all have one"),
+            ("impact_metrics", "", "neither", "set only when the log's scenario does not read with this fwsim "
+                                              "version: why the miss, hit and angles are left out"),
+            ("switch_time_s", "s", "neither", "start of the last Phase 3 (the dive that ended the run)"),
+            ("go_arounds", "count", "lower", "dives before the last one that did not close and went back to "
+                                              "the loiter"),
+            ("impact_time_s", "s", "neither", "time of the impact (hull or sea contact) that ended the run"),
+            ("miss_distance_m", "m", "lower", "closest approach of the UAV's centre of gravity to the ship's aim "
+                                              "point, the path continued straight for 3 s past an impact"),
+            ("miss_bow_m", "m", "zero", "that closest approach's offset towards the bow (ship frame)"),
+            ("miss_port_m", "m", "zero", "that closest approach's offset to port (ship frame)"),
+            ("miss_up_m", "m", "zero", "that closest approach's offset upwards (ship frame)"),
+            ("impact_fpa_deg", "deg", "neither", "flight-path angle of the velocity at impact (negative: descending)"),
+            ("impact_heading_deg", "deg", "neither", "course of the velocity at impact, from north clockwise, "
+                                                     "0 to 360"),
+            ("impact_fpa_error_deg", "deg", "zero", "impact flight-path angle minus the commanded one "
+                                                    "(controllers.bpng.impact_flight_path_deg)"),
+            ("impact_heading_error_deg", "deg", "zero", "impact course minus the commanded one "
+                                                        "(controllers.bpng.impact_heading_deg), wrapped to ±180")),
+    *_specs("tracking",
+            ("camera_frames", "count", "neither", "camera frames rendered"),
+            ("target_in_fov_fraction", "fraction", "higher", "share of the frames with the ship in the field of view"),
+            ("target_visible_fraction", "fraction", "higher", "share of the frames with some of the ship's pixels not "
+                                                              "hidden by the UAV's own airframe"),
+            ("occluded_frames", "count", "lower", "frames with the ship in view but wholly hidden by the airframe"),
+            ("partly_occluded_frames", "count", "lower", "frames with the ship seen but partly hidden by the airframe"),
+            ("detections", "count", "neither", "detector outputs that found the ship"),
+            ("lock_time_s", "s", "lower", "time of the first flight-software tick with the target locked"),
+            ("target_in_fov_fraction_after_lock", "fraction", "higher", "share of the frames after the lock with the "
+                                                                        "ship in the field of view"),
+            ("occluded_frames_after_lock", "count", "lower", "frames after the lock with the ship in view but hidden "
+                                                             "by the airframe"),
+            ("target_visible_fraction_after_lock", "fraction", "higher", "share of the frames after the lock that saw "
+                                                                         "the ship (in view, not behind the airframe)"),
+            ("target_hidden_longest_s_after_lock", "s", "lower", "longest stretch after the lock between frames "
+                                                                 "that saw the ship"),
+            ("pixel_err_rms_px_u", "px", "lower", "RMS horizontal offset of the detection from the image centre, "
+                                                  "from lock + 5 s"),
+            ("pixel_err_rms_px_v", "px", "lower", "RMS vertical offset of the detection from the image centre, "
+                                                  "from lock + 5 s"),
+            ("pixel_err_max_px", "px", "lower", "largest offset of the detection from the image centre, "
+                                                "from lock + 5 s"),
+            ("ibvs_recentre_time_s", "s", "lower", "time from the lock until the detection stays within 20 px of "
+                                                   "the image centre")),
+    *_specs("estimator",
+            ("estimator_pos_rmse_m", "m", "lower", "RMS horizontal position error of the target estimate, from its "
+                                                   "first estimate"),
+            ("estimator_vel_rmse_m_s", "m/s", "lower", "RMS horizontal velocity error of the target estimate"),
+            ("estimator_pos_err_within_2std_fraction", "fraction", "higher", "share of estimates whose horizontal "
+             "error is within twice their own reported std (an honest filter: about 0.86 or more)"),
+            ("estimator_convergence_time_s", "s", "lower", "time from the lock until the estimate's own horizontal "
+                                                           "std stays under 5 m"),
+            ("estimator_pos_err_max_after_convergence_m", "m", "lower", "largest horizontal position error after "
+                                                                        "convergence"),
+            ("estimator_pos_rmse_after_convergence_m", "m", "lower", "RMS horizontal position error after convergence"),
+            ("estimator_vel_rmse_after_convergence_m_s", "m/s", "lower", "RMS horizontal velocity error after "
+                                                                         "convergence"),
+            ("estimator_updates", "count", "neither", "measurement updates, at the end of the run"),
+            ("estimator_innovation_rejected", "count", "lower", "detections its innovation gate rejected"),
+            ("estimator_rejected", "count", "lower", "detections it could not use"),
+            ("estimator_resets", "count", "lower", "resets after a divergence"),
+            ("estimator_numerical_resets", "count", "lower", "resets after a numerical failure (e.g. a covariance "
+                                                             "that lost its positive definiteness)"),
+            ("estimator_initialisations", "count", "neither", "times it was started")),
+    *_specs("fusion",
+            ("fusion_detections", "count", "neither", "detections the flight software received"),
+            *((f"fusion_{r}", "count", better, f"detections {text}") for r, better, text in _FUSION_REASONS)),
+    *_specs("loiter",
+            ("loiter_settle_s", "s", "neither", "the loiter errors are scored from Phase 2's start plus this"),
+            ("loiter_radius_rmse_m", "m", "lower", "RMS horizontal distance to the true ship minus the ring's radius"),
+            ("loiter_alt_rmse_m", "m", "lower", "RMS altitude minus the ring's altitude"),
+            ("occluded_frames_phase2", "count", "lower", "frames in Phase 2 with the ship in view but hidden by the "
+                                                         "airframe"),
+            ("nmpc_solves", "count", "neither", "NMPC solves"),
+            ("nmpc_solve_ms_median", "ms", "lower", "median wall time of an NMPC solve (machine-dependent)"),
+            ("nmpc_solve_ms_p99", "ms", "lower", "99th percentile wall time of an NMPC solve (machine-dependent)"),
+            ("nmpc_fallbacks", "count", "lower", "NMPC solves that failed and fell back"),
+            ("nmpc_cbf_active_fraction", "fraction", "neither", "share of the NMPC solves with the visibility "
+                                                                "barrier (CBF) active")),
+    *_specs("gimbal",
+            ("tilt_positive_s", "s", "lower", "time with the gimbal tilted upwards (above the body's x-y plane)")),
+    *_specs("autopilot",
+            ("airspeed_err_rms_m_s", "m/s", "lower", "RMS airspeed set-point minus airspeed"),
+            ("roll_rate_err_rms_deg_s", "deg/s", "lower", "RMS roll-rate set-point minus roll rate"),
+            ("pitch_rate_err_rms_deg_s", "deg/s", "lower", "RMS pitch-rate set-point minus pitch rate"),
+            ("accel_err_rms_m_s2", "m/s²", "lower", "RMS magnitude of the acceleration set-point minus the "
+                                                    "acceleration, over the ticks in acceleration mode")),
+    *_specs("flight",
+            ("airspeed_min_m_s", "m/s", "neither", "lowest airspeed"),
+            ("airspeed_max_m_s", "m/s", "neither", "highest airspeed"),
+            ("bank_abs_max_deg", "deg", "neither", "largest bank angle, either side"),
+            ("sideslip_abs_max_deg", "deg", "lower", "largest sideslip angle, either side"),
+            ("height_min_m", "m", "neither", "lowest height above the sea")),
+)
+
+METRIC = {s.name: s for s in METRICS}
+GROUPS = tuple(dict.fromkeys(s.group for s in METRICS))
+#: the terminal metrics that are None when there is no terminal phase (or no impact)
+TERMINAL_VALUES = ("switch_time_s", "impact_time_s", "miss_distance_m", "miss_bow_m", "miss_port_m", "miss_up_m",
+                   "impact_fpa_deg", "impact_heading_deg", "impact_fpa_error_deg", "impact_heading_error_deg")
+IMPACT_ONLY = ("impact_time_s", "impact_fpa_deg", "impact_heading_deg", "impact_fpa_error_deg",
+               "impact_heading_error_deg")
+
+
+def better_of(name: str) -> str:
+    """Which way is better for a metric (:data:`BETTER`); "neither" for a name not in the table."""
+    spec = METRIC.get(name)
+    return spec.better if spec is not None else "neither"
+
+
+def ordered(m: dict[str, Any]) -> dict[str, Any]:
+    """The metrics in the table's order (names not in it last, in their own order); NaN as None."""
+    keys = [s.name for s in METRICS if s.name in m] + [k for k in m if k not in METRIC]
+    return {k: (None if isinstance(m[k], float) and math.isnan(m[k]) else m[k]) for k in keys}
+
+
+def grouped(m: dict[str, Any]) -> list[tuple[str, list[tuple[str, Any]]]]:
+    """(group, [(name, value)]) in the table's order; names not in the table under "other"."""
+    out = [(g, [(s.name, m[s.name]) for s in METRICS if s.group == g and s.name in m]) for g in GROUPS]
+    other = [(k, v) for k, v in m.items() if k not in METRIC]
+    return [(g, rows) for g, rows in out + [("other", other)] if rows]
+
+
+def format_value(value: Any) -> str:
+    """A metric's value as text for a table: "—" for none, yes/no for a bool, 4 significant digits."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def metrics_json(m: dict[str, Any]) -> str:
+    """Strict JSON of a metrics dict (``null`` for a missing or NaN value; never a bare NaN)."""
+    clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in m.items()}
+    return json.dumps(clean, indent=2, allow_nan=False, ensure_ascii=False)
+
+
+_BETTER_TEXT = {"lower": "lower", "higher": "higher", "zero": "nearer 0", "neither": "—"}
+
+
+def metrics_doc() -> str:
+    """The metrics reference page (docs/guide/metrics.md), generated from :data:`METRICS`."""
+    lines = ["# Metrics reference", "",
+             "<!-- generated from fwsim/metrics.py (METRICS) by `python tools/gen_metrics_doc.py`; "
+             "edit the table there, not this page -->", "",
+             "`fwsim metrics LOG` computes these from a run's log (never from the live run) and prints them "
+             "grouped, in this order; `fwsim metrics LOG --json` prints them as strict JSON. A metric with no "
+             "value for the run (the ship never locked, the run never dived) prints as `—` (`null` in JSON); "
+             "a group whose topics the log lacks is left out. *Better* is the direction `fwsim compare` "
+             "calls an improvement (`--ab`: which run is better).", ""]
+    for group in GROUPS:
+        lines += [f"## {group}", "", "| metric | unit | better | definition |", "|---|---|---|---|"]
+        lines += [f"| `{s.name}` | {s.unit or 'text'} | {_BETTER_TEXT[s.better]} | {s.description} |"
+                  for s in METRICS if s.group == group]
+        lines.append("")
+    return "\n".join(lines + list(_DOC_NOTES))
+
+
+_DOC_NOTES = (
+    "## How they are scored", "",
+    "- **Terminal phase.** The terminal metrics are scored when the flight software reached Phase 3 (or, flying "
+    "a script with no phases, when the run ended at an impact). A run that never did has no miss distance and "
+    "no impact angles (`—`, `null`), counts as not hit, and `terminal_note` says where it ended, e.g. `no "
+    "terminal phase: the run ended in phase 2 (loiter:nmpc) after 30.0 s (duration reached)`. A dive that "
+    "did not end at an impact keeps its miss distance (the closest approach so far) but has no impact angles.",
+    "- **Miss distance.** The closest approach of the UAV's centre of gravity to the ship's aim point (midships, "
+    f"half-way up the hull), with the path continued straight along the final velocity for {MISS_EXTENSION_S:g} s "
+    "past an impact, so that it says where the guidance was taking the UAV, not where the hull or the sea "
+    "stopped it. The ship's pose comes from the logged ship states.",
+    f"- **Estimator convergence.** From the estimator's own reported uncertainty, not from truth: the first "
+    f"estimate after which the larger horizontal position std stays under {CONVERGED_STD_M:g} m. "
+    "`estimator_pos_err_within_2std_fraction` checks that std against the truth: about 0.86 or more for an "
+    "honest filter; well below, the filter is overconfident and its convergence comes too early.",
+    f"- **Pixel errors** are scored from the lock plus {PIXEL_SETTLE_S:g} s (the camera recentres the ship after "
+    f"the lock); **loiter errors** from Phase 2's start plus {LOITER_SETTLE_S:g} s to the switch.", "",
+    "## Comparing runs", "",
+    "`fwsim compare BASELINE RUN` checks a run against a baseline's tolerances. A change beyond the tolerance "
+    "is *improved* in the better direction (reported; it fails only with `--strict`), a *REGRESSION* in the "
+    "worse one or outside a bound, and *CHANGED* for a metric with no better direction, a text that differs or a "
+    "value on one side only. The regression baselines (`tests/baselines/`) are checked strictly: a baseline "
+    "records behaviour, so an improvement is refreshed on purpose with `python tools/refresh_baselines.py`.", "",
+    "`fwsim compare A B --ab` says, per metric, whether B is better or worse than A, by how much (B − A, and "
+    "relative to A), and ends with a count: `B better on N, worse on M, same on K`. Same means equal to rounding "
+    "(or within `--tolerances`).", "",
+)
 
 
 def convergence_index(std_m) -> int:
@@ -118,12 +367,13 @@ def share_within(err: np.ndarray, std: np.ndarray, k: float = 2.0) -> float:
     return float(np.mean(err[ok] <= k * std[ok])) if ok.any() else math.nan
 
 
-def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
-    """Metrics of one run as a flat dict (numbers, plus status and reason)."""
+def compute_metrics(log: RunLog | str | Path) -> dict[str, Any]:
+    """Metrics of one run as a flat dict in the table's order (numbers, ``hit`` a bool, status and reason text;
+    None for a metric with no value in this run)."""
     if not isinstance(log, RunLog):
         log = read_log(log)
     st = log.table(topics.UAV_STATE)
-    m: dict[str, float | str] = {"status": log.status, "end_reason": log.reason}
+    m: dict[str, Any] = {"status": log.status, "end_reason": log.reason}
     t = st["t_s"]
     m["flight_time_s"] = float(t[-1] - t[0]) if t.size else 0.0
     m["airspeed_min_m_s"] = float(np.min(st["airspeed_m_s"]))
@@ -131,16 +381,65 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
     m["bank_abs_max_deg"] = float(np.degrees(np.max(np.abs(st["euler_ned_rad"][:, 0]))))
     m["sideslip_abs_max_deg"] = float(np.degrees(np.max(np.abs(st["beta_rad"]))))
     m["height_min_m"] = float(np.min(st["height_above_sea_m"]))
-    if topics.AUTOPILOT_STATUS in log.topics:
-        ap = log.table(topics.AUTOPILOT_STATUS)
-        m["airspeed_err_rms_m_s"] = _rms(ap["airspeed_sp_m_s"] - ap["airspeed_m_s"])
-        err = np.degrees(ap["body_rates_sp_frd_rad_s"] - ap["body_rates_frd_rad_s"])
-        m["roll_rate_err_rms_deg_s"] = _rms(err[:, 0])
-        m["pitch_rate_err_rms_deg_s"] = _rms(err[:, 1])
-        accel = ap["mode"] == "accel"
-        if np.any(accel):
-            a_err = np.linalg.norm(ap["accel_sp_enu_m_s2"][accel] - ap["accel_enu_m_s2"][accel], axis=1)
-            m["accel_err_rms_m_s2"] = _rms(a_err)
+    _autopilot_metrics(log, m)
+    _camera_metrics(log, m)
+    _acquisition_metrics(log, m)
+    _fusion_metrics(log, m)
+    _loiter_metrics(log, m)
+    _impact_metrics(log, m)
+    return ordered(m)
+
+
+def terminal_metrics(log: RunLog | str | Path) -> dict[str, Any]:
+    """Only the outcome and terminal metrics (what ``fwsim run``'s result line needs), in the table's order."""
+    if not isinstance(log, RunLog):
+        log = read_log(log)
+    st = log.table(topics.UAV_STATE)
+    t = st["t_s"]
+    m: dict[str, Any] = {"status": log.status, "end_reason": log.reason,
+                         "flight_time_s": float(t[-1] - t[0]) if t.size else 0.0}
+    _impact_metrics(log, m)
+    return ordered(m)
+
+
+def result_line(m: dict[str, Any]) -> str:
+    """One line on how a run ended, from its metrics: ``hit at 176.88 s, miss 0.32 m, impact angles -0.64° /
+    +0.25° off`` or ``no dive: ended in phase 2 (loiter:nmpc) after 30.0 s (duration reached)``."""
+    note = m.get("terminal_note") or ""
+    if m.get("miss_distance_m") is None:
+        if note.startswith("no terminal phase"):
+            return "no dive: " + note.split(": ", 1)[-1].removeprefix("the run ")
+        return "no miss distance" + (f" ({note or m.get('impact_metrics') or 'not scored'})")
+    what = "hit" if m.get("hit") else "no hit"
+    when = m.get("impact_time_s")
+    text = f"{what}{f' at {when:.2f} s' if when is not None else ''}, miss {m['miss_distance_m']:.2f} m"
+    fpa, heading = m.get("impact_fpa_error_deg"), m.get("impact_heading_error_deg")
+    if fpa is not None and heading is not None:
+        text += f", impact angles {_signed(fpa)}° / {_signed(heading)}° off"
+    elif note:
+        text += f" ({note})"
+    return text
+
+
+def _signed(x: float) -> str:
+    return f"{x:+.2f}".replace("-", "\u2212")
+
+
+def _autopilot_metrics(log: RunLog, m: dict) -> None:
+    if topics.AUTOPILOT_STATUS not in log.topics:
+        return
+    ap = log.table(topics.AUTOPILOT_STATUS)
+    m["airspeed_err_rms_m_s"] = _rms(ap["airspeed_sp_m_s"] - ap["airspeed_m_s"])
+    err = np.degrees(ap["body_rates_sp_frd_rad_s"] - ap["body_rates_frd_rad_s"])
+    m["roll_rate_err_rms_deg_s"] = _rms(err[:, 0])
+    m["pitch_rate_err_rms_deg_s"] = _rms(err[:, 1])
+    accel = ap["mode"] == "accel"
+    if np.any(accel):
+        a_err = np.linalg.norm(ap["accel_sp_enu_m_s2"][accel] - ap["accel_enu_m_s2"][accel], axis=1)
+        m["accel_err_rms_m_s2"] = _rms(a_err)
+
+
+def _camera_metrics(log: RunLog, m: dict) -> None:
     if topics.CAMERA_FRAME in log.topics:
         fr = log.table(topics.CAMERA_FRAME)
         in_fov = fr["in_fov"].astype(bool)
@@ -153,11 +452,6 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, float | str]:
     if topics.CAMERA_DETECTION in log.topics:
         det = log.table(topics.CAMERA_DETECTION)
         m["detections"] = float(np.sum(det["detected"].astype(bool)))
-    _acquisition_metrics(log, m)
-    _fusion_metrics(log, m)
-    _loiter_metrics(log, m)
-    _impact_metrics(log, m)
-    return m
 
 
 def _fusion_metrics(log: RunLog, m: dict) -> None:
@@ -176,8 +470,92 @@ def _fusion_metrics(log: RunLog, m: dict) -> None:
             m[f"estimator_{k}"] = float(last[k])
 
 
-#: loiter errors are scored from Phase 2 start + this, to the switch (or to the descent to the dive's entry ring)
-LOITER_SETTLE_S = 60.0
+def _phases(log: RunLog, m: dict) -> str:
+    """Switch time and go-arounds; "" when the terminal metrics are scored, else why not (``terminal_note``)."""
+    reason = str(log.reason)
+    ended = reason.startswith("hit the ship") or reason.startswith("sea contact")
+    if topics.FSW_STATUS not in log.topics or not log.topics[topics.FSW_STATUS]:
+        return "" if ended else f"no terminal phase: the log has no flight-software status ({reason})"
+    fs = log.table(topics.FSW_STATUS)
+    phase = fs["phase"]
+    # the start of the last Phase 3 (the dive that ended the run; earlier ones went round)
+    starts = np.flatnonzero((phase[1:] == TERMINAL_PHASE) & (phase[:-1] != TERMINAL_PHASE)) + 1
+    if phase.size and phase[0] == TERMINAL_PHASE:
+        starts = np.concatenate([[0], starts])
+    m["switch_time_s"] = float(fs["t_s"][starts[-1]]) if starts.size else math.nan
+    m["go_arounds"] = float(np.sum((phase[1:] == 2) & (phase[:-1] == TERMINAL_PHASE)))
+    last = int(phase[-1]) if phase.size else 0
+    name = str(fs["phase_name"][-1]) if "phase_name" in fs and phase.size else ""
+    where = f"phase {last}" + (f" ({name})" if name else "")
+    after = f"after {m.get('flight_time_s', float(fs['t_s'][-1])):.1f} s"
+    if starts.size or (ended and not np.any(phase != 0)):  # dived, or a script (no phases) that ended at an impact
+        return "" if ended else f"no impact: the run ended in {where} {after} ({reason}); the miss distance is " \
+                                "the closest approach before the end"
+    return f"no terminal phase: the run ended in {where} {after} ({reason})"
+
+
+def _impact_metrics(log: RunLog, m: dict) -> None:
+    """Terminal phase: switch time, impact time, miss distance to the aim point, hit, impact angles; None with a
+    ``terminal_note`` (why) for those a run that never dived (or never hit anything) does not have."""
+    from fwsim.scenario import parse_scenario
+    note = _phases(log, m)
+    ended = not note
+    try:
+        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+    except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
+        why = short(exc, 160) or type(exc).__name__
+        m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
+        return
+    st = log.table(topics.UAV_STATE)
+    ship = _ship(log, scenario)
+    m["hit"] = _hit(st, ship, scenario)
+    if note:
+        m["terminal_note"] = note
+        if note.startswith("no terminal phase"):
+            m.update({k: None for k in TERMINAL_VALUES})
+            return
+    m["impact_time_s"] = float(st["t_s"][-1]) if ended else None
+    _miss_metrics(st, ship, ended, m)
+    bpng = getattr(scenario.controllers, "bpng", None)
+    if ended and bpng is not None:
+        v = st["vel_enu_m_s"][-1]
+        fpa = math.degrees(math.asin(max(-1.0, min(1.0, v[2] / max(float(np.linalg.norm(v)), 1e-9)))))
+        heading = math.degrees(math.atan2(v[0], v[1]))
+        m["impact_fpa_deg"] = fpa
+        m["impact_heading_deg"] = heading % 360.0
+        m["impact_fpa_error_deg"] = fpa - bpng.impact_flight_path_deg
+        m["impact_heading_error_deg"] = (heading - bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
+    else:
+        m.update({k: None for k in IMPACT_ONLY})
+
+
+def _ship(log: RunLog, scenario):
+    from fwsim.target import Ship
+    return LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
+
+
+def _hit(st, ship, scenario) -> bool:
+    """The run's last state inside the hull or superstructure."""
+    from fwsim.target import HullVolume
+    p_ship, R = ship.pose(float(st["t_s"][-1]))
+    return bool(HullVolume(scenario.target).contains(R.T @ (st["pos_enu_m"][-1] - p_ship)))
+
+
+def _miss_metrics(st, ship, ended: bool, m: dict) -> None:
+    """The closest approach to the aim point and its offset in the ship's frame."""
+    t, pos = st["t_s"], st["pos_enu_m"]
+    if ended:
+        # Guidance accuracy: continue the path straight through the impact along the final
+        # velocity for MISS_EXTENSION_S, so the miss distance says where the UAV was going,
+        # not where the ship's skin or the sea stopped it.
+        ext = np.linspace(0.0, MISS_EXTENSION_S, 61)[1:]
+        t = np.concatenate([t, t[-1] + ext])
+        pos = np.concatenate([pos, pos[-1] + ext[:, None] * st["vel_enu_m_s"][-1]])
+    aims = np.array([ship.aim_point_enu_m(float(ti)) for ti in t])
+    m["miss_distance_m"], miss, t_miss = _closest_approach(t, pos - aims)
+    _, R_miss = ship.pose(t_miss)  # the miss in the ship's frame (bow, port, up): where the UAV was going
+    m["miss_bow_m"], m["miss_port_m"], m["miss_up_m"] = (float(c) for c in R_miss.T @ miss)
+
 
 
 def _loiter_metrics(log: RunLog, m: dict) -> None:
@@ -276,58 +654,6 @@ def _closest_approach(t: np.ndarray, rel: np.ndarray) -> tuple[float, np.ndarray
     return best, np.asarray(vec, dtype=float), t_best
 
 
-def _impact_metrics(log: RunLog, m: dict) -> None:
-    """Terminal phase: switch time, impact time, miss distance to the aim point, hit, impact angles."""
-    from fwsim.scenario import parse_scenario
-    from fwsim.target import HullVolume, Ship
-    if topics.FSW_STATUS in log.topics:
-        fs = log.table(topics.FSW_STATUS)
-        # the start of the last Phase 3 (the dive that ended the run; earlier ones went round)
-        starts = np.flatnonzero((fs["phase"][1:] == 3) & (fs["phase"][:-1] != 3)) + 1
-        if fs["phase"].size and fs["phase"][0] == 3:
-            starts = np.concatenate([[0], starts])
-        m["switch_time_s"] = float(fs["t_s"][starts[-1]]) if starts.size else math.nan
-        m["go_arounds"] = float(np.sum((fs["phase"][1:] == 2) & (fs["phase"][:-1] == 3)))
-    reason = str(log.reason)
-    ended = reason.startswith("hit the ship") or reason.startswith("sea contact")
-    st = log.table(topics.UAV_STATE)
-    m["impact_time_s"] = float(st["t_s"][-1]) if ended else math.nan
-    try:
-        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
-    except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
-        why = short(exc, 160) or type(exc).__name__
-        m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
-        return
-    ship = LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
-    t = st["t_s"]
-    pos = st["pos_enu_m"]
-    if ended:
-        # Guidance accuracy: continue the path straight through the impact along the final
-        # velocity for MISS_EXTENSION_S, so the miss distance says where the UAV was going,
-        # not where the ship's skin or the sea stopped it.
-        ext = np.linspace(0.0, MISS_EXTENSION_S, 61)[1:]
-        t = np.concatenate([t, t[-1] + ext])
-        pos = np.concatenate([pos, pos[-1] + ext[:, None] * st["vel_enu_m_s"][-1]])
-    aims = np.array([ship.aim_point_enu_m(float(ti)) for ti in t])
-    m["miss_distance_m"], miss, t_miss = _closest_approach(t, pos - aims)
-    _, R_miss = ship.pose(t_miss)  # the miss in the ship's frame (bow, port, up): where the UAV was going
-    m["miss_bow_m"], m["miss_port_m"], m["miss_up_m"] = (float(c) for c in R_miss.T @ miss)
-    pos = st["pos_enu_m"]
-    t = st["t_s"]
-    hull = HullVolume(scenario.target)
-    p_ship, R = ship.pose(float(t[-1]))
-    m["hit"] = 1.0 if hull.contains(R.T @ (pos[-1] - p_ship)) else 0.0  # a number, like every metric
-    bpng = getattr(scenario.controllers, "bpng", None)
-    if ended and bpng is not None:
-        v = st["vel_enu_m_s"][-1]
-        fpa = math.degrees(math.asin(max(-1.0, min(1.0, v[2] / max(float(np.linalg.norm(v)), 1e-9)))))
-        heading = math.degrees(math.atan2(v[0], v[1]))
-        m["impact_fpa_deg"] = fpa
-        m["impact_heading_deg"] = heading % 360.0
-        m["impact_fpa_error_deg"] = fpa - bpng.impact_flight_path_deg
-        m["impact_heading_error_deg"] = (heading - bpng.impact_heading_deg + 180.0) % 360.0 - 180.0
-
-
 def _acquisition_metrics(log: RunLog, m: dict) -> None:
     lock_t = lock_time_s(log)
     m["lock_time_s"] = lock_t
@@ -366,14 +692,14 @@ def _acquisition_metrics(log: RunLog, m: dict) -> None:
         t, vel = est["t_s"][valid], est["vel_enu_m_s"][valid, :2]
         tv = interp_at(t, tru["t_s"], tru["vel_enu_m_s"][:, :2])
         ve = np.linalg.norm(vel - tv, axis=1)
-        m["ukf_pos_rmse_m"] = _rms(pe)
-        m["ukf_vel_rmse_m_s"] = _rms(ve)
-        m["ukf_pos_err_within_2std_fraction"] = share_within(pe, std, 2.0)
+        m["estimator_pos_rmse_m"] = _rms(pe)
+        m["estimator_vel_rmse_m_s"] = _rms(ve)
+        m["estimator_pos_err_within_2std_fraction"] = share_within(pe, std, 2.0)
         k = convergence_index(std)
         if k < len(t):
-            m["ukf_convergence_time_s"] = float(t[k] - lock_t)
-            m["ukf_pos_err_max_after_convergence_m"] = float(np.max(pe[k:]))
-            m["ukf_pos_rmse_after_convergence_m"] = _rms(pe[k:])
-            m["ukf_vel_rmse_after_convergence_m_s"] = _rms(ve[k:])
+            m["estimator_convergence_time_s"] = float(t[k] - lock_t)
+            m["estimator_pos_err_max_after_convergence_m"] = float(np.max(pe[k:]))
+            m["estimator_pos_rmse_after_convergence_m"] = _rms(pe[k:])
+            m["estimator_vel_rmse_after_convergence_m_s"] = _rms(ve[k:])
         else:
-            m["ukf_convergence_time_s"] = math.nan
+            m["estimator_convergence_time_s"] = math.nan

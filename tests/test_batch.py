@@ -144,6 +144,29 @@ def test_batch_rows_and_summary_files(pool_batch):
         assert pq.read_table(out / "summary.parquet").num_rows == 4
 
 
+def test_summary_hit_is_a_bool_and_runs_that_never_dived_are_told(pool_batch):
+    """hit is true/false in every summary; the checkout never dives: no miss distance, a note why, not a hit; the
+    summary records the spec it flew (path, SHA-256, text) for the report."""
+    import hashlib
+
+    from fwsim.report import summarise
+    spec, out, result, _ = pool_batch
+    done = [r for r in result.rows if r["status"] == "completed"]
+    assert done and all(r["hit"] is False and r["miss_distance_m"] is None for r in done)
+    assert all(r["terminal_note"].startswith("no terminal phase: the run ended in phase 0 (script)") for r in done)
+    data = json.loads((out / "summary.json").read_text())
+    assert [r.get("hit") for r in data["rows"] if r["status"] == "completed"] == [False] * len(done)
+    assert data["batch"]["spec_sha256"] == hashlib.sha256(spec.read_bytes()).hexdigest()
+    assert data["batch"]["spec_text"] == spec.read_text()
+    with open(out / "summary.csv") as f:
+        table = [r for r in csv.DictReader(f) if r["status"] == "completed"]
+    assert {r["hit"] for r in table} == {"false"} and {r["miss_distance_m"] for r in table} == {""}
+    rep = summarise(data["rows"])
+    assert rep.hits == 0 and rep.hit_probability == 0.0 and rep.dived == 0
+    assert rep.never_dived == {"ended in phase 0 (script), duration reached": len(done)}
+    assert dict(rep.headline())["miss distance CEP50 / CEP90"] == "— (no run dived)"
+
+
 def test_resume_keeps_finished_logs_and_flies_the_rest(pool_batch, tmp_path):
     spec, out, result, _ = pool_batch
     resumed_out = tmp_path / "out"

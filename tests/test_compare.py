@@ -55,27 +55,59 @@ def refresh_tool():
 
 @pytest.mark.parametrize("tol, base, run_value, verdict", [
     (Tolerance(abs=0.1), 1.0, 1.09, "ok"),
-    (Tolerance(abs=0.1), 1.0, 1.11, "REGRESSION"),
+    (Tolerance(abs=0.1), 1.0, 1.11, "REGRESSION"),  # lower is better: up is worse
+    (Tolerance(abs=0.1), 1.0, 0.89, "improved"),  # ... and down is better: reported, not failing
     (Tolerance(rel=1e-3), 1000.0, 1000.9, "ok"),
-    (Tolerance(rel=1e-3), 1000.0, 998.9, "REGRESSION"),
+    (Tolerance(rel=1e-3), 1000.0, 1001.1, "REGRESSION"),
+    (Tolerance(rel=1e-3), 1000.0, 998.9, "improved"),
     (Tolerance(abs=1.0, rel=1e-3), 10.0, 10.9, "ok"),  # the larger of the two
     (Tolerance(abs=1e-3, rel=0.5), 10.0, 14.0, "ok"),
     (Tolerance(min=0.0, max=5.0), 1.0, 4.0, "ok"),  # bounds only: the baseline value does not matter
     (Tolerance(min=0.0, max=5.0), 1.0, 5.5, "REGRESSION"),
+    (Tolerance(min=2.0), 3.0, 1.0, "REGRESSION"),  # out of bounds is a regression even in the better direction
     (Tolerance(abs=10.0, max=5.0), 1.0, 5.5, "REGRESSION"),  # both must hold
     (Tolerance(), 1.0, 1.0, "ok"),  # no tolerance: exact
     (Tolerance(), 1.0, 1.0 + 1e-15, "REGRESSION"),
-    (Tolerance(abs=1.0), math.nan, math.nan, "ok"),
-    (Tolerance(abs=1.0), 1.0, math.nan, "REGRESSION"),
-    (Tolerance(abs=1.0), math.nan, 1.0, "REGRESSION"),
+    (Tolerance(abs=1.0), math.nan, math.nan, "ok"),  # no value on either side
+    (Tolerance(abs=1.0), 1.0, math.nan, "CHANGED"),  # a value on one side only: neither better nor worse
+    (Tolerance(abs=1.0), math.nan, 1.0, "CHANGED"),
     (Tolerance(), "completed", "completed", "ok"),
-    (Tolerance(), "completed", "failed", "REGRESSION"),
+    (Tolerance(), "completed", "failed", "CHANGED"),
     (Tolerance(ignore=True), "a", "b", "ignored"),
     (Tolerance(abs=1.0), 1.0, None, "missing"),
     (Tolerance(abs=1.0), None, 1.0, "new"),
 ])
 def test_check_metric_rules(tol, base, run_value, verdict):
-    assert check_metric("m", base, run_value, tol).verdict == verdict
+    """The rules, for a metric where lower is better."""
+    assert check_metric("m", base, run_value, tol, better="lower").verdict == verdict
+
+
+@pytest.mark.parametrize("metric, base, run_value, verdict", [
+    ("pixel_err_rms_px_u", 1.7346, 1.7237, "improved"),  # lower is better: not a regression
+    ("pixel_err_rms_px_u", 1.7237, 1.7346, "REGRESSION"),
+    ("target_in_fov_fraction_after_lock", 0.95, 0.99, "improved"),  # higher is better
+    ("target_in_fov_fraction_after_lock", 0.99, 0.95, "REGRESSION"),
+    ("impact_fpa_error_deg", -2.0, 1.0, "improved"),  # nearer zero is better, whatever the sign
+    ("impact_fpa_error_deg", 1.0, -2.0, "REGRESSION"),
+    ("hit", False, True, "improved"),
+    ("hit", True, False, "REGRESSION"),
+    ("flight_time_s", 60.0, 5.0, "CHANGED"),  # no better direction
+    ("made_up_metric", 1.0, 2.0, "CHANGED"),  # not in the table: no direction
+])
+def test_verdicts_follow_the_metrics_table_direction(metric, base, run_value, verdict):
+    check = check_metric(metric, base, run_value, Tolerance(rel=1e-5))
+    assert check.verdict == verdict
+    assert check.failed == (verdict != "improved")
+
+
+def test_an_improvement_passes_unless_strict():
+    base, run = {"pixel_err_rms_px_u": 1.7346}, {"pixel_err_rms_px_u": 1.7237}
+    tol = {"default": Tolerance(rel=1e-5)}
+    lenient = compare_metrics(base, run, tol)
+    assert lenient.ok and "1 improved" in lenient.summary_line() and "REGRESSION" not in lenient.format_text()
+    strict = compare_metrics(base, run, tol, strict=True)
+    assert not strict.ok and strict.failures[0].verdict == "improved"
+    assert strict.summary_line().startswith("FAIL") and "1 improved (strict: failing)" in strict.summary_line()
 
 
 def test_default_tolerance_applies_to_numbers_not_text():
@@ -83,7 +115,7 @@ def test_default_tolerance_applies_to_numbers_not_text():
     cmp = compare_metrics({"x": 1.0, "y": 1.0, "status": "completed"},
                           {"x": 1.05, "y": 1.05, "status": "failed"}, tol)
     verdicts = {c.metric: c.verdict for c in cmp.checks}
-    assert verdicts == {"x": "REGRESSION", "y": "ok", "status": "REGRESSION"}
+    assert verdicts == {"x": "CHANGED", "y": "ok", "status": "CHANGED"}  # x: no better direction
     assert not cmp.ok and len(cmp.failures) == 2
 
 
@@ -171,6 +203,54 @@ def test_cli_compare_missing_metric_fails_and_bad_input_is_exit_2(short_logs, tm
     assert code == 2 and "not an MCAP file" in err
 
 
+def test_ab_says_which_run_is_better_and_by_how_much():
+    from fwsim.compare import ab_compare
+    a = {"status": "completed", "hit": False, "miss_distance_m": 4.0, "impact_fpa_error_deg": -2.0,
+         "target_in_fov_fraction_after_lock": 0.9, "flight_time_s": 60.0, "camera_frames": 1800.0,
+         "lock_time_s": math.nan, "pixel_err_rms_px_u": 1.7346}
+    b = {"status": "completed", "hit": True, "miss_distance_m": 1.0, "impact_fpa_error_deg": 2.5,
+         "target_in_fov_fraction_after_lock": 0.9 * (1 + 1e-12), "flight_time_s": 59.0, "camera_frames": 1800.0,
+         "lock_time_s": 12.0, "pixel_err_rms_px_u": 1.7237}
+    ab = ab_compare(a, b)
+    verdicts = {r.metric: r.verdict for r in ab.rows}
+    assert verdicts == {"status": "same", "hit": "B better", "flight_time_s": "differs", "miss_distance_m": "B better",
+                        "impact_fpa_error_deg": "B worse", "camera_frames": "same", "lock_time_s": "value in B only",
+                        "target_in_fov_fraction_after_lock": "same", "pixel_err_rms_px_u": "B better"}
+    assert [r.metric for r in ab.rows][:3] == ["status", "hit", "flight_time_s"]  # the metrics table's order
+    row = dict((r[0], r) for r in ab.text_rows())["miss_distance_m"]
+    assert row[3] == "-3" and row[4] == "-75 %"  # B - A, and relative to A
+    assert ab.summary_line() == ("B better on 3, worse on 1, same on 3; 1 differ with no better direction, "
+                                 "1 have a value in one run only")
+    # the tolerances widen "same"
+    wide = ab_compare(a, b, {"pixel_err_rms_px_u": Tolerance(abs=0.1)})
+    assert {r.metric: r.verdict for r in wide.rows}["pixel_err_rms_px_u"] == "same"
+
+
+def test_cli_ab_mode(short_logs, capsys):
+    code, out, err = fwsim_main(capsys, "compare", short_logs["ref"], short_logs["weak"], "--ab")
+    assert code == 0, out + err  # A/B informs; it does not fail
+    row = next(ln for ln in out.splitlines() if "roll_rate_err_rms_deg_s" in ln)
+    assert "B worse" in row and "%" in row  # a weaker roll-rate loop tracks worse
+    assert "B better on" in out.splitlines()[-1] and "worse on" in out.splitlines()[-1]
+
+
+def test_cli_compare_reports_an_improvement_and_strict_fails_it(short_logs, tmp_path, capsys):
+    """The weak run as the baseline, the reference as the run: the roll-rate error went down, an improvement,
+    not a regression; --strict fails on it."""
+    tol = tmp_path / "tol.yaml"
+    tol.write_text("tolerances:\n  default: {rel: 1.0e-5}\n  end_reason: {ignore: true}\n"
+                   "  sideslip_abs_max_deg: {ignore: true}\n  bank_abs_max_deg: {ignore: true}\n"
+                   "  airspeed_err_rms_m_s: {ignore: true}\n  pitch_rate_err_rms_deg_s: {ignore: true}\n"
+                   "  height_min_m: {ignore: true}\n  airspeed_min_m_s: {ignore: true}\n"
+                   "  airspeed_max_m_s: {ignore: true}\n")
+    code, out, _ = fwsim_main(capsys, "compare", short_logs["weak"], short_logs["ref"], "--tolerances", tol)
+    row = next(ln for ln in out.splitlines() if "roll_rate_err_rms_deg_s" in ln)
+    assert code == 0 and "improved" in row and "REGRESSION" not in out, out
+    code, out, _ = fwsim_main(capsys, "compare", short_logs["weak"], short_logs["ref"], "--tolerances", tol,
+                              "--strict")
+    assert code == 1 and "1 improved (strict: failing)" in out
+
+
 # -- regression baselines ---------------------------------------------------------
 
 def test_baseline_files_are_complete():
@@ -217,7 +297,8 @@ def test_refresh_rewrites_metrics_and_keeps_the_rest(tmp_path, capsys):
     tool = refresh_tool()
     assert tool.main([str(dst)]) == 0
     out = capsys.readouterr().out
-    assert "REGRESSION" in out and f"wrote {dst}" in out  # the table of what moved (5 s instead of 60 s)
+    # the table of what moved (5 s instead of 60 s: flight_time_s has no better direction, it changed)
+    assert "CHANGED" in next(ln for ln in out.splitlines() if ln.startswith("flight_time_s")) and f"wrote {dst}" in out
     assert dst.read_text().split(REFRESH_MARKER)[0] == head  # comments and tolerances kept
     b = load_baseline(dst)
     assert b.metrics["flight_time_s"] == pytest.approx(5.0, abs=1e-6)

@@ -307,5 +307,5 @@ def test_paper_mission_against_a_turning_ship_hits_with_both_estimators(tmp_path
         res = run(scenario, text, tmp_path / f"{est}.mcap")
         out[est] = compute_metrics(res.log_path)
         assert out[est]["hit"] == 1.0, (est, out[est]["miss_distance_m"])
-    rmse = {est: out[est]["ukf_pos_rmse_after_convergence_m"] for est in out}
+    rmse = {est: out[est]["estimator_pos_rmse_after_convergence_m"] for est in out}
     assert max(rmse.values()) < 8.0 and rmse["ct_ukf"] < 1.5 * rmse["ukf"], rmse

@@ -62,7 +62,7 @@ def test_terminal_dive_from_the_loiter_ring_meets_the_bounds(tmp_path):
     assert result.reason.startswith("hit the ship"), (result.reason, case)
     assert m["hit"] == 1.0 and m["miss_distance_m"] <= 3.0, case
     assert abs(m["impact_fpa_error_deg"]) <= 3.0 and abs(m["impact_heading_error_deg"]) <= 3.0, case
-    assert m["ukf_pos_err_max_after_convergence_m"] < 8.0, case
+    assert m["estimator_pos_err_max_after_convergence_m"] < 8.0, case
 
 
 def test_a_ship_unlike_the_class_still_converges_and_hits(tmp_path):
@@ -81,10 +81,10 @@ def test_a_ship_unlike_the_class_still_converges_and_hits(tmp_path):
     events = [text for _, _, text in log.events() if text.startswith("perception:")]
     size = log.table("/fsw/ship_heading")
     case = {k: round(m[k], 2) for k in ("miss_distance_m", "impact_fpa_error_deg", "impact_heading_error_deg",
-                                        "ukf_pos_rmse_after_convergence_m", "fusion_size_mismatch")}
+                                        "estimator_pos_rmse_after_convergence_m", "fusion_size_mismatch")}
     in_use = np.flatnonzero(size["size_in_use"])
     scale = size["size_scale"][-1]
     assert in_use.size and scale[0] > 1.1 and scale[1] < 0.9 and scale[2] > 1.1, (scale, events)
     assert m["hit"] == 1.0 and m["miss_distance_m"] <= 6.0, case
     assert abs(m["impact_fpa_error_deg"]) <= 3.0 and abs(m["impact_heading_error_deg"]) <= 3.0, case
-    assert m["ukf_pos_rmse_after_convergence_m"] < 8.0 and m["fusion_size_mismatch"] < 500, case
+    assert m["estimator_pos_rmse_after_convergence_m"] < 8.0 and m["fusion_size_mismatch"] < 500, case

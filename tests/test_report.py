@@ -29,8 +29,8 @@ def _rows():
                      "target_in_fov_fraction_after_lock": [1.0, 1.0, 0.98, 1.0][i],
                      "target_visible_fraction_after_lock": [1.0, 0.97, 0.98, 1.0][i],
                      "target_hidden_longest_s_after_lock": [0.0, 5.2, 3.0, 0.0][i],
-                     "ukf_pos_err_max_after_convergence_m": [3.0, 5.0, 9.0, 7.0][i],
-                     "ukf_pos_err_within_2std_fraction": [0.9, 0.5, 0.2, 0.7][i],
+                     "estimator_pos_err_max_after_convergence_m": [3.0, 5.0, 9.0, 7.0][i],
+                     "estimator_pos_err_within_2std_fraction": [0.9, 0.5, 0.2, 0.7][i],
                      "set.target.speed_m_s": float(i), "log": f"/tmp/logs/r{i}.mcap"})
     rows.append({"id": "r4", "status": "completed", "reason": "duration reached", "hit": 0.0,
                  "miss_distance_m": 30.0, "target_in_fov_fraction_after_lock": 0.5,
@@ -63,8 +63,8 @@ def test_summary_statistics_by_hand():
     assert math.isnan(summarise(old_rows).visible_after_lock["share_99"])  # rows scored before the metric
     assert rep.estimator_error_m["share_8m"] == pytest.approx(3 / 4)
     # a run whose estimate never converged counts against the share, it does not drop out of it
-    never = dict(_rows()[0], id="r6", ukf_pos_rmse_m=12.0)
-    del never["ukf_pos_err_max_after_convergence_m"]
+    never = dict(_rows()[0], id="r6", estimator_pos_rmse_m=12.0)
+    del never["estimator_pos_err_max_after_convergence_m"]
     assert summarise(_rows() + [never]).estimator_error_m["share_8m"] == pytest.approx(3 / 5)
     assert rep.within_3m_3deg == pytest.approx(3 / 6)  # r0, r1, r2 (r3 misses by 4 m; r4, r5 no hit)
     assert rep.outcomes == {"hit": 4, "no hit: duration reached": 1, "failed: AirframeError: trim failed": 1}
@@ -74,6 +74,75 @@ def test_summary_statistics_by_hand():
     assert summarise(rows).outcomes == {"hit": 3, "hit after going round": 1, "no hit: duration reached": 1,
                                         "failed: AirframeError: trim failed": 1}
     assert [r["id"] for r in worst_runs(_rows(), 3)] == ["r5", "r4", "r3"]
+
+
+def test_rows_from_before_the_estimator_rename_still_count():
+    """A summary written when the estimator metrics were named ukf_*: the same statistics."""
+    old = [{(k.replace("estimator_", "ukf_", 1) if k.startswith("estimator_") else k): v for k, v in r.items()}
+           for r in _rows()]
+    assert "ukf_pos_err_max_after_convergence_m" in old[0]
+    assert summarise(old).estimator_error_m == summarise(_rows()).estimator_error_m
+
+
+def _no_dive(i: int, phase: str = "phase 2 (loiter:nmpc)") -> dict:
+    """A run that never reached the terminal phase, as compute_metrics scores it: no miss, a note why."""
+    return {"id": f"n{i}", "status": "completed", "reason": "duration reached", "hit": False, "seed": 20 + i,
+            "terminal_note": f"no terminal phase: the run ended in {phase} after {30.0 + i:.1f} s (duration reached)",
+            "switch_time_s": None, "miss_distance_m": None, "impact_fpa_error_deg": None,
+            "impact_heading_error_deg": None, "target_in_fov_fraction_after_lock": 1.0}
+
+
+def test_runs_that_never_dived_are_counted_and_explained_not_scored():
+    rows = _rows() + [_no_dive(0), _no_dive(1), _no_dive(2, "phase 1 (acquisition:search)")]
+    rep = summarise(rows)
+    assert rep.runs == 9 and rep.hits == 4 and rep.dived == 5  # the 4 hits and r4 (dived, missed by 30 m)
+    assert rep.cep50_m == pytest.approx(2.0)  # over the runs that dived only: the same as without them
+    assert rep.never_dived == {"ended in phase 2 (loiter:nmpc), duration reached": 2,
+                               "ended in phase 1 (acquisition:search), duration reached": 1}
+    head = dict(rep.headline())
+    assert head["never dived (no miss distance, not a hit)"].startswith("3 of 9 runs: ended in phase 2")
+    assert head["miss distance CEP50 / CEP90"].endswith("over the 5 runs that dived")
+    assert rep.outcomes["no dive: ended in phase 2 (loiter:nmpc), duration reached"] == 2
+    # none dived: no CEP of 1000 m, no mean nan: a dash and why
+    only = summarise([_no_dive(0), _no_dive(1)])
+    head = dict(only.headline())
+    assert head["miss distance CEP50 / CEP90"] == "— (no run dived)"
+    assert head["impact flight-path error"] == "— (no run dived)" and "nan" not in str(only.headline())
+    assert only.hits == 0 and only.hit_probability == 0.0
+    # a summary from before the note: a never-dived run had a miss distance (its closest pass) and no switch
+    old = dict(_no_dive(3), miss_distance_m=1000.89)
+    del old["terminal_note"]
+    assert summarise(_rows() + [old]).cep50_m == pytest.approx(2.0)
+
+
+def test_seed_ranges():
+    from fwsim.report import seed_ranges
+    assert seed_ranges([3, 1, 2, 2, 8, 10, 9, 5]) == "1-3, 5, 8-10" and seed_ranges([]) == "—"
+
+
+def test_report_records_what_was_flown(tmp_path):
+    """The page names the fwsim version, the spec (path, SHA-256, its text), the seeds and the dates."""
+    import hashlib
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("name: demo\nruns:\n  - scenario: x.yaml\n    seeds: [1, 2, 3]\n")
+    digest = hashlib.sha256(spec.read_bytes()).hexdigest()
+    rows = [dict(r, seed=i + 1) for i, r in enumerate(_rows())] + [_no_dive(0)]
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "summary.json").write_text(json.dumps({"batch": {
+        "name": "demo", "spec": str(spec), "spec_sha256": digest, "spec_text": spec.read_text(),
+        "fwsim_version": "0.1.0", "written_utc": "2030-01-02T03:04:05+00:00"}, "rows": rows}))
+    rep, path = write_report(tmp_path / "out")
+    flown = dict(rep.flown)
+    assert flown["spec"] == f"{spec} (SHA-256 {digest}, the file unchanged since)"
+    assert flown["seeds"] == "1-6, 20 (7 runs)"
+    assert flown["flown with"] == "fwsim 0.1.0, batch written 2030-01-02T03:04:05+00:00"
+    assert flown["report made"].startswith("20") and "by fwsim" in flown["report made"]
+    page = path.read_text()
+    assert "What was flown" in page and digest in page and "seeds: [1, 2, 3]" in page and "1-6, 20" in page
+    assert "never dived" in page and "1 of 7 runs: ended in phase 2 (loiter:nmpc)" in page
+    spec.write_text("name: changed\n")  # the file edited after the batch: the page says so, shows the flown text
+    rep, path = write_report(tmp_path / "out")
+    assert "the file has changed since" in dict(rep.flown)["spec"] and "seeds: [1, 2, 3]" in path.read_text()
 
 
 def test_report_html_and_cli(tmp_path, capsys):
@@ -111,7 +180,7 @@ def test_the_envelope_verdict_splits_by_estimator():
 
 
 def test_estimator_consistency_share_against_a_known_gaussian():
-    """ukf_pos_err_within_2std_fraction's statistic: an honest std covers a round 2-D Gaussian error 86.5 %
+    """estimator_pos_err_within_2std_fraction's statistic: an honest std covers a round 2-D Gaussian error 86.5 %
     of the time at twice the std (1 - exp(-2)); a std three times too small covers far less."""
     import numpy as np
 
@@ -361,8 +430,8 @@ def test_the_envelope_paired_comparison_by_hand(tmp_path, capsys):
     second[0]["miss_distance_m"] = 5.0
     second[3]["miss_distance_m"] = 1.5
     second[1]["miss_distance_m"] = 1.4
-    second[2]["ukf_pos_err_max_after_convergence_m"] = math.nan  # never converged: the estimate bar not met
-    second[2]["ukf_pos_rmse_m"] = 6.0
+    second[2]["estimator_pos_err_max_after_convergence_m"] = math.nan  # never converged: the estimate bar not met
+    second[2]["estimator_pos_rmse_m"] = 6.0
     p = tool.paired(first, second)
     assert len(p["pairs"]) == 5 and p["unmatched"] == (1, 0)
     within_bar = [name for name, _ in tool.BARS].index("within 3 m / 3 deg")

@@ -115,7 +115,7 @@ def table(rows: list[dict], names: list[str]) -> str:
         p = paper[0] if paper else {}
         cell = (f"{'hit' if p.get('hit') == 1.0 else 'MISS'}, {_f(p.get('miss_distance_m'))}, "
                 f"{_f(p.get('impact_fpa_error_deg'), '{:+.2f}')} / {_f(p.get('impact_heading_error_deg'), '{:+.2f}')}, "
-                f"{_f(p.get('ukf_pos_err_max_after_convergence_m'), '{:.1f}')}") if p else "—"
+                f"{_f(p.get('estimator_pos_err_max_after_convergence_m'), '{:.1f}')}") if p else "—"
         miss = [c["miss_distance_m"] for c in cases if math.isfinite(c["miss_distance_m"])]
         ang = [max(abs(c["impact_fpa_error_deg"]), abs(c["impact_heading_error_deg"])) for c in cases
                if math.isfinite(c["impact_fpa_error_deg"])]

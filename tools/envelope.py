@@ -64,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fwsim.report import summarise, within
+from fwsim.report import row_value, summarise, within
 
 #: seconds before the end of a run at which --why gives the estimate's error (the end itself too)
 WHY_TIMES_S = (5.0, 2.0)
@@ -328,11 +328,11 @@ def run_bars(row: dict) -> tuple[bool | None, ...]:
     """One run against each of :data:`BARS` (None: the bar does not count it, as fwsim report's statistics
     do not: a failed run has no view share; a run without an estimate is not in the estimate bar's count)."""
     def finite(key: str) -> float | None:
-        v = row.get(key)
+        v = row_value(row, key)  # (a summary from before the estimator metrics were renamed: ukf_*)
         return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else None
     seen = finite("target_visible_fraction_after_lock")
-    est = finite("ukf_pos_err_max_after_convergence_m")
-    estimated = est is not None or finite("ukf_pos_rmse_m") is not None
+    est = finite("estimator_pos_err_max_after_convergence_m")
+    estimated = est is not None or finite("estimator_pos_rmse_m") is not None
     return (row.get("hit") == 1.0, within(row, 3.0, 3.0), None if seen is None else seen >= 0.99,
             None if not estimated else est is not None and est <= ESTIMATE_BAR_M)
 
@@ -385,6 +385,11 @@ def _miss(r: dict) -> float:
     """A run's miss distance, NaN when it has none."""
     m = r.get("miss_distance_m")
     return float(m) if isinstance(m, (int, float)) and math.isfinite(m) else math.nan
+
+
+def _num(v) -> float:
+    """A summary value as a float, NaN when it has none (null)."""
+    return float(v) if isinstance(v, (int, float)) else math.nan
 
 
 def _miss_cell(r: dict) -> str:
@@ -485,9 +490,8 @@ def _failed_bar(row: dict) -> str:
     """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
     if row.get("hit") != 1.0:
         return "no hit"
-    far = not row.get("miss_distance_m", math.inf) <= 3.0
-    off = not max(abs(row.get("impact_fpa_error_deg", math.inf)),
-                  abs(row.get("impact_heading_error_deg", math.inf))) <= 3.0
+    far = not _num(row.get("miss_distance_m")) <= 3.0
+    off = not max(abs(_num(row.get("impact_fpa_error_deg"))), abs(_num(row.get("impact_heading_error_deg")))) <= 3.0
     return "distance and angle" if far and off else "distance" if far else "angle"
 
 
@@ -617,8 +621,8 @@ def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
         bar = _failed_bar(r)
         motion = r.get("set.target.motion")
         hidden = r.get("target_hidden_longest_s_after_lock")
-        cells = [str(r.get("id", "?")), bar, f"{r.get('miss_distance_m', math.nan):.2f}",
-                 f"{r.get('miss_bow_m', math.nan):+.1f}, {r.get('miss_port_m', math.nan):+.1f}",
+        cells = [str(r.get("id", "?")), bar, _miss_cell(r),
+                 f"{_num(r.get('miss_bow_m')):+.1f}, {_num(r.get('miss_port_m')):+.1f}",
                  str(r.get("set.target.type", "-")), _label(motion) if motion is not None else "-",
                  f"{r['set.target.speed_m_s']:.1f}" if isinstance(r.get("set.target.speed_m_s"), (int, float))
                  else "-",

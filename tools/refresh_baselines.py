@@ -27,7 +27,8 @@ BASELINE_DIR = PROJECT_ROOT / "tests" / "baselines"
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("baselines", nargs="*", type=Path, help="baseline files (default: tests/baselines/*.yaml)")
-    p.add_argument("--check", action="store_true", help="compare only; exit 1 if any baseline regressed")
+    p.add_argument("--check", action="store_true",
+                   help="compare only; exit 1 if any metric moved beyond its tolerance (improvements too)")
     args = p.parse_args(argv)
     paths = args.baselines or sorted(BASELINE_DIR.glob("*.yaml"))
     failed = 0
@@ -35,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
         for path in paths:
             baseline = load_baseline(path, require_metrics=False)
             metrics = fly_baseline(baseline, Path(tmp) / f"{path.stem}.mcap")
-            cmp = compare_metrics(baseline.metrics, metrics, baseline.tolerances, str(path), "re-flown now")
+            cmp = compare_metrics(baseline.metrics, metrics, baseline.tolerances, str(path), "re-flown now",
+                                  strict=True)
             print(cmp.format_text(), end="\n\n")
             failed += not cmp.ok
             if not args.check:
