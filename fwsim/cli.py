@@ -187,7 +187,7 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
             return 128 + int(getattr(exc, "signum", 2))
         except Exception as exc:
             bar.stop()
-            console.print(f"[red]run failed[/]: {type(exc).__name__}: {exc}\nthe log says why: {log_path}")
+            _run_failed(exc, log_path, getattr(args, "debug", False))
             return 1
         # A run that ends early (the ship hit, sea contact) ends the bar at 100 %, not at its share of duration_s.
         bar.update(task, total=max(result.sim_time_s, 1e-9), completed=result.sim_time_s, refresh=True)
@@ -199,6 +199,19 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
     if result.blocks is not None:
         _print_blocks(f"where the time went: {scenario.name}", result.blocks, result.wall_time_s, result.sim_time_s)
     return 0 if result.status == "completed" else 1
+
+
+def _run_failed(exc: Exception, log_path: Path, debug: bool) -> None:
+    """A run that ended on an error: one line saying what and where (a user's block: the slot, the method and
+    the line of the user's file), the whole traceback with ``--debug``."""
+    from fwsim.loop import failure_text
+    if debug:
+        import traceback
+        console.print("".join(traceback.format_exception(exc)).rstrip(), markup=False, highlight=False)
+    from rich.markup import escape
+    console.print(f"[red]run failed[/]: {escape(failure_text(exc))}", highlight=False)
+    console.print(f"the log says why: {escape(str(log_path))}" + ("" if debug else " (the whole traceback: --debug)"),
+                  highlight=False)
 
 
 def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
