@@ -802,3 +802,15 @@ def _write_parquet(rows: list[dict[str, Any]], cols: list[str], path: Path, info
         info.setdefault("warnings", []).append(f"summary.parquet not written: {exc}")
         return []
     return [path]
+
+
+class _CallableModule(type(sys)):
+    """This module, callable: ``fwsim.batch(spec, ...)`` is :func:`fwsim.api.batch` even once the module
+    ``fwsim.batch`` is imported (the import puts the module where the package exports the function)."""
+
+    def __call__(self, *args, **kwargs):
+        from fwsim.api import batch
+        return batch(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule
