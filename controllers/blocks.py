@@ -15,8 +15,14 @@ section, each by a built-in name or by the import path of a user's class::
 
 The module is imported from the Python path, else from the scenario file's
 folder or the current folder. The class is checked when the scenario is
-read: a bad path, or a class that lacks a member of the Protocol, is a
-one-line scenario error before anything flies. If the class has a ``Config``
+read: a bad path, or a class that lacks a method of the Protocol, is a
+one-line scenario error before anything flies. The Protocol's data members
+(``initialised``, ``radius_m``, ...) may be properties, class attributes or
+attributes the class sets in ``__init__``: they are checked on the built
+block, at the start of the run. In flight, a user's block is guarded at its
+boundary (:func:`build_block`): an exception in one of its methods, or a
+return value of the wrong type, ends the run with a :class:`PluginError`
+naming the slot, the method, the line of the user's file and the exception. If the class has a ``Config``
 attribute (a pydantic model), the options are validated with it and the class
 gets the model; otherwise it gets the options as a dict. It is built as
 ``cls(options, context)``, where ``context`` (:class:`BlockContext`) holds
@@ -29,7 +35,7 @@ its own log topics and events. A user estimator can wrap the built-in one::
             self.inner = UkfTargetEstimator(context.camera, context.config.ukf)
         ...                                # delegate, counting calls
 
-docs/BLOCKS.md shows a whole one. What a block returns is typed
+docs/guide/plugins.md shows whole ones. What a block returns is typed
 (``controllers.messages``). Built-in classes live beside their algorithms:
 ``controllers.ukf``, ``controllers.ct_ukf``, ``controllers.imm``, ``controllers.guidance``, ``controllers.pointing``.
 
@@ -40,6 +46,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +55,8 @@ from typing import Any, Callable, Protocol, runtime_checkable
 import numpy as np
 
 __all__ = ["TargetEstimator", "LoiterGuidance", "TerminalGuidance", "PointingLaw", "BlockContext", "Recorder",
-           "SLOTS", "Slot", "BlockError", "builtin_names", "resolve_class", "build_block", "options_for"]
+           "SLOTS", "Slot", "BlockError", "PluginError", "builtin_names", "resolve_class", "build_block",
+           "options_for"]
 
 
 # --------------------------------------------------------------------------- the Protocols
@@ -58,7 +66,8 @@ __all__ = ["TargetEstimator", "LoiterGuidance", "TerminalGuidance", "PointingLaw
 class TargetEstimator(Protocol):
     """A target estimator (``controllers.estimator``). The flight software's estimation block
     (``controllers.estimation``) decides when it starts and restarts; the estimator predicts, fuses
-    and estimates. Members (``initialised``, ``tracked_height_m``: a property or a class attribute):"""
+    and estimates. Members (``initialised``, ``tracked_height_m``: a property, a class attribute or an
+    attribute set in ``__init__``):"""
 
     @property
     def initialised(self) -> bool:
@@ -185,8 +194,13 @@ class Slot:
 
     @property
     def methods(self) -> tuple[str, ...]:
-        """The members that must be callable (the others may be properties or attributes)."""
+        """The members that must be methods of the class."""
         return tuple(m for m in self.members if callable(getattr(self.protocol, m, None)))
+
+    @property
+    def data(self) -> tuple[str, ...]:
+        """The data members: properties, class attributes or attributes set in ``__init__`` (see the module text)."""
+        return tuple(m for m in self.members if m not in self.methods)
 
 
 def _ukf(ctx: BlockContext):
@@ -241,6 +255,12 @@ class BlockError(ValueError):
     """A block choice that cannot be used (one line)."""
 
 
+class PluginError(RuntimeError):
+    """A user's block failed in flight: ``str()`` is one line naming the slot (``controllers.estimator``), the
+    class and method, the line of the user's file where it happened and the exception, or the type it returned
+    and the type expected. The user's exception is its ``__cause__`` (``fwsim run --debug`` prints it whole)."""
+
+
 def resolve_class(path: str, slot: str, search_dirs=()) -> type:
     """The class at ``module.sub:ClassName``, checked against the slot's Protocol; BlockError if it is not.
 
@@ -258,14 +278,18 @@ def resolve_class(path: str, slot: str, search_dirs=()) -> type:
             raise BlockError(f"{module_name!r} has no {qualname!r}")
     if not inspect.isclass(obj):
         raise BlockError(f"{path!r} is not a class")
-    missing = [m for m in s.members if not hasattr(obj, m)]
+    missing = [m for m in s.methods if not hasattr(obj, m)]
     if missing:
         raise BlockError(f"{path} does not implement {s.protocol.__name__}: no {', '.join(missing)} "
-                         f"(methods, or properties / class attributes; see controllers/blocks.py)")
+                         "(a method of the Protocol; see docs/guide/plugins.md)")
     not_methods = [m for m in s.methods if not callable(getattr(obj, m))]
     if not_methods:
         raise BlockError(f"{path} does not implement {s.protocol.__name__}: {', '.join(not_methods)} "
                          "must be a method")
+    methods = [m for m in s.data if callable(inspect.getattr_static(obj, m, None))]
+    if methods:
+        raise BlockError(f"{path} does not implement {s.protocol.__name__}: {', '.join(methods)} must be a "
+                         "property or an attribute, not a method")
     return obj
 
 
@@ -309,9 +333,108 @@ def options_for(cls: type, options: dict) -> Any:
 
 def build_block(slot: str, choice, ctx: BlockContext, search_dirs=()):
     """The block for a choice (``BlockChoice``): a built-in made from its config section, or a user's class
-    made as ``cls(options, ctx)``."""
+    made as ``cls(options, ctx)``, guarded at its boundary (:func:`guarded`) and checked for the Protocol's
+    data members once built."""
     builtin = SLOTS[slot].builtins.get(choice.use)
     if builtin is not None:
         return builtin(ctx)
     cls = resolve_class(choice.use, slot, search_dirs)
-    return cls(options_for(cls, choice.options), ctx)
+    options = options_for(cls, choice.options)
+    block = guarded(slot, cls)(options, ctx)
+    missing = [m for m in SLOTS[slot].data if not hasattr(block, m)]
+    if missing:
+        raise PluginError(f"controllers.{slot}: {cls.__name__} has no {', '.join(missing)} once built (set it in "
+                          "__init__, or make it a property or a class attribute)")
+    return block
+
+
+# --------------------------------------------------------------------------- a user's block, guarded
+
+#: per slot, what a method must return (a user's block is checked at each call; None: not checked). The names
+#: are ``controllers.messages`` / ``fwsim.messages`` classes, looked up when a block is guarded.
+RETURNS: dict[str, dict[str, str]] = {
+    "estimator": {"update": "FusionResult", "estimate": "TargetEstimate", "status": "EstimatorStatus"},
+    "after_lock": {"step": "Guidance"},
+    "terminal": {"step": "Guidance"},
+    "pointing": {"step": "GimbalCommand"},
+}
+#: exceptions a method may raise as part of its Protocol (they pass the guard unchanged)
+PASSES: dict[tuple[str, str], tuple[type, ...]] = {("estimator", "initialise"): (ValueError,)}
+
+
+def guarded(slot: str, cls: type) -> type:
+    """A subclass of the user's ``cls`` (same name, same behaviour) whose Protocol methods, properties and
+    ``__init__`` turn an exception into a :class:`PluginError` that says where it happened in the user's file,
+    and whose methods check the type they return (:data:`RETURNS`; a Guidance's command too)."""
+    from controllers import messages
+    from fwsim import messages as boundary
+
+    s = SLOTS[slot]
+    files = _user_files(cls)
+    expected = {m: getattr(messages, n, None) or getattr(boundary, n) for m, n in RETURNS[slot].items()}
+    body: dict[str, Any] = {"__module__": cls.__module__, "__qualname__": cls.__qualname__, "__doc__": cls.__doc__,
+                            "__init__": _guard(slot, cls, "__init__", cls.__init__, files, None)}
+    for m in s.methods:
+        body[m] = _guard(slot, cls, m, getattr(cls, m), files, expected.get(m))
+    for m in s.data:
+        prop = inspect.getattr_static(cls, m, None)
+        if isinstance(prop, property) and prop.fget is not None:
+            body[m] = property(_guard(slot, cls, m, prop.fget, files, None), prop.fset, prop.fdel, prop.__doc__)
+    return type(cls.__name__, (cls,), body)
+
+
+def _guard(slot: str, cls: type, name: str, fn: Callable, files: frozenset[str], expected: type | None):
+    passes = PASSES.get((slot, name), ())
+    command = expected is not None and expected.__name__ == "Guidance"
+    if command:
+        from fwsim.messages import AutopilotCommand
+
+    def call(self, *args, **kwargs):
+        try:
+            out = fn(self, *args, **kwargs)
+        except passes:
+            raise
+        except PluginError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a user's code may raise anything: the run says where
+            raise PluginError(f"controllers.{slot}: {cls.__name__}.{name} failed{_where(exc, files)}: "
+                              f"{type(exc).__name__}: {exc}") from exc
+        if expected is not None and not isinstance(out, expected):
+            raise PluginError(f"controllers.{slot}: {cls.__name__}.{name} returned {type(out).__name__}, "
+                              f"expected {expected.__name__}")
+        if command and not isinstance(out.command, AutopilotCommand):
+            raise PluginError(f"controllers.{slot}: {cls.__name__}.{name} returned a Guidance whose command is "
+                              f"{type(out.command).__name__}, expected AccelCommand or RateCommand")
+        return out
+
+    call.__name__, call.__qualname__, call.__doc__ = name, f"{cls.__qualname__}.{name}", fn.__doc__
+    return call
+
+
+def _user_files(cls: type) -> frozenset[str]:
+    """The source files of the user's class and of its bases that are not the project's own."""
+    files = set()
+    for c in cls.__mro__:
+        module = sys.modules.get(c.__module__)
+        path = getattr(module, "__file__", None)
+        if path and c.__module__.split(".")[0] not in ("controllers", "fwsim", "builtins"):
+            files.add(str(Path(path).resolve()))
+    return frozenset(files)
+
+
+def _where(exc: BaseException, files: frozenset[str]) -> str:
+    """`` at my_filters.py:42``: the innermost frame of the traceback in one of ``files`` (else the innermost
+    frame of all), relative to the current folder when it is under it."""
+    import traceback
+    frames = traceback.extract_tb(exc.__traceback__)[1:]  # (the guard's own frame first)
+    if not frames:
+        return ""
+    mine = [f for f in frames if str(Path(f.filename).resolve()) in files]
+    frame = (mine or frames)[-1]
+    name = frame.filename
+    try:
+        rel = os.path.relpath(name)
+        name = name if rel.startswith("..") else rel
+    except ValueError:  # another drive (Windows)
+        pass
+    return f" at {name}:{frame.lineno}"

@@ -14,7 +14,9 @@ searches; the lock starts the estimator and IBVS takes the gimbal), 2 loiter
 round the estimated ship (``after_lock``), 3 terminal guidance to the impact
 angles once the switch condition holds (``controllers.phases``). The
 estimator, the Phase 2 and Phase 3 guidance and the pointing law are each a
-built-in block or a user's class named in the scenario (``controllers.blocks``).
+built-in block or a user's class named in the scenario (``controllers.blocks``); a user's class is
+guarded at its boundary (``controllers.blocks.guarded``): an exception in it, or a return value of the
+wrong type, ends the run with a line naming the block, the method and the user's file:line.
 Every block writes what it decided to the log through the tick's recorder;
 ``FlightSoftwareOutput`` carries it to the harness. A scripted command list can
 stand in for the mission (``kind: script``).

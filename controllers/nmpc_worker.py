@@ -88,16 +88,19 @@ class WorkerError(RuntimeError):
 
 
 def _serve(conn, cfg_json: str) -> None:
-    """The worker process: build the NMPC, then answer each (t, x0, q, v) with (result, fallback count)."""
+    """The worker process: build the NMPC, then answer each (t, x0, q, v) with (result, fallback count). It ends
+    quietly when the flight software has gone (its socket closed: a run that ended before the NMPC was built,
+    or while a solve was under way)."""
     from controllers.config import NmpcConfig
     from controllers.nmpc import Nmpc
 
     try:
         nmpc = Nmpc(NmpcConfig.model_validate_json(cfg_json))
     except Exception as exc:  # noqa: BLE001 - said to the flight software, which raises it
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        _send(conn, ("error", f"{type(exc).__name__}: {exc}"))
         return
-    conn.send(("ready", None))
+    if not _send(conn, ("ready", None)):
+        return
     while True:
         try:
             msg = conn.recv()
@@ -109,7 +112,17 @@ def _serve(conn, cfg_json: str) -> None:
             out = ("ok", (nmpc.solve(*msg), nmpc.fallback_count))
         except Exception as exc:  # noqa: BLE001
             out = ("error", f"{type(exc).__name__}: {exc}")
-        conn.send(out)
+        if not _send(conn, out):
+            return
+
+
+def _send(conn, msg) -> bool:
+    """Send ``msg`` to the flight software; False when it has gone (the socket closed at its end)."""
+    try:
+        conn.send(msg)
+    except OSError:  # BrokenPipeError, ConnectionResetError: the run is over
+        return False
+    return True
 
 
 def _main(argv: list[str]) -> int:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,6 +78,34 @@ _STATE = ("position/lat-geod-rad", "position/long-gc-rad", "position/h-sl-meters
           "fcs/aileron-pos-rad", "fcs/elevator-pos-rad", "fcs/rudder-pos-rad",
           "velocities/vt-fps", "aero/alpha-rad", "aero/beta-rad", "fcs/motor-throttle-norm")
 _COMMANDS = ("fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm", "fcs/rudder-cmd-norm", "fcs/throttle-cmd-norm")
+
+
+@contextmanager
+def _stdout_to(lines: list[str]):
+    """What is written to file descriptor 1 inside the block (JSBSim's C++ output, which its debug level does
+    not silence: "Sorry, udot doesn't appear to be trimmable"), taken off the terminal and appended to
+    ``lines`` (stripped, empty lines dropped) at the end of the block."""
+    import ctypes
+    import sys
+    import tempfile
+    try:
+        libc = ctypes.CDLL(None)
+        sys.stdout.flush()
+        libc.fflush(None)
+        saved = os.dup(1)
+    except (OSError, AttributeError, ValueError):  # no C library to flush, or no descriptor 1: left alone
+        yield
+        return
+    with tempfile.TemporaryFile() as f:
+        os.dup2(f.fileno(), 1)
+        try:
+            yield
+        finally:
+            libc.fflush(None)
+            os.dup2(saved, 1)
+            os.close(saved)
+            f.seek(0)
+            lines += [ln.strip() for ln in f.read().decode("utf-8", "replace").splitlines() if ln.strip()]
 
 
 class Airframe:
@@ -144,12 +173,16 @@ class Airframe:
         fdm["propulsion/set-running"] = -1
         self.t_s = 0.0
         if trim:
+            said: list[str] = []
             try:
-                fdm["simulation/do_simple_trim"] = 1  # full trim
+                with _stdout_to(said):  # JSBSim's trim prints why it failed; that goes into the error instead
+                    fdm["simulation/do_simple_trim"] = 1  # full trim
             except Exception as exc:  # JSBSim raises a generic error
+                why = "; ".join(line.removeprefix("Sorry, ") for line in said)
                 raise AirframeError(
                     f"JSBSim trim failed at {airspeed_m_s:.1f} m/s, flight path "
-                    f"{math.degrees(flight_path_rad):.1f} deg, altitude {alt:.0f} m: {exc}") from exc
+                    f"{math.degrees(flight_path_rad):.1f} deg, altitude {alt:.0f} m: {exc}"
+                    + (f" ({why})" if why else "")) from exc
             self.trim = TrimResult(
                 ok=True,
                 throttle_norm=fdm["fcs/throttle-cmd-norm"],

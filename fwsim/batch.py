@@ -37,6 +37,7 @@ Ray remote tasks running the same :func:`run_one`.
 """
 from __future__ import annotations
 
+import copy
 import csv
 import ctypes
 import hashlib
@@ -221,7 +222,7 @@ def _apply_changes(data: dict, path: Path, changes: SpecChanges) -> None:
             raise BatchSpecError(f"--hold {h}: no entry of {path.name} disperses a field at or under it")
 
 
-def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None = None
+def load_spec(path: str | Path | dict, out_dir: str | Path, changes: SpecChanges | None = None
               ) -> tuple[str, list[RunJob]]:
     """Read a batch spec and expand it into jobs (validating every scenario once).
 
@@ -231,8 +232,11 @@ def load_spec(path: str | Path, out_dir: str | Path, changes: SpecChanges | None
     Raises :class:`BatchSpecError` (or ScenarioError for a bad scenario) with
     one line per problem.
     """
-    path = Path(path)
-    data = load_yaml_file(path, "batch spec", BatchSpecError)
+    if isinstance(path, dict):  # a spec given as data (fwsim.batch): its scenario paths from the current folder
+        data, path = copy.deepcopy(path), Path("<spec>")
+    else:
+        path = Path(path)
+        data = load_yaml_file(path, "batch spec", BatchSpecError)
     if not isinstance(data, dict) or not isinstance(data.get("runs"), list) or not data["runs"]:
         raise BatchSpecError(f"{path}: expected a mapping with a non-empty 'runs:' list")
     unknown = set(data) - _SPEC_KEYS
@@ -659,11 +663,11 @@ def resumable(job: RunJob) -> bool:
     return log.scenario_text == job.scenario_text()
 
 
-def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
+def run_batch(spec_path: str | Path | dict, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
               ray_address: str | None = None, on_start: Callable[[int, int], None] | None = None,
               on_row: RowCallback | None = None, run_fn: Callable[[RunJob], dict] = run_one,
               changes: SpecChanges | None = None) -> BatchResult:
-    """Expand a spec (with ``changes``, :class:`SpecChanges`), fly what is needed, write the summary files.
+    """Expand a spec (a file or a dict; with ``changes``, :class:`SpecChanges`), fly what is needed, write the summary.
 
     ``on_start(total, resumed)`` is called once before flying and
     ``on_row(row)`` after each finished run (for a progress bar). ``run_fn``
@@ -730,9 +734,12 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, workers: int | None
 
 # -- summary files ----------------------------------------------------------
 
-def spec_record(spec_path: str | Path) -> dict[str, str]:
-    """What the summary records of the spec flown (``fwsim report`` shows it): its path, SHA-256 and text."""
+def spec_record(spec_path: str | Path | dict) -> dict[str, Any]:
+    """What the summary records of the spec flown (``fwsim report`` shows it): its path, SHA-256 and text (a
+    spec given as a dict: the dict itself)."""
     import hashlib
+    if isinstance(spec_path, dict):
+        return {"spec": spec_path}
     path = Path(spec_path).resolve()
     try:
         data = path.read_bytes()
@@ -810,3 +817,15 @@ def _write_parquet(rows: list[dict[str, Any]], cols: list[str], path: Path, info
         info.setdefault("warnings", []).append(f"summary.parquet not written: {exc}")
         return []
     return [path]
+
+
+class _CallableModule(type(sys)):
+    """This module, callable: ``fwsim.batch(spec, ...)`` is :func:`fwsim.api.batch` even once the module
+    ``fwsim.batch`` is imported (the import puts the module where the package exports the function)."""
+
+    def __call__(self, *args, **kwargs):
+        from fwsim.api import batch
+        return batch(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

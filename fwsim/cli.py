@@ -1,7 +1,10 @@
-"""Command line: ``fwsim run | metrics | bench | batch | compare | plot | replay | report``.
+"""Command line: ``fwsim run | scenario | metrics | bench | batch | compare | plot | replay | report``.
 
     fwsim run scenarios/paper_mission.yaml [--out runs] [--set initial.airspeed_m_s=24]
-                                           [--rerun spawn|connect[=ADDR]|save=PATH.rrd]
+                                           [--rerun spawn|connect[=ADDR]|save=PATH.rrd] [--debug]
+    fwsim scenario show SCENARIO [--set ...]    # the scenario as the run sees it, every default filled in
+    fwsim scenario schema                       # its JSON Schema (for an editor)
+    fwsim scenario reference [--out FILE]       # the field reference page
     fwsim metrics runs/<log>.mcap [--json]
     fwsim run SCENARIO --profile                # plus where the wall time went, block by block
     fwsim bench [--json] [--quick] [SCENARIO]
@@ -188,7 +191,7 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
             return 128 + int(getattr(exc, "signum", 2))
         except Exception as exc:
             bar.stop()
-            console.print(f"[red]run failed[/]: {type(exc).__name__}: {exc}\nthe log says why: {log_path}")
+            _run_failed(exc, log_path, getattr(args, "debug", False))
             return 1
         # A run that ends early (the ship hit, sea contact) ends the bar at 100 %, not at its share of duration_s.
         bar.update(task, total=max(result.sim_time_s, 1e-9), completed=result.sim_time_s, refresh=True)
@@ -212,6 +215,19 @@ def _result(log_path: Path) -> str:
         return f"not scored ({type(exc).__name__}: {short(exc, 120)})"
 
 
+def _run_failed(exc: Exception, log_path: Path, debug: bool) -> None:
+    """A run that ended on an error: one line saying what and where (a user's block: the slot, the method and
+    the line of the user's file), the whole traceback with ``--debug``."""
+    from fwsim.loop import failure_text
+    if debug:
+        import traceback
+        console.print("".join(traceback.format_exception(exc)).rstrip(), markup=False, highlight=False)
+    from rich.markup import escape
+    console.print(f"[red]run failed[/]: {escape(failure_text(exc))}", highlight=False)
+    console.print(f"the log says why: {escape(str(log_path))}" + ("" if debug else " (the whole traceback: --debug)"),
+                  highlight=False)
+
+
 def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
     """The per-block wall-time table of a profiled run (fwsim.profiling)."""
     table = Table(title=title, caption=f"{sim_s:.1f} s simulated in {wall_s:.2f} s of wall time "
@@ -223,6 +239,37 @@ def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
         per_call = f"{1e6 * b.seconds / b.calls:.1f}" if b.calls else ""
         table.add_row(b.name, f"{100 * b.share:.1f} %", f"{b.ms_per_sim_s:.2f}", str(b.calls or ""), per_call)
     _console().print(table)
+
+
+def _to_stdout(text: str) -> None:
+    """``text`` on stdout; a reader that closes the pipe early (``| head``) ends it quietly."""
+    try:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (no second error at exit)
+
+
+def cmd_scenario(args) -> int:
+    """``fwsim scenario show | schema | reference``: a scenario resolved, the JSON Schema, the field reference."""
+    if args.action == "show":
+        from fwsim.scenario import dump_scenario
+        scenario, _ = load_scenario(args.scenario, parse_sets(args.set))
+        _to_stdout(dump_scenario(scenario))
+        return 0
+    if args.action == "schema":
+        from fwsim.reference import scenario_schema
+        _to_stdout(json.dumps(scenario_schema(), indent=2, ensure_ascii=False) + "\n")
+        return 0
+    from fwsim.reference import reference_markdown
+    text = reference_markdown()
+    if args.out is None:
+        _to_stdout(text)
+        return 0
+    out = _writable_file(Path(args.out), "--out")
+    out.write_text(text, encoding="utf-8")
+    console.print(f"wrote {out}")
+    return 0
 
 
 def cmd_metrics(args) -> int:
@@ -478,12 +525,21 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="fwsim", description="Fixed-wing UAV tracking and terminal guidance harness "
-                                                          "around JSBSim.")
-    from fwsim import __version__
-    p.add_argument("--version", action="version", version=f"fwsim {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
+def _add_scenario_parser(sub) -> None:
+    sc = sub.add_parser("scenario", help="a scenario with every default filled in, the JSON Schema, the field "
+                                         "reference")
+    acts = sc.add_subparsers(dest="action", required=True)
+    show = acts.add_parser("show", help="print the scenario as the run sees it (YAML, every default filled in)")
+    show.add_argument("scenario", help="scenario YAML file")
+    show.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                      help="override a scenario field, as fwsim run takes it (repeatable)")
+    acts.add_parser("schema", help="print the scenario's JSON Schema (for an editor: docs/guide/reference.md)")
+    ref = acts.add_parser("reference", help="print the field reference page (Markdown)")
+    ref.add_argument("--out", help="write it to this file instead (docs/guide/reference.md)")
+    sc.set_defaults(func=cmd_scenario)
+
+
+def _add_run_parser(sub) -> None:
     r = sub.add_parser("run", help="fly a scenario and write its MCAP log")
     r.add_argument("scenario", help="scenario YAML file")
     r.add_argument("--out", default="runs", help="folder for the log (default: runs/)")
@@ -498,17 +554,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also stream the run to Rerun as it flies (the MCAP log is written as always): "
                         "'spawn' a viewer, 'connect' to a running one (default rerun+http://127.0.0.1:9876/proxy; "
                         "ADDR: a port, HOST:PORT or a rerun+http:// URL), or 'save' into an .rrd file")
+    r.add_argument("--debug", action="store_true", help="on an error, print the whole traceback")
     r.set_defaults(func=cmd_run)
-    _add_metrics_parser(sub)
-    b = sub.add_parser("bench", help="measure simulation speed on this machine")
-    b.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
-    b.add_argument("scenario", nargs="?", help="only this scenario, profiled block by block")
-    b.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
-                   help="override a field of SCENARIO (repeatable)")
-    b.set_defaults(func=cmd_bench)
+
+
+def _add_batch_parser(sub) -> None:
     ba = sub.add_parser("batch", help="fly many runs from a batch spec (process pool or Ray); summary table")
-    ba.add_argument("spec", help="batch spec YAML (docs/TOOLS.md)")
+    ba.add_argument("spec", help="batch spec YAML (docs/guide/batches.md)")
     ba.add_argument("--out", help="output folder: logs/, summary.csv/.json/.parquet (default: runs/<spec name>)")
     ba.add_argument("--workers", type=int, default=None, help="parallel runs (default: CPU count)")
     ba.add_argument("--resume", action="store_true",
@@ -528,6 +580,29 @@ def build_parser() -> argparse.ArgumentParser:
                     help="fly only the runs of these scenario seeds (30, s30, 30,59, 10-14; repeatable), each the "
                          "same draw as in the whole batch: a batch's failing runs flown again with a --set change")
     ba.set_defaults(func=cmd_batch)
+
+
+def _add_bench_parser(sub) -> None:
+    b = sub.add_parser("bench", help="measure simulation speed on this machine")
+    b.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    b.add_argument("--quick", action="store_true", help="shorter measurement (noisier)")
+    b.add_argument("scenario", nargs="?", help="only this scenario, profiled block by block")
+    b.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                   help="override a field of SCENARIO (repeatable)")
+    b.set_defaults(func=cmd_bench)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fwsim", description="Fixed-wing UAV tracking and terminal guidance harness "
+                                                          "around JSBSim.")
+    from fwsim import __version__
+    p.add_argument("--version", action="version", version=f"fwsim {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    _add_run_parser(sub)
+    _add_scenario_parser(sub)
+    _add_metrics_parser(sub)
+    _add_bench_parser(sub)
+    _add_batch_parser(sub)
     _add_compare_parser(sub)
     pl = sub.add_parser("plot", help="PNG figures from a log")
     pl.add_argument("log", help="MCAP log of a run")

@@ -209,19 +209,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     """
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    rates = scenario.rates
-    dt = 1.0 / rates.sim_hz
-    fsw_every = round(rates.sim_hz / rates.flight_software_hz)
-    log_every = round(rates.sim_hz / rates.log_hz)
-    n_ticks = int(round(scenario.duration_s * rates.sim_hz))
-    progress_every = max(int(rates.sim_hz), 1)
-
-    cam_every = round(rates.sim_hz / scenario.camera.rate_hz)
-    render_hz = scenario.camera.render.rate_hz
-    render_every = round(rates.sim_hz / render_hz) if render_hz > 0 else 0
-
     wall0 = time.perf_counter()
-    sim_t = 0.0
+    flight = None
     status, reason = "completed", "duration reached"
     epoch_ns = start_epoch_ns(scenario.start_time) if scenario.start_time else time.time_ns() // 1_000_000 * 1_000_000
     with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario), epoch_ns=epoch_ns,
@@ -233,110 +222,168 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             # the flight software first: a block may start a worker process (the NMPC's) that gets ready
             # while the harness is built
             fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
-            world = World(scenario)
-            origin = world.airframe.origin
-            truth = world.reset()
-            trim = world.airframe.trim
-            log.write_event(0.0, f"trim: throttle {trim.throttle_norm:.3f}, elevator {trim.elevator_norm:.3f}, "
-                                 f"alpha {math.degrees(trim.alpha_rad):.2f} deg")
-            autopilot = Autopilot(load_autopilot_params(scenario.aircraft.name,
-                                                        overrides=scenario.aircraft.autopilot_gains),
-                                  dt, trim.throttle_norm)
-            sensors = Sensors(scenario.sensors, scenario.seed)
-            cam = scenario.camera
-            detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
-            if profile is not None:
-                time_harness(profile, sensors=sensors, detector=detector, autopilot=autopilot, world=world, log=log)
-                time_flight_software(profile, fsw)
-            log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
-                                  world.camera.K.K)
-            log.write_scene_models(topics.SCENE, 0.0, [
-                ("uav", topics.UAV_FRAME, world.camera.caster.uav_mesh, (0.85, 0.2, 0.2, 1.0)),
-                ("ship", topics.SHIP_FRAME_ID, world.ship.mesh, (0.55, 0.6, 0.65, 1.0))])
-            trails = _Trails()
-            _log_truth(log, truth, origin, trails)
-            disturbed = world.disturbed
-            events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None
-            phase = None
-            if disturbed:
-                log.write(topics.WORLD_AIR, world.air())
-            last_det = None
-            frame = None
-
-            for tick in range(n_ticks):
-                t_now = truth.uav.t_s
-                if events is not None:
-                    events.step(t_now, phase, log.write_event, world.airframe.cosine_gust, world.manoeuvre_ship)
-                if tick % fsw_every == 0:
-                    new_det = detector.arrived(t_now)
-                    last_det = new_det or last_det
-                    meas = sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, last_det,
-                                          gnss_held=events is not None and events.gnss_held)
-                    out = fsw.step(meas)
-                    phase = out.status.phase
-                    log.write(topics.AUTOPILOT_COMMAND, out.command)
-                    log.write(topics.FSW_GIMBAL_COMMAND, out.gimbal)
-                    log.write(topics.FSW_STATUS, out.status)
-                    for topic, msg in out.logs:
-                        log.write(topic, msg)
-                    for text in out.events:
-                        log.write_event(t_now, text)
-                    if new_det is not None:
-                        log.write(topics.CAMERA_DETECTION, new_det)
-                act = autopilot.actuate(out.command, truth.uav)
-                gimbal_cmd = out.gimbal
-                if events is not None and events.gimbal_stuck:
-                    gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
-                truth = world.step(act, gimbal_cmd)
-                sim_t = truth.uav.t_s
-                if (tick + 1) % cam_every == 0:
-                    frame = world.look()
-                    if events is None:
-                        detector.observe(frame)
-                    else:
-                        detector.observe(frame, events.blackout, events.clutter_box(cam.rate_hz, cam.width_px,
-                                                                                    cam.height_px))
-                    log.write(topics.CAMERA_FRAME, frame)
-                if (tick + 1) % log_every == 0:
-                    _log_truth(log, truth, origin, trails)
-                    log.write(topics.AUTOPILOT_STATUS, autopilot.status())
-                    log.write(topics.ACTUATORS, act)
-                    if disturbed:
-                        log.write(topics.WORLD_AIR, world.air())
-                if render_every and (tick + 1) % render_every == 0:
-                    _log_render(log, world, sim_t, frame, last_det)
-                if world.uav_inside_ship():
-                    _log_truth(log, truth, origin, trails)
-                    status, reason = "completed", f"hit the ship at t = {sim_t:.2f} s"
-                    break
-                if truth.uav.height_above_sea_m <= scenario.stop.min_height_m:
-                    _log_truth(log, truth, origin, trails)
-                    status, reason = "completed", f"sea contact at t = {sim_t:.2f} s"
-                    break
-                if truth.uav.airspeed_m_s > scenario.stop.max_airspeed_m_s:
-                    _log_truth(log, truth, origin, trails)
-                    raise RunStopped(f"airspeed {truth.uav.airspeed_m_s:.1f} m/s above the limit "
-                                     f"{scenario.stop.max_airspeed_m_s:g} m/s at t = {sim_t:.2f} s")
-                if progress is not None and tick % progress_every == 0:
-                    progress(sim_t, scenario.duration_s)
-                if sigint.requested:
-                    sigint.closing = True
-                    _log_truth(log, truth, origin, trails)
-                    trails.flush(log, sim_t)
-                    log.close("interrupted", f"interrupted ({sigint.description}) at t = {sim_t:.2f} s")
-                    raise Interrupted(sigint.signum)
-            trails.flush(log, sim_t)  # the last part of the paths
+            flight = _Flight(scenario, log, fsw, profile)
+            status, reason = flight.fly(sigint, progress)
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too
-            log.close("failed", f"{type(exc).__name__}: {exc} (t = {sim_t:.2f} s)")
+            log.close("failed", f"{failure_text(exc)} (t = {flight.sim_t if flight else 0.0:.2f} s)")
             raise
         finally:
             if fsw is not None:
                 fsw.close()  # e.g. the NMPC's worker process
         log.close(status, reason)
+    sim_t = flight.sim_t if flight is not None else 0.0
     if progress is not None:
         progress(sim_t, scenario.duration_s)
     wall = time.perf_counter() - wall0
     blocks = profile.report(wall, sim_t) if profile is not None else None
     return RunResult(log_path, status, reason, sim_t, wall, blocks)
+
+
+def failure_text(exc: BaseException) -> str:
+    """How an error that ended a run reads in the log and on the command line: a user's block says where it
+    failed (:class:`controllers.blocks.PluginError`), anything else is ``Type: message``."""
+    from controllers.blocks import PluginError
+    return str(exc) if isinstance(exc, PluginError) else f"{type(exc).__name__}: {exc}"
+
+
+class _Flight:
+    """One run's harness around its flight software, built and then flown tick by tick (``run``'s body)."""
+
+    def __init__(self, scenario: Scenario, log: LogWriter, fsw, profile: BlockTimer | None):
+        self.scenario, self.log, self.fsw = scenario, log, fsw
+        rates = scenario.rates
+        self.fsw_every = round(rates.sim_hz / rates.flight_software_hz)
+        self.log_every = round(rates.sim_hz / rates.log_hz)
+        self.cam_every = round(rates.sim_hz / scenario.camera.rate_hz)
+        render_hz = scenario.camera.render.rate_hz
+        self.render_every = round(rates.sim_hz / render_hz) if render_hz > 0 else 0
+        self.sim_t = 0.0
+        self.world = world = World(scenario)
+        self.origin = world.airframe.origin
+        self.truth = world.reset()
+        trim = world.airframe.trim
+        log.write_event(0.0, f"trim: throttle {trim.throttle_norm:.3f}, elevator {trim.elevator_norm:.3f}, "
+                             f"alpha {math.degrees(trim.alpha_rad):.2f} deg")
+        self.autopilot = Autopilot(load_autopilot_params(scenario.aircraft.name,
+                                                         overrides=scenario.aircraft.autopilot_gains),
+                                   1.0 / rates.sim_hz, trim.throttle_norm)
+        self.sensors = Sensors(scenario.sensors, scenario.seed)
+        cam = self.cam = scenario.camera
+        self.detector = Detector(cam.detector, rng_for(scenario.seed, "detector"), cam.width_px, cam.height_px)
+        if profile is not None:
+            time_harness(profile, sensors=self.sensors, detector=self.detector, autopilot=self.autopilot,
+                         world=world, log=log)
+            time_flight_software(profile, fsw)
+        log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
+                              world.camera.K.K)
+        log.write_scene_models(topics.SCENE, 0.0, [
+            ("uav", topics.UAV_FRAME, world.camera.caster.uav_mesh, (0.85, 0.2, 0.2, 1.0)),
+            ("ship", topics.SHIP_FRAME_ID, world.ship.mesh, (0.55, 0.6, 0.65, 1.0))])
+        self.trails = _Trails()
+        _log_truth(log, self.truth, self.origin, self.trails)
+        self.disturbed = world.disturbed
+        self.events = EventRunner(scenario.events, rng_for(scenario.seed, "events")) if scenario.events else None
+        self.phase = None
+        if self.disturbed:
+            log.write(topics.WORLD_AIR, world.air())
+        self.last_det = None
+        self.frame = None
+        self.out = None
+
+    def fly(self, sigint: _StopOnSigint, progress) -> tuple[str, str]:
+        """Tick to ``duration_s`` or an end (the ship hit, sea contact); (status, reason). RunStopped when the
+        scenario's limits stop it, Interrupted (the log closed) on a signal."""
+        scenario, log = self.scenario, self.log
+        progress_every = max(int(scenario.rates.sim_hz), 1)
+        why = "duration reached"
+        for tick in range(int(round(scenario.duration_s * scenario.rates.sim_hz))):
+            self._step(tick)
+            ended = self._ended()
+            if ended:
+                why = ended
+                break
+            if progress is not None and tick % progress_every == 0:
+                progress(self.sim_t, scenario.duration_s)
+            if sigint.requested:
+                sigint.closing = True
+                _log_truth(log, self.truth, self.origin, self.trails)
+                self.trails.flush(log, self.sim_t)
+                log.close("interrupted", f"interrupted ({sigint.description}) at t = {self.sim_t:.2f} s")
+                raise Interrupted(sigint.signum)
+        self.trails.flush(log, self.sim_t)  # the last part of the paths
+        return "completed", why
+
+    def _step(self, tick: int) -> None:
+        """One tick: events, the flight software (at its rate), the autopilot, the world, camera and log."""
+        events, log = self.events, self.log
+        t_now = self.truth.uav.t_s
+        if events is not None:
+            events.step(t_now, self.phase, log.write_event, self.world.airframe.cosine_gust,
+                        self.world.manoeuvre_ship)
+        if tick % self.fsw_every == 0:
+            self._flight_software(t_now)
+        out = self.out
+        act = self.autopilot.actuate(out.command, self.truth.uav)
+        gimbal_cmd = out.gimbal
+        if events is not None and events.gimbal_stuck:
+            gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
+        self.truth = truth = self.world.step(act, gimbal_cmd)
+        self.sim_t = truth.uav.t_s
+        if (tick + 1) % self.cam_every == 0:
+            self._look()
+        if (tick + 1) % self.log_every == 0:
+            _log_truth(log, truth, self.origin, self.trails)
+            log.write(topics.AUTOPILOT_STATUS, self.autopilot.status())
+            log.write(topics.ACTUATORS, act)
+            if self.disturbed:
+                log.write(topics.WORLD_AIR, self.world.air())
+        if self.render_every and (tick + 1) % self.render_every == 0:
+            _log_render(log, self.world, self.sim_t, self.frame, self.last_det)
+
+    def _flight_software(self, t_now: float) -> None:
+        """The sensors sampled and the flight software stepped; its commands, status and topics logged."""
+        log, truth, events = self.log, self.truth, self.events
+        new_det = self.detector.arrived(t_now)
+        self.last_det = new_det or self.last_det
+        meas = self.sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, self.last_det,
+                                   gnss_held=events is not None and events.gnss_held)
+        self.out = out = self.fsw.step(meas)
+        self.phase = out.status.phase
+        log.write(topics.AUTOPILOT_COMMAND, out.command)
+        log.write(topics.FSW_GIMBAL_COMMAND, out.gimbal)
+        log.write(topics.FSW_STATUS, out.status)
+        for topic, msg in out.logs:
+            log.write(topic, msg)
+        for text in out.events:
+            log.write_event(t_now, text)
+        if new_det is not None:
+            log.write(topics.CAMERA_DETECTION, new_det)
+
+    def _look(self) -> None:
+        """The camera's frame, handed to the detector (through the events' blackout and clutter) and logged."""
+        events, cam = self.events, self.cam
+        self.frame = frame = self.world.look()
+        if events is None:
+            self.detector.observe(frame)
+        else:
+            self.detector.observe(frame, events.blackout, events.clutter_box(cam.rate_hz, cam.width_px,
+                                                                             cam.height_px))
+        self.log.write(topics.CAMERA_FRAME, frame)
+
+    def _ended(self) -> str:
+        """Why the run ends at this tick ('' when it goes on); RunStopped above the airspeed limit."""
+        truth, stop, t = self.truth, self.scenario.stop, self.sim_t
+        if self.world.uav_inside_ship():
+            why = f"hit the ship at t = {t:.2f} s"
+        elif truth.uav.height_above_sea_m <= stop.min_height_m:
+            why = f"sea contact at t = {t:.2f} s"
+        elif truth.uav.airspeed_m_s > stop.max_airspeed_m_s:
+            _log_truth(self.log, truth, self.origin, self.trails)
+            raise RunStopped(f"airspeed {truth.uav.airspeed_m_s:.1f} m/s above the limit "
+                             f"{stop.max_airspeed_m_s:g} m/s at t = {t:.2f} s")
+        else:
+            return ""
+        _log_truth(self.log, truth, self.origin, self.trails)
+        return why

@@ -316,6 +316,16 @@ def parse_scenario(text: str, source: str = "<scenario>", overrides: dict[str, A
         raise ScenarioError(_format_errors(source, exc)) from None
 
 
+def dump_scenario(scenario: Scenario) -> str:
+    """The scenario as YAML with every field, the defaults filled in (``fwsim scenario show``); it reads back
+    (:func:`parse_scenario`) to the same scenario."""
+    import yaml
+
+    from fwsim.yamlfile import FAST_SAFE_DUMPER
+    body = yaml.dump(scenario.model_dump(mode="json"), Dumper=FAST_SAFE_DUMPER, sort_keys=False, allow_unicode=True)
+    return f"# {scenario.name}: every field, the defaults filled in (fwsim scenario show)\n{body}"
+
+
 def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> tuple[Scenario, str]:
     """Read and validate a scenario file; returns the config and its text (for the log)."""
     path = Path(path)
