@@ -160,7 +160,7 @@ def test_the_airframe_settings_are_checked():
         AirframeConfig(boxes_frd_m=[[0.1, 0.0, -1, 1, -1, 1]])
     with pytest.raises(ValueError, match="tail < nose"):
         AirframeConfig(fuselage_x_m=[0.3, -0.6])
-    # the default since 2026-11-26 (docs/ENVELOPE.md, "The airframe's cut, predicted")
+    # the default (docs/results/envelope.mds cut, predicted")
     assert Controllers().airframe.enabled is True
     assert Controllers.model_validate({"airframe": {"enabled": False}}).airframe.enabled is False
     with pytest.raises(ValueError, match="align_iterations"):
