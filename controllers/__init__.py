@@ -1,5 +1,5 @@
 """Flight software under test: the paper's algorithms.
 
 Nothing in this package may import the truth side of the harness (JSBSim,
-``fwsim.airframe``, ``fwsim.loop``, ...). It sees only measurements.
+``fwsim.world.airframe``, ``fwsim.sim.loop``, ...). It sees only measurements.
 """

@@ -351,7 +351,7 @@ def build_block(slot: str, choice, ctx: BlockContext, search_dirs=()):
 # --------------------------------------------------------------------------- a user's block, guarded
 
 #: per slot, what a method must return (a user's block is checked at each call; None: not checked). The names
-#: are ``controllers.messages`` / ``fwsim.messages`` classes, looked up when a block is guarded.
+#: are ``controllers.messages`` / ``fwsim.interface.messages`` classes, looked up when a block is guarded.
 RETURNS: dict[str, dict[str, str]] = {
     "estimator": {"update": "FusionResult", "estimate": "TargetEstimate", "status": "EstimatorStatus"},
     "after_lock": {"step": "Guidance"},
@@ -367,8 +367,7 @@ def guarded(slot: str, cls: type) -> type:
     ``__init__`` turn an exception into a :class:`PluginError` that says where it happened in the user's file,
     and whose methods check the type they return (:data:`RETURNS`; a Guidance's command too)."""
     from controllers import messages
-    from fwsim import messages as boundary
-
+    from fwsim.interface import messages as boundary
     s = SLOTS[slot]
     files = _user_files(cls)
     expected = {m: getattr(messages, n, None) or getattr(boundary, n) for m, n in RETURNS[slot].items()}
@@ -387,7 +386,7 @@ def _guard(slot: str, cls: type, name: str, fn: Callable, files: frozenset[str],
     passes = PASSES.get((slot, name), ())
     command = expected is not None and expected.__name__ == "Guidance"
     if command:
-        from fwsim.messages import AutopilotCommand
+        from fwsim.interface.messages import AutopilotCommand
 
     def call(self, *args, **kwargs):
         try:

@@ -20,7 +20,7 @@ with, all in the world frame (ENU, metres, seconds):
   * ``V_f`` the wanted terminal velocity direction (``vf_enu``).
 
 ``u`` is an acceleration perpendicular to V_p, gravity not included: exactly
-what ``fwsim.messages.AccelCommand`` carries.
+what ``fwsim.interface.messages.AccelCommand`` carries.
 
 The sign of the bias term: derived, and the paper's print is RIGHT
 --------------------------------------------------------------------
@@ -169,8 +169,8 @@ from typing import NamedTuple
 import numpy as np
 
 from controllers.config import BpngConfig
-from fwsim.frames import cross3, dcm_enu_from_frd
-from fwsim.messages import AccelCommand
+from fwsim.interface.frames import cross3, dcm_enu_from_frd
+from fwsim.interface.messages import AccelCommand
 
 _MIN_RANGE_M = 1e-3  # below: LOS rate undefined, set to 0
 _MIN_SPEED_M_S = 1e-3  # below: velocity direction undefined, command 0
@@ -220,7 +220,7 @@ class BpngTerms(NamedTuple):
 
 
 def _cross(a, b):
-    """a x b over the last axis (fwsim.frames.cross3 for two single vectors: the same products, without
+    """a x b over the last axis (fwsim.interface.frames.cross3 for two single vectors: the same products, without
     np.cross's overhead)."""
     if a.ndim == 1 and b.ndim == 1:
         return cross3(a, b)

@@ -1,7 +1,7 @@
 """Pinhole camera and image-feature kinematics for the flight software (UKF, IBVS).
 
 A small, dependency-free module (numpy only) shared by ``controllers.ukf`` and
-the IBVS controller. The harness has its own camera (``fwsim.camera``), which
+the IBVS controller. The harness has its own camera (``fwsim.sensors.camera``), which
 flight software must not import; this one holds only what a mission computer
 knows: the intrinsics and the geometry.
 
@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fwsim.frames import R_frd_from_cam, camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
-from fwsim.messages import Measurements
+from fwsim.interface.frames import R_frd_from_cam, camera_angular_velocity, camera_pose_world, cross3, dcm_enu_from_frd
+from fwsim.interface.messages import Measurements
 
 __all__ = ["PinholeCamera", "CameraMotion", "camera_motion", "feature_rates", "rotation_matrix",
            "translation_rates", "interaction_matrix", "depth_on_plane", "closing_time_s", "held_while_closing"]
@@ -53,7 +53,7 @@ class PinholeCamera:
 
     @classmethod
     def from_fov(cls, width_px: int, height_px: int, hfov_deg: float) -> "PinholeCamera":
-        """Square pixels, principal point at the image centre (same as ``fwsim.camera.Intrinsics.from_fov``)."""
+        """Square pixels, principal point at the image centre (same as ``fwsim.sensors.camera.Intrinsics.from_fov``)."""
         f = (width_px / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
         return cls(f, f, width_px / 2.0, height_px / 2.0, int(width_px), int(height_px))
 
@@ -212,9 +212,9 @@ class CameraMotion:
     def from_measurements(cls, meas: Measurements, mount_offset_frd_m) -> "CameraMotion":
         """Build from one ``Measurements`` and the known mount offset r_c/p (body FRD, m).
 
-        Pose from :func:`fwsim.frames.camera_pose_world` (attitude + encoders);
+        Pose from :func:`fwsim.interface.frames.camera_pose_world` (attitude + encoders);
         ``r_c`` is ``meas.cam_pos_enu_m`` when finite, else the pose's;
-        ``omega`` from :func:`fwsim.frames.camera_angular_velocity` (encoder
+        ``omega`` from :func:`fwsim.interface.frames.camera_angular_velocity` (encoder
         rates, NaN taken as 0, plus gyros); height from the altimeter (the
         GNSS height of r_c if the altimeter is NaN). Raises ValueError without
         gimbal encoders.

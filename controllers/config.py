@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from fwsim.configbase import StrictModel
+from fwsim.interface.configbase import StrictModel
 
 _PI = math.pi
 _HALF_PI = 0.5 * math.pi

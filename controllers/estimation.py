@@ -38,8 +38,8 @@ import numpy as np
 from controllers.camera_model import CameraMotion, closing_time_s
 from controllers.course_turn import CourseTurn
 from controllers.messages import DetectionFix, DetectionFusion, FusionReason, FusionResult, TargetEstimate, TargetState
-from fwsim import topics
-from fwsim.messages import Measurements
+from fwsim.interface import topics
+from fwsim.interface.messages import Measurements
 
 __all__ = ["Estimation"]
 

@@ -30,8 +30,8 @@ from controllers.bpng import Bpng
 from controllers.messages import Guidance, TargetState
 from controllers.path import OrbitFollower, PathFollower
 from controllers.target_model import ShipModel
-from fwsim import topics
-from fwsim.messages import Measurements
+from fwsim.interface import topics
+from fwsim.interface.messages import Measurements
 
 __all__ = ["PathGuidance", "OrbitLoiter", "NmpcLoiter", "BpngTerminal"]
 

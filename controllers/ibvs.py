@@ -157,8 +157,8 @@ import numpy as np
 
 from controllers.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from controllers.config import IbvsConfig
-from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, finite3, wrap_pi
-from fwsim.messages import GimbalCommand, Measurements
+from fwsim.interface.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, finite3, wrap_pi
+from fwsim.interface.messages import GimbalCommand, Measurements
 
 _PI = math.pi
 _HALF_PI = 0.5 * math.pi
@@ -235,7 +235,7 @@ def camera_rates_paper(x1: float, x2: float, lambda_1_s: float, known_rate=(0.0,
     """The paper's eq. IBVSsss: ``[w_cx, w_cy] = -L1hat^-1 known_rate - lambda L1hat^-1 e`` (camera frame,
     relative to the body). ``L1hat`` = first two columns of L1 (det = 1 + x1^2 + x2^2 > 0, always invertible);
     ``known_rate`` is the paper's ``L2 [V_p - V_q; omega_p]``. Convert with eq. sigular
-    (``fwsim.frames.joint_rates_from_camera_rates``) for the joint rates.
+    (``fwsim.interface.frames.joint_rates_from_camera_rates``) for the joint rates.
     """
     a, c = x1 * x2, -(1.0 + x1 * x1)
     d, f = 1.0 + x2 * x2, -x1 * x2

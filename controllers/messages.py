@@ -1,6 +1,6 @@
 """Typed messages between the flight software's blocks, and what they put in the log.
 
-``fwsim.messages`` holds the boundary (``Measurements`` in, commands out);
+``fwsim.interface.messages`` holds the boundary (``Measurements`` in, commands out);
 these are the flight software's own: each a frozen dataclass whose first
 field is ``t_s``, vectors as float64 arrays, NaN for a field that does not
 apply (PX4's convention). In signal order::
@@ -21,7 +21,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from fwsim.messages import AutopilotCommand
+from fwsim.interface.messages import AutopilotCommand
 
 _NAN2 = lambda: np.full(2, np.nan)  # noqa: E731
 

@@ -45,7 +45,7 @@ from controllers.pointing import Pointing
 from controllers.script import ScriptedCommands
 from controllers.search import GimbalSearch
 from controllers.target_model import ShipModel
-from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
+from fwsim.interface.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
 
 __all__ = ["FlightSoftware", "FlightSoftwareOutput", "ScriptedFlightSoftware", "flight_software"]
 

@@ -46,8 +46,8 @@ import operator
 import numpy as np
 
 from controllers.config import NavigationConfig
-from fwsim.frames import cross3, dcm_enu_from_frd, finite3
-from fwsim.messages import Measurements
+from fwsim.interface.frames import cross3, dcm_enu_from_frd, finite3
+from fwsim.interface.messages import Measurements
 
 __all__ = ["NavigationConfig", "Navigation"]
 

@@ -89,8 +89,8 @@ import numpy as np
 from controllers.cbf import G, cbf_rows, cbf_terms
 from controllers.compiled import Buffered
 from controllers.config import NmpcConfig
-from fwsim.frames import wrap_pi
-from fwsim.messages import Measurements, RateCommand
+from fwsim.interface.frames import wrap_pi
+from fwsim.interface.messages import Measurements, RateCommand
 
 __all__ = ["NmpcConfig", "NmpcResult", "NmpcStatus", "Nmpc", "continuous_dynamics", "NX", "KinematicRun",
            "kinematic_closed_loop"]

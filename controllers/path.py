@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from fwsim.frames import wrap_pi
-from fwsim.messages import FlightSoftwareStatus, Measurements, RateCommand
+from fwsim.interface.frames import wrap_pi
+from fwsim.interface.messages import FlightSoftwareStatus, Measurements, RateCommand
 
 CHI_INF_RAD = math.radians(60.0)  # approach angle far from the path
 K_PATH_1_M = 0.01  # 1/m

@@ -79,9 +79,9 @@ from controllers.camera_model import CameraMotion, PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
 from controllers.messages import DetectionFix, FusionReason, TargetState
 from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px, projected_points_px
-from fwsim import topics
-from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd
-from fwsim.messages import Measurements
+from fwsim.interface import topics
+from fwsim.interface.frames import R_frd_from_cam, dcm_enu_from_frd
+from fwsim.interface.messages import Measurements
 
 __all__ = ["Perception", "Lock"]
 

@@ -19,9 +19,9 @@ from controllers.config import IbvsConfig, ReacquireConfig
 from controllers.ibvs import Ibvs
 from controllers.messages import DetectionFix, TargetState
 from controllers.search import GimbalSearch
-from fwsim import topics
-from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
-from fwsim.messages import GimbalCommand, Measurements
+from fwsim.interface import topics
+from fwsim.interface.frames import dcm_enu_from_frd, pan_tilt_pointing_at
+from fwsim.interface.messages import GimbalCommand, Measurements
 
 __all__ = ["Pointing", "IbvsPointing"]
 

@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from fwsim.frames import cross3
-from fwsim.messages import (
+from fwsim.interface.frames import cross3
+from fwsim.interface.messages import (
     AccelCommand,
     AutopilotCommand,
     FlightSoftwareStatus,

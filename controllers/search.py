@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from controllers.config import AcquisitionConfig
-from fwsim.messages import GimbalCommand, Measurements
+from fwsim.interface.messages import GimbalCommand, Measurements
 
 
 class GimbalSearch:

@@ -59,7 +59,7 @@ import scipy.special
 from controllers.camera_model import PinholeCamera, depth_on_plane
 from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
 from controllers.ukf import ground_from_pixel_jacobian
-from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
+from fwsim.interface.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
            "ShipOutline", "box_centre_offset_px",

@@ -76,7 +76,7 @@ from controllers.camera_model import MIN_RAY_DOWN as _CAMERA_MIN_RAY_DOWN
 from controllers.camera_model import CameraMotion, PinholeCamera, depth_on_plane, feature_rates
 from controllers.config import UkfConfig
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult, TargetEstimate
-from fwsim.messages import Measurements
+from fwsim.interface.messages import Measurements
 
 __all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "UnscentedCore", "UkfTargetEstimator",
            "fix_from_measurements", "height_consider_cov"]

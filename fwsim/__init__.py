@@ -23,6 +23,6 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 AIRCRAFT_DIR = PROJECT_ROOT / "aircraft"
 SCENARIO_DIR = PROJECT_ROOT / "scenarios"
 
-from fwsim.api import Flight, batch, fly  # noqa: E402 - (standard library only until called)
+from fwsim.sim.api import Flight, batch, fly  # noqa: E402 - (standard library only until called)
 
 __all__ = ["fly", "batch", "Flight", "PROJECT_ROOT", "AIRCRAFT_DIR", "SCENARIO_DIR", "__version__"]

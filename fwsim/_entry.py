@@ -2,7 +2,7 @@
 
 SIGTERM (what a batch scheduler, a container or Ray sends) and SIGHUP (a closed terminal) end the command as
 Ctrl-C does from the first instant, even while the heavy modules are still importing: one line, exit code
-128 + the signal's number, no traceback. Once a run flies, :mod:`fwsim.loop` takes the signals over so that
+128 + the signal's number, no traceback. Once a run flies, :mod:`fwsim.sim.loop` takes the signals over so that
 the log is closed with ``run_status: interrupted`` and the signal's name.
 """
 from __future__ import annotations

@@ -41,10 +41,10 @@ import numpy as np
 import yaml
 
 from fwsim import AIRCRAFT_DIR
-from fwsim.configbase import StrictModel
-from fwsim.frames import cross3, dcm_enu_from_frd, wrap_pi
-from fwsim.messages import AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand, AutopilotStatus, RateCommand
-from fwsim.yamlfile import FAST_SAFE_LOADER
+from fwsim.interface.configbase import StrictModel
+from fwsim.interface.frames import cross3, dcm_enu_from_frd, wrap_pi
+from fwsim.interface.messages import AccelCommand, ActuatorCommand, AirframeState, AutopilotCommand, AutopilotStatus, RateCommand
+from fwsim.scenario.yamlfile import FAST_SAFE_LOADER
 
 G_M_S2 = 9.80665
 _NAN3 = np.full(3, np.nan)

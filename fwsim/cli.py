@@ -28,8 +28,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from fwsim.scenario import ScenarioError, load_scenario, parse_sets
-from fwsim.yamlfile import short
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_sets
+from fwsim.scenario.yamlfile import short
 
 
 def _console(**kwargs) -> Console:
@@ -138,7 +138,7 @@ def _print_table(title: str, rows: dict) -> None:
 
 
 def cmd_run(args) -> int:
-    from fwsim.loop import default_log_path
+    from fwsim.sim.loop import default_log_path
     target = None
     if args.rerun is not None:  # a bad value fails before the scenario is even read
         from fwsim.log.rerun_live import LiveViewError, RerunLive, parse_target
@@ -171,7 +171,7 @@ def cmd_run(args) -> int:
 
 
 def _fly(args, scenario, text: str, log_path: Path, live) -> int:
-    from fwsim.loop import run
+    from fwsim.sim.loop import run
     console.print(f"[bold]fwsim[/] flying [cyan]{scenario.name}[/] (seed {scenario.seed}, "
                   f"{scenario.duration_s:g} s) -> {log_path}" + (f"; live view: {live.target}" if live else ""))
     with Progress(TextColumn("sim {task.completed:>7.1f} / {task.total:.0f} s"), BarColumn(),
@@ -180,7 +180,7 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
         task = bar.add_task("run", total=scenario.duration_s)
         timer = None
         if getattr(args, "profile", False):
-            from fwsim.profiling import BlockTimer
+            from fwsim.sim.profiling import BlockTimer
             timer = BlockTimer()
         try:
             result = run(scenario, text, log_path, progress=lambda t, T: bar.update(task, completed=t),
@@ -207,8 +207,8 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
 
 
 def _result(log_path: Path) -> str:
-    """The one-line result of a flown run (``fwsim.metrics.result_line``), from its log."""
-    from fwsim.metrics import result_line, terminal_metrics
+    """The one-line result of a flown run (``fwsim.analysis.metrics.result_line``), from its log."""
+    from fwsim.analysis.metrics import result_line, terminal_metrics
     try:
         return result_line(terminal_metrics(log_path))
     except Exception as exc:  # noqa: BLE001 - a log that cannot be scored: say so, the run itself is done
@@ -218,7 +218,7 @@ def _result(log_path: Path) -> str:
 def _run_failed(exc: Exception, log_path: Path, debug: bool) -> None:
     """A run that ended on an error: one line saying what and where (a user's block: the slot, the method and
     the line of the user's file), the whole traceback with ``--debug``."""
-    from fwsim.loop import failure_text
+    from fwsim.sim.loop import failure_text
     if debug:
         import traceback
         console.print("".join(traceback.format_exception(exc)).rstrip(), markup=False, highlight=False)
@@ -229,7 +229,7 @@ def _run_failed(exc: Exception, log_path: Path, debug: bool) -> None:
 
 
 def _print_blocks(title: str, blocks, wall_s: float, sim_s: float) -> None:
-    """The per-block wall-time table of a profiled run (fwsim.profiling)."""
+    """The per-block wall-time table of a profiled run (fwsim.sim.profiling)."""
     table = Table(title=title, caption=f"{sim_s:.1f} s simulated in {wall_s:.2f} s of wall time "
                                        f"({sim_s / wall_s if wall_s > 0 else float('nan'):.1f}x real time, "
                                        "timers included)")
@@ -253,15 +253,15 @@ def _to_stdout(text: str) -> None:
 def cmd_scenario(args) -> int:
     """``fwsim scenario show | schema | reference``: a scenario resolved, the JSON Schema, the field reference."""
     if args.action == "show":
-        from fwsim.scenario import dump_scenario
+        from fwsim.scenario.model import dump_scenario
         scenario, _ = load_scenario(args.scenario, parse_sets(args.set))
         _to_stdout(dump_scenario(scenario))
         return 0
     if args.action == "schema":
-        from fwsim.reference import scenario_schema
+        from fwsim.scenario.reference import scenario_schema
         _to_stdout(json.dumps(scenario_schema(), indent=2, ensure_ascii=False) + "\n")
         return 0
-    from fwsim.reference import reference_markdown
+    from fwsim.scenario.reference import reference_markdown
     text = reference_markdown()
     if args.out is None:
         _to_stdout(text)
@@ -273,7 +273,7 @@ def cmd_scenario(args) -> int:
 
 
 def cmd_metrics(args) -> int:
-    from fwsim.metrics import compute_metrics, metrics_json
+    from fwsim.analysis.metrics import compute_metrics, metrics_json
     path = Path(args.log)
     log = _flight_log(path)
     if log is None:
@@ -294,9 +294,9 @@ NOTES = ("terminal_note", "impact_metrics")  # text that explains a group's miss
 
 
 def _print_metrics(title: str, m: dict) -> None:
-    """The metrics grouped as the table in fwsim.metrics lists them, with their units; "—" for no value, and a
+    """The metrics grouped as the table in fwsim.analysis.metrics lists them, with their units; "—" for no value, and a
     group's note (why its values are missing) on the group's heading line."""
-    from fwsim.metrics import METRIC, format_value, grouped
+    from fwsim.analysis.metrics import METRIC, format_value, grouped
     groups = grouped(m)
     width = max((len(k) for _, rows in groups for k, _ in rows), default=0) + 2
     lines = [title]
@@ -314,7 +314,7 @@ def _print_metrics(title: str, m: dict) -> None:
 
 
 def cmd_bench(args) -> int:
-    from fwsim.bench import block_breakdown, blocks_json, run_bench
+    from fwsim.sim.bench import block_breakdown, blocks_json, run_bench
     if args.scenario is not None:  # one scenario, profiled block by block
         scenario, text = load_scenario(args.scenario, parse_sets(args.set))
         console.print(f"flying {scenario.name} ({scenario.duration_s:g} s) with a timer on every block ...")
@@ -334,7 +334,7 @@ def cmd_bench(args) -> int:
         return 0
     blocks = res.pop("paper_mission_blocks")
     _print_table("fwsim bench", res)
-    from fwsim.profiling import BlockTime
+    from fwsim.sim.profiling import BlockTime
     rows = [BlockTime(k, v["seconds"], v["calls"], v["share"], v["ms_per_sim_s"]) for k, v in blocks.items()]
     wall = sum(b.seconds for b in rows)
     _print_blocks("paper mission, block by block (a separate, profiled run)", rows, wall,
@@ -363,7 +363,7 @@ def _only_seeds(values: list[str]) -> tuple[int, ...]:
 def cmd_batch(args) -> int:
     from rich.progress import TimeRemainingColumn
 
-    from fwsim.batch import SpecChanges, run_batch
+    from fwsim.batch.runner import SpecChanges, run_batch
     if args.workers is not None and args.workers < 1:
         raise ScenarioError(f"--workers: expected the number of parallel runs, 1 or more (got {args.workers})")
     if args.seed is not None and args.seed < 0:
@@ -429,7 +429,7 @@ def cmd_batch(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from fwsim.compare import ab_files, compare_files
+    from fwsim.analysis.compare import ab_files, compare_files
     try:
         if args.ab:
             return _print_ab(ab_files(args.baseline, args.run, args.tolerances, any_runs=args.any))
@@ -468,7 +468,7 @@ def _print_ab(ab) -> int:
 
 
 def cmd_plot(args) -> int:
-    from fwsim.plot import plot_log
+    from fwsim.analysis.plot import plot_log
     path = Path(args.log)
     log = _flight_log(path)
     if log is None:
@@ -490,7 +490,7 @@ def cmd_plot(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from fwsim.report import ReportError, write_report
+    from fwsim.analysis.report import ReportError, write_report
     try:
         rep, path = write_report(args.out_dir)
     except ReportError as exc:

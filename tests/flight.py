@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fwsim.airframe import Airframe
+from fwsim.world.airframe import Airframe
 from fwsim.autopilot import Autopilot, load_autopilot_params
 
 

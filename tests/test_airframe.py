@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from flight import Flight, flight_path_rad
 
-from fwsim.airframe import Airframe, AirframeError, aircraft_hash
-from fwsim.messages import ActuatorCommand, RateCommand
+from fwsim.world.airframe import Airframe, AirframeError, aircraft_hash
+from fwsim.interface.messages import ActuatorCommand, RateCommand
 
 
 def test_loads_from_any_working_directory(tmp_path):

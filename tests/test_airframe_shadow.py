@@ -9,11 +9,11 @@ from controllers.airframe import AirframeShadow
 from controllers.camera_model import PinholeCamera
 from controllers.config import AirframeConfig, Controllers
 from controllers.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
-from fwsim.camera import Camera, CameraConfig, Pose
-from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
-from fwsim.geometry import uav_mesh
-from fwsim.gimbal import camera_pose_world
-from fwsim.target import Ship, TargetConfig
+from fwsim.sensors.camera import Camera, CameraConfig, Pose
+from fwsim.interface.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
+from fwsim.world.geometry import uav_mesh
+from fwsim.world.gimbal import camera_pose_world
+from fwsim.world.target import Ship, TargetConfig
 
 CAM_CFG = CameraConfig(hfov_deg=60.0)
 MOUNT = np.array(CAM_CFG.gimbal.mount_offset_frd_m)
@@ -94,7 +94,7 @@ def _detection(cp, Rc, R_fc, box, h):
     the camera's rotation in the body frame), the camera's motion, and the image of the tracked point ``h``
     above the ship's waterline centre (the origin)."""
     from controllers.ukf import CameraMotion
-    from fwsim.messages import Measurements
+    from fwsim.interface.messages import Measurements
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     pan = math.atan2(R_fc[1, 2], R_fc[0, 2])  # the optical axis (camera z) in the body frame

@@ -10,7 +10,7 @@ import pytest
 
 import fwsim
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
-from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.scenario.model import ScenarioError, load_scenario
 
 CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
 

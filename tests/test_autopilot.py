@@ -7,7 +7,7 @@ from flight import Flight, flight_path_rad
 
 from controllers.script import perpendicular_axes
 from fwsim.autopilot import Autopilot, bank_from_specific_force, load_autopilot_params
-from fwsim.messages import AccelCommand, RateCommand
+from fwsim.interface.messages import AccelCommand, RateCommand
 
 DEG = math.pi / 180.0
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from fwsim import SCENARIO_DIR
-from fwsim.batch import BASE_COLUMNS, BatchSpecError, SpecChanges, load_spec, run_batch, run_id, run_one
+from fwsim.batch.runner import BASE_COLUMNS, BatchSpecError, SpecChanges, load_spec, run_batch, run_id, run_one
 from fwsim.log import read_log
-from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.scenario.model import ScenarioError, load_scenario
 
 CHECKOUT = (SCENARIO_DIR / "autopilot_checkout.yaml").as_posix()
 
@@ -150,7 +150,7 @@ def test_summary_hit_is_a_bool_and_runs_that_never_dived_are_told(pool_batch):
     summary records the spec it flew (path, SHA-256, text) for the report."""
     import hashlib
 
-    from fwsim.report import summarise
+    from fwsim.analysis.report import summarise
     spec, out, result, _ = pool_batch
     done = [r for r in result.rows if r["status"] == "completed"]
     assert done and all(r["hit"] is False and r["miss_distance_m"] is None for r in done)
@@ -263,7 +263,7 @@ runs:
 GENERATED = """
 name: gen
 runs:
-  - generator: fwsim.cases:terminal_case
+  - generator: fwsim.batch.cases:terminal_case
     args: {duration_s: 2}
     cases:
       - {theta_f_deg: -30, psi_f_deg: 30, ship_heading_deg: 0, ship_speed_m_s: 5}
@@ -290,11 +290,11 @@ def test_a_generated_scenario_entry_flies_each_case_and_resumes(tmp_path):
 
 
 @pytest.mark.parametrize("body, message", [
-    ("runs: [{generator: fwsim.cases:no_such}]", "has no function 'no_such'"),
+    ("runs: [{generator: fwsim.batch.cases:no_such}]", "has no function 'no_such'"),
     ("runs: [{generator: no_module_x:f}]", "cannot import 'no_module_x'"),
-    ("runs: [{generator: fwsim.cases:terminal_case, cases: [{theta_f_deg: -30}]}]", "TypeError"),
+    ("runs: [{generator: fwsim.batch.cases:terminal_case, cases: [{theta_f_deg: -30}]}]", "TypeError"),
     ("runs: [{scenario: SC, cases: [{a: 1}]}]", "'cases' and 'args' go with a 'generator'"),
-    ("runs: [{scenario: SC, generator: fwsim.cases:terminal_case}]", "a 'scenario:' file or a 'generator:'"),
+    ("runs: [{scenario: SC, generator: fwsim.batch.cases:terminal_case}]", "a 'scenario:' file or a 'generator:'"),
 ])
 def test_generator_errors_are_one_line(tmp_path, body, message):
     spec = write_spec(tmp_path, body.replace("SC", str(SCENARIO_DIR / "autopilot_checkout.yaml")))

@@ -14,10 +14,10 @@ from controllers.messages import Guidance
 from controllers.ukf import UkfTargetEstimator
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main
-from fwsim.loop import run
-from fwsim.messages import AccelCommand, GimbalCommand
-from fwsim.metrics import compute_metrics
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+from fwsim.sim.loop import run
+from fwsim.interface.messages import AccelCommand, GimbalCommand
+from fwsim.analysis.metrics import compute_metrics
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
 
 CALLS: dict[str, int] = {}  # what the last CountingUkf was asked to do, by method
 

@@ -8,8 +8,8 @@ import pytest
 from pydantic import ValidationError
 
 from controllers.bpng import Bpng, BpngConfig, BpngStatus, body_rates_from_accel, bpng_accel, vf_enu
-from fwsim.frames import dcm_enu_from_frd, enu_from_ned
-from fwsim.messages import AccelCommand
+from fwsim.interface.frames import dcm_enu_from_frd, enu_from_ned
+from fwsim.interface.messages import AccelCommand
 
 CFG = BpngConfig()
 GAINS = dict(n_sigma=CFG.n_sigma, n_f=CFG.n_f, min_tgo_s=CFG.min_tgo_s, max_accel_m_s2=CFG.max_accel_m_s2,
@@ -364,7 +364,7 @@ def test_from_a_loiter_round_a_fast_ship_the_cap_keeps_the_ship_in_the_capture_r
     """The loiter round a 10 m/s ship crossing the impact heading (theta_f -30, psi_f 30, ship heading 270):
     at the switch (bearing to the ship = psi_f) the ground velocity is ~100 deg off V_f. The printed law's
     bias cancels the PN term and the UAV flies away; with the cap it turns in and hits at the impact angle."""
-    from fwsim.cases import _orbit_heading_deg
+    from fwsim.batch.cases import _orbit_heading_deg
     th, ps, ship_hdg, ship_speed = -30.0, 30.0, 270.0, 10.0
     b = math.radians(ps)  # bearing UAV -> ship at the switch
     p = np.array([[-500.0 * math.sin(b), -500.0 * math.cos(b), 500.0]])

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from flight import Flight
 
-from fwsim.camera import Camera, CameraConfig, Detector, DetectorConfig, FrameGeometry, Pose
-from fwsim.frames import dcm_enu_from_frd
-from fwsim.geometry import uav_mesh
-from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
-from fwsim.messages import RateCommand
-from fwsim.target import Ship, TargetConfig
+from fwsim.sensors.camera import Camera, CameraConfig, Detector, DetectorConfig, FrameGeometry, Pose
+from fwsim.interface.frames import dcm_enu_from_frd
+from fwsim.world.geometry import uav_mesh
+from fwsim.world.gimbal import camera_pose_world, pan_tilt_pointing_at
+from fwsim.interface.messages import RateCommand
+from fwsim.world.target import Ship, TargetConfig
 
 MOUNT = np.array([0.0, 0.0, 0.10])
 SHIP = Ship(TargetConfig())
@@ -182,7 +182,7 @@ def test_scripted_bank_in_jsbsim_hides_then_shows_the_ship(cam):
 def test_ray_table_is_the_rays_of_every_pixel():
     """The camera's table of pixel rays (built from column and row terms) is ``Intrinsics.rays`` of each
     pixel, bit for bit: the ROI's rays come from it, so a detection is the same either way."""
-    from fwsim.camera import Camera, Intrinsics
+    from fwsim.sensors.camera import Camera, Intrinsics
     K = Intrinsics.from_fov(160, 90, 60.0)
     uu, vv = np.meshgrid(np.arange(K.width_px, dtype=float), np.arange(K.height_px, dtype=float))
     direct = K.rays(uu.ravel(), vv.ravel()).reshape(K.height_px, K.width_px, 3)

@@ -6,13 +6,13 @@ import pytest
 
 from controllers.cbf import CbfConfig, alpha_right, body_z_component, cbf_rows, h_sides, h_value, lateral_offset
 from controllers.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
-from fwsim.frames import dcm_enu_from_frd, heading_ned_from_course_enu
+from fwsim.interface.frames import dcm_enu_from_frd, heading_ned_from_course_enu
 
 RNG = np.random.default_rng(7)
 
 
 def body_frame(phi, psi_enu, theta=0.0):
-    """R_enu_from_frd of an NMPC state's attitude, through fwsim.frames (the harness's convention)."""
+    """R_enu_from_frd of an NMPC state's attitude, through fwsim.interface.frames (the harness's convention)."""
     return dcm_enu_from_frd([phi, theta, heading_ned_from_course_enu(psi_enu)])
 
 
@@ -25,7 +25,7 @@ def test_config_defaults_validate():
 
 @pytest.mark.parametrize("psi_enu", [0.0, 0.5 * math.pi, 2.0, -2.5, math.pi])
 def test_target_on_the_right_gives_positive_lateral_offset(psi_enu):
-    """R_p > 0 for a target along the body's right wing (FRD +y from fwsim.frames), < 0 on the left."""
+    """R_p > 0 for a target along the body's right wing (FRD +y from fwsim.interface.frames), < 0 on the left."""
     x = np.array([100.0, -50.0, 500.0, 0.0, 0.0, psi_enu])
     right = body_frame(0.0, psi_enu)[:, 1]  # body y (right wing) in ENU
     assert right[2] == pytest.approx(0.0, abs=1e-12)
@@ -38,7 +38,7 @@ def test_target_on_the_right_gives_positive_lateral_offset(psi_enu):
 
 
 def test_body_z_sign_is_the_sign_of_h_at_zero_pitch():
-    """z_b (body-z component of r_q/p from fwsim.frames) >= 0 exactly when h = min(h_R, h_L) >= 0."""
+    """z_b (body-z component of r_q/p from fwsim.interface.frames) >= 0 exactly when h = min(h_R, h_L) >= 0."""
     n_pos = n_neg = 0
     for _ in range(4000):
         phi = RNG.uniform(-1.2, 1.2)

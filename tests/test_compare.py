@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
-from fwsim.compare import (
+from fwsim.analysis.compare import (
     REFRESH_MARKER,
     CompareError,
     Tolerance,
@@ -23,8 +23,8 @@ from fwsim.compare import (
     parse_tolerances,
     write_baseline_metrics,
 )
-from fwsim.loop import run
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.scenario.model import load_scenario
 
 BASELINE_DIR = PROJECT_ROOT / "tests" / "baselines"
 BASELINES = sorted(BASELINE_DIR.glob("*.yaml"))
@@ -204,7 +204,7 @@ def test_cli_compare_missing_metric_fails_and_bad_input_is_exit_2(short_logs, tm
 
 
 def test_ab_says_which_run_is_better_and_by_how_much():
-    from fwsim.compare import ab_compare
+    from fwsim.analysis.compare import ab_compare
     a = {"status": "completed", "hit": False, "miss_distance_m": 4.0, "impact_fpa_error_deg": -2.0,
          "target_in_fov_fraction_after_lock": 0.9, "flight_time_s": 60.0, "camera_frames": 1800.0,
          "lock_time_s": math.nan, "pixel_err_rms_px_u": 1.7346}

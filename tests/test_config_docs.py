@@ -6,7 +6,7 @@ import typing
 
 from pydantic import BaseModel
 
-from fwsim.scenario import Scenario
+from fwsim.scenario.model import Scenario
 
 MAX_CHARS = 200
 

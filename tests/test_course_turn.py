@@ -20,9 +20,10 @@ from controllers.config import TurnFromCourseConfig
 from controllers.course_turn import CourseTurn, CourseTurnStatus, fit_periodic, lag_matrices
 from controllers.estimation import Estimation
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
-from fwsim import SCENARIO_DIR, topics
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
-from fwsim.target import Ship, TargetConfig
+from fwsim import SCENARIO_DIR
+from fwsim.interface import topics
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
+from fwsim.world.target import Ship, TargetConfig
 
 ON = TurnFromCourseConfig(enabled=True)
 
@@ -134,7 +135,7 @@ def test_a_zigzags_swing_is_not_a_steady_turn():
 
 
 class ZigzagShip(TurningShip):
-    """TurningShip's camera and start, the ship on fwsim.target's zigzag (the truth side's own model): heading
+    """TurningShip's camera and start, the ship on fwsim.world.target's zigzag (the truth side's own model): heading
     30 deg + amplitude sin(2 pi t / period) at constant speed (before t = 0, the start's velocity)."""
 
     def __init__(self, amplitude_deg: float = 30.0, period_s: float = 60.0, **kw):

@@ -106,7 +106,7 @@ class RingAndOffset(RingOnly):
 
 def test_the_entry_ring_with_a_loiter_that_cannot_descend_is_a_one_line_scenario_error():
     from fwsim import SCENARIO_DIR
-    from fwsim.scenario import ScenarioError, load_scenario
+    from fwsim.scenario.model import ScenarioError, load_scenario
 
     entry = {"controllers.switch.entry_depression_margin_deg": 5.0}
     with pytest.raises(ScenarioError) as exc:

@@ -1,15 +1,17 @@
-"""Timed events (fwsim.events): each kind does what it says, in one short flight of the paper mission."""
+"""Timed events (fwsim.world.events): each kind does what it says, in one short flight of the paper mission."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fwsim import SCENARIO_DIR, topics
-from fwsim.events import EventRunner
+from fwsim import SCENARIO_DIR
+
+from fwsim.interface import topics
+from fwsim.world.events import EventRunner
 from fwsim.log import read_log
-from fwsim.loop import run
-from fwsim.scenario import ScenarioError, load_scenario
-from fwsim.sensors import Sensors, rng_for
+from fwsim.sim.loop import run
+from fwsim.scenario.model import ScenarioError, load_scenario
+from fwsim.sensors.onboard import Sensors, rng_for
 
 PAPER = SCENARIO_DIR / "paper_mission.yaml"
 EVENTS = [
@@ -97,8 +99,8 @@ def test_target_manoeuvre_turns_the_ship(flight):
 
 
 def test_gnss_outage_holds_the_last_fix():
-    from fwsim.messages import AirframeState
-    from fwsim.sensors import SensorsConfig
+    from fwsim.interface.messages import AirframeState
+    from fwsim.sensors.onboard import SensorsConfig
     s = Sensors(SensorsConfig(), seed=1)
 
     def state(t):

@@ -9,8 +9,8 @@ from mcap.reader import make_reader
 
 from fwsim import SCENARIO_DIR
 from fwsim.log import read_log
-from fwsim.loop import run
-from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.sim.loop import run
+from fwsim.scenario.model import ScenarioError, load_scenario
 
 START = "2026-05-01T09:30:00Z"
 START_NS = 1777627800 * 10**9

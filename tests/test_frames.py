@@ -1,4 +1,4 @@
-"""Property tests (hypothesis) and known cases for fwsim.frames."""
+"""Property tests (hypothesis) and known cases for fwsim.interface.frames."""
 from __future__ import annotations
 
 import math
@@ -8,8 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fwsim import frames as F
-
+from fwsim.interface import frames as F
 SETTINGS = settings(max_examples=120, deadline=None)
 PI = math.pi
 
@@ -345,5 +344,5 @@ def test_geodetic_known():
 
 @given(st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3), st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3))
 def test_cross3_matches_numpy(a, b):
-    from fwsim.frames import cross3
+    from fwsim.interface.frames import cross3
     np.testing.assert_allclose(cross3(a, b), np.cross(a, b), rtol=1e-12, atol=1e-9)

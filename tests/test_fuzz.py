@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main
-from fwsim.scenario import MAX_PROBLEMS, ScenarioError, load_scenario, parse_scenario, parse_sets
+from fwsim.scenario.model import MAX_PROBLEMS, ScenarioError, load_scenario, parse_scenario, parse_sets
 
 SCALE = float(os.environ.get("FWSIM_FUZZ", "1"))
 PAPER = SCENARIO_DIR / "paper_mission.yaml"
@@ -143,7 +143,7 @@ def test_set_items_are_accepted_or_a_short_error(path, value, sep):
 
 @pytest.fixture(scope="module")
 def good_log_bytes(tmp_path_factory) -> bytes:
-    from fwsim.loop import run
+    from fwsim.sim.loop import run
     scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"duration_s": 3, "camera.render.rate_hz": 2,
                                                                          "start_time": "2026-01-01T00:00:00Z"})
     return run(scenario, text, tmp_path_factory.mktemp("fuzzlog") / "good.mcap").log_path.read_bytes()

@@ -1,4 +1,4 @@
-"""Tests for fwsim.gimbal: PT camera kinematics (paper eq. omegac / sigular), rate and joint limits."""
+"""Tests for fwsim.world.gimbal: PT camera kinematics (paper eq. omegac / sigular), rate and joint limits."""
 from __future__ import annotations
 
 import math
@@ -9,9 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from fwsim import frames as F
-from fwsim import gimbal as G
-
+from fwsim.interface import frames as F
+from fwsim.world import gimbal as G
 SETTINGS = settings(max_examples=60, deadline=None)
 PI = math.pi
 

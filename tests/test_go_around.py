@@ -2,7 +2,7 @@
 import pytest
 
 from fwsim import SCENARIO_DIR
-from fwsim.scenario import load_scenario
+from fwsim.scenario.model import load_scenario
 
 # One draw of the envelope sweep (scenarios/batches/envelope.yaml, seed 1602, run s38): a 9.9 m/s ship, a
 # -58.5 deg dive to 64 deg into a 6.8 m/s wind from the south-east, a 339 m ring at 457 m, a degraded detector.
@@ -29,8 +29,8 @@ def test_a_tail_chase_that_never_dived_goes_round_and_hits(tmp_path):
     64 deg), and the second dive hits within 3 m and 3 deg. Flown without BPNG's capture guard, which keeps
     this dive from stalling at all (the next test): here the go-around itself is under test."""
     from fwsim.log import read_log
-    from fwsim.loop import run
-    from fwsim.metrics import compute_metrics
+    from fwsim.sim.loop import run
+    from fwsim.analysis.metrics import compute_metrics
     scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml",
                                    {**TAIL_CHASE, "controllers.bpng.capture_turn_deg_s": None})
     res = run(scenario, text, tmp_path / "tail_chase.mcap")
@@ -52,8 +52,8 @@ def test_the_capture_guard_closes_the_tail_chase_on_its_first_dive(tmp_path):
     (``bpng.capture_turn_deg_s``), the bias held back where it cancelled PN, so the first dive closes and hits
     within 3 m and 3 deg, without going round."""
     from fwsim.log import read_log
-    from fwsim.loop import run
-    from fwsim.metrics import compute_metrics
+    from fwsim.sim.loop import run
+    from fwsim.analysis.metrics import compute_metrics
     scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", TAIL_CHASE)
     res = run(scenario, text, tmp_path / "tail_chase_guard.mcap")
     m = compute_metrics(res.log_path)

@@ -14,9 +14,9 @@ import pytest
 from pydantic import ValidationError
 
 from controllers import ibvs as I
-from fwsim import frames as F
-from fwsim.gimbal import Gimbal, GimbalConfig
-from fwsim.messages import Measurements
+from fwsim.interface import frames as F
+from fwsim.world.gimbal import Gimbal, GimbalConfig
+from fwsim.interface.messages import Measurements
 
 PI = math.pi
 W_PX, H_PX = 1280, 720

@@ -19,7 +19,7 @@ from controllers.config import CtUkfConfig, ImmConfig
 from controllers.imm import ImmEstimate, ImmTargetEstimator, mix, transition, update_probabilities
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
 from fwsim import SCENARIO_DIR
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
 
 
 def test_the_markov_chain_by_hand():

@@ -9,8 +9,8 @@ import pytest
 
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario, parse_sets
-from fwsim.yamlfile import MAX_VALUES, load_yaml_text
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario, parse_sets
+from fwsim.scenario.yamlfile import MAX_VALUES, load_yaml_text
 
 PAPER = SCENARIO_DIR / "paper_mission.yaml"
 PAPER_TEXT = PAPER.read_text()
@@ -58,7 +58,7 @@ def test_aliases_below_the_limit_load():
 
 
 def test_a_huge_file_is_refused_before_it_is_read(tmp_path):
-    from fwsim.yamlfile import MAX_FILE_BYTES
+    from fwsim.scenario.yamlfile import MAX_FILE_BYTES
     p = tmp_path / "huge.yaml"
     p.write_bytes(b"# " + b"x" * MAX_FILE_BYTES + b"\nname: a\n")
     with pytest.raises(ScenarioError, match="too large for a scenario file"):

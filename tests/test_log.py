@@ -14,7 +14,7 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from fwsim.log import LogWriter, RunLog, read_log
 from fwsim.log.schema import describe_field, json_schema
-from fwsim.messages import AccelCommand, AirframeState, AutopilotStatus, RateCommand
+from fwsim.interface.messages import AccelCommand, AirframeState, AutopilotStatus, RateCommand
 
 META = {"fwsim_version": "0.1.0", "jsbsim_version": "1.2.1", "seed": "42",
         "aircraft_hash": "abc123", "scenario": "unit-test"}
@@ -22,7 +22,7 @@ SCENARIO = "name: unit-test\nduration_s: 2.0\ntarget:\n  speed_m_s: 5.0  # knots
 
 
 def quat_enu_from_frd(euler):
-    from fwsim.frames import quat_enu_from_frd as f
+    from fwsim.interface.frames import quat_enu_from_frd as f
 
     return f(euler)
 

@@ -22,10 +22,10 @@ from controllers.ct_ukf import CtUkfTargetEstimator, ManoeuvreEstimate, fx_ct_ba
 from controllers.messages import TargetEstimate
 from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
 from fwsim import SCENARIO_DIR
-from fwsim import frames as F
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+from fwsim.interface import frames as F
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
 
-TURN_DEG_S = 1.5  # the ship's heading rate (clockwise seen from above, as fwsim.target's constant_turn)
+TURN_DEG_S = 1.5  # the ship's heading rate (clockwise seen from above, as fwsim.world.target's constant_turn)
 
 
 class TurningShip(OrbitTruth):
@@ -297,8 +297,8 @@ def test_paper_mission_against_a_turning_ship_hits_with_both_estimators(tmp_path
     UKF's (seed 21, not tuned on). The CT-UKF's was the better one (2.4 against 6.2 m) until the box shapes
     followed the course and the size fit weighed its boxes at 3 Hz, which brought the UKF's to 2.0 m (the
     CT-UKF's stayed at 2.4 m; misses 2.9 and 2.6 m)."""
-    from fwsim.loop import run
-    from fwsim.metrics import compute_metrics
+    from fwsim.sim.loop import run
+    from fwsim.analysis.metrics import compute_metrics
     out = {}
     for est in ("ukf", "ct_ukf"):
         scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {

@@ -9,9 +9,9 @@ import pytest
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
 from fwsim.cli import main as main_cli
 from fwsim.log import read_log
-from fwsim.loop import run
-from fwsim.metrics import BETTER, GROUPS, METRIC, METRICS, compute_metrics, metrics_doc, result_line
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.analysis.metrics import BETTER, GROUPS, METRIC, METRICS, compute_metrics, metrics_doc, result_line
+from fwsim.scenario.model import load_scenario
 
 CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
 PAPER = SCENARIO_DIR / "paper_mission.yaml"
@@ -59,7 +59,7 @@ def test_every_computed_metric_is_in_the_table_and_every_entry_is_computed(fligh
     unreadable.effective_scenario_text += "\nfrom_a_later_version: 1\n"  # the impact metrics left out, and why
     other = compute_metrics(unreadable)
     computed = set(loiter) | set(hit) | set(other)
-    assert computed - set(METRIC) == set(), "computed but not in fwsim.metrics.METRICS"
+    assert computed - set(METRIC) == set(), "computed but not in fwsim.analysis.metrics.METRICS"
     assert set(METRIC) - computed == set(), "in the table but computed by none of these flights"
     for m in (loiter, hit, other):  # in the table's order
         assert list(m) == [s.name for s in METRICS if s.name in m]

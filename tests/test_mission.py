@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from fwsim import SCENARIO_DIR
-from fwsim.loop import run
-from fwsim.metrics import compute_metrics
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.analysis.metrics import compute_metrics
+from fwsim.scenario.model import load_scenario
 
 
 def fly(path, tmp_path, **overrides):
@@ -51,8 +51,8 @@ def test_terminal_dive_from_the_loiter_ring_meets_the_bounds(tmp_path):
     within 3 m of the aim point and 3 deg of both impact angles."""
     import yaml
 
-    from fwsim.cases import terminal_case
-    from fwsim.scenario import parse_scenario
+    from fwsim.batch.cases import terminal_case
+    from fwsim.scenario.model import parse_scenario
     text = yaml.safe_dump(terminal_case(-30.0, 30.0, 0.0, 5.0), sort_keys=False)
     scenario = parse_scenario(text)
     result = run(scenario, text, tmp_path / "terminal.mcap")

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from controllers.nav import Navigation, NavigationConfig
-from fwsim.messages import Measurements
-from fwsim.sensors import Sensors, SensorsConfig
+from fwsim.interface.messages import Measurements
+from fwsim.sensors.onboard import Sensors, SensorsConfig
 
 
 def _truth(t, v=np.array([30.0, -40.0, -20.0])):
@@ -59,7 +59,7 @@ def test_off_passes_the_fix_through_and_a_gap_restarts():
 
 
 def test_sensors_stamp_the_fix_time():
-    from fwsim.messages import AirframeState
+    from fwsim.interface.messages import AirframeState
     s = Sensors(SensorsConfig(gnss_rate_hz=10.0), seed=1)
     fields = {n: 0.0 for n in AirframeState.__dataclass_fields__}
     stamps = []

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controllers.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
-from fwsim.messages import Measurements, RateCommand
+from fwsim.interface.messages import Measurements, RateCommand
 
 SHIP_V = np.array([0.0, 5.0, 0.0])  # the paper's ship: 5 m/s (here north)
 _CACHE = {}

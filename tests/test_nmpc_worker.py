@@ -10,7 +10,7 @@ from controllers.guidance import NmpcLoiter
 from controllers.messages import TargetState
 from controllers.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements
 from controllers.nmpc_worker import ENV, InlineSolver, ProcessSolver, WorkerError, make_solver
-from fwsim.messages import Measurements
+from fwsim.interface.messages import Measurements
 
 FSW_DT = 1.0 / 30.0
 SHIP_V = np.array([0.0, 5.0, 0.0])

@@ -5,10 +5,10 @@ from matplotlib.image import imread
 
 from fwsim import SCENARIO_DIR
 from fwsim.log import LogWriter, read_log
-from fwsim.loop import run
-from fwsim.messages import AirframeState
-from fwsim.plot import FIGURES, plot_log
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.interface.messages import AirframeState
+from fwsim.analysis.plot import FIGURES, plot_log
+from fwsim.scenario.model import load_scenario
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -80,7 +80,7 @@ def test_cli_plot_lists_files_and_skips(mission_log, tmp_path, capsys):
 
 def test_phase_colouring_uses_fsw_status(mission_log):
     """Colours follow (phase, phase_name) from /fsw/status, held until the next status."""
-    from fwsim.plot import _phases
+    from fwsim.analysis.plot import _phases
     log = read_log(mission_log)
     fsw, st = log.table("/fsw/status"), log.table("/uav/state")
     index, labels = _phases(log, st["t_s"])
@@ -92,7 +92,7 @@ def test_phase_colouring_uses_fsw_status(mission_log):
 
 
 def test_headings_wrap_the_same_way_and_break_at_the_wrap():
-    from fwsim.plot import _with_breaks
+    from fwsim.analysis.plot import _with_breaks
     t = np.arange(6.0)
     rad = np.radians([350.0, 355.0, -1.0, 5.0, 10.0, -100.0])  # yaw from JSBSim or atan2: either sign
     tt, deg = _with_breaks(t, rad)
@@ -106,7 +106,7 @@ def test_headings_wrap_the_same_way_and_break_at_the_wrap():
 def test_estimate_axes_clip_the_lock_transient():
     from matplotlib.figure import Figure
 
-    from fwsim.plot import _clip_transient
+    from fwsim.analysis.plot import _clip_transient
     ax = Figure().subplots()
     err = np.concatenate([np.full(3, 175.0), np.random.default_rng(0).normal(0.0, 2.0, 500)])
     ax.plot(err)
@@ -122,7 +122,7 @@ def test_the_ship_visibility_figure_states_the_runs_seen_share(mission_log, tmp_
     """ship_visibility's title gives the share of the frames after the lock that saw the ship, as the metric
     target_visible_fraction_after_lock scores it, and its longest stretch unseen; before any lock, of all
     frames, and says so."""
-    from fwsim.metrics import compute_metrics
+    from fwsim.analysis.metrics import compute_metrics
     assert FIGURES["ship_visibility"].draw(read_log(mission_log)).axes[0].get_title().startswith("no lock")
     scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"duration_s": 20})
     locked = run(scenario, text, tmp_path / "locked.mcap").log_path  # the search locks at ~13 s

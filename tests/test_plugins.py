@@ -11,11 +11,11 @@ import fwsim
 from controllers.blocks import SLOTS, BlockContext, BlockError, PluginError, guarded, resolve_class
 from controllers.messages import TargetState
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
-from fwsim.cases import terminal_case
+from fwsim.batch.cases import terminal_case
 from fwsim.cli import main
 from fwsim.log import read_log
-from fwsim.messages import Measurements
-from fwsim.scenario import ScenarioError, parse_scenario
+from fwsim.interface.messages import Measurements
+from fwsim.scenario.model import ScenarioError, parse_scenario
 
 EXAMPLES = PROJECT_ROOT / "docs" / "examples"
 PAPER = str(SCENARIO_DIR / "paper_mission.yaml")

@@ -9,8 +9,8 @@ import yaml
 
 from fwsim import PROJECT_ROOT, SCENARIO_DIR
 from fwsim.cli import main
-from fwsim.reference import REGENERATE, reference_markdown, scenario_schema, sections, unit_of
-from fwsim.scenario import load_scenario, parse_scenario
+from fwsim.scenario.reference import REGENERATE, reference_markdown, scenario_schema, sections, unit_of
+from fwsim.scenario.model import load_scenario, parse_scenario
 
 SHIPPED = sorted(SCENARIO_DIR.glob("*.yaml")) + sorted((SCENARIO_DIR / "ablation").glob("*.yaml"))
 

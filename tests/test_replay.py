@@ -11,9 +11,9 @@ from rerun.chunk import RrdReader
 from fwsim import SCENARIO_DIR
 from fwsim.log import LogWriter
 from fwsim.log.rerun_export import LAYERS, TIMELINE, export_rrd
-from fwsim.loop import run
-from fwsim.messages import AirframeState
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.interface.messages import AirframeState
+from fwsim.scenario.model import load_scenario
 
 RERUN = Path(sys.executable).with_name("rerun")
 

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from fwsim.cli import main
-from fwsim.report import ReportError, summarise, wilson_interval, worst_runs, write_report
+from fwsim.analysis.report import ReportError, summarise, wilson_interval, worst_runs, write_report
 
 
 def test_wilson_interval_against_hand_computed_values():
@@ -116,7 +116,7 @@ def test_runs_that_never_dived_are_counted_and_explained_not_scored():
 
 
 def test_seed_ranges():
-    from fwsim.report import seed_ranges
+    from fwsim.analysis.report import seed_ranges
     assert seed_ranges([3, 1, 2, 2, 8, 10, 9, 5]) == "1-3, 5, 8-10" and seed_ranges([]) == "—"
 
 
@@ -184,7 +184,7 @@ def test_estimator_consistency_share_against_a_known_gaussian():
     of the time at twice the std (1 - exp(-2)); a std three times too small covers far less."""
     import numpy as np
 
-    from fwsim.metrics import share_within
+    from fwsim.analysis.metrics import share_within
     rng = np.random.default_rng(5)
     err = np.hypot(*rng.normal(0.0, 4.0, size=(2, 20000)))
     std = np.full(err.size, 4.0)
@@ -230,9 +230,9 @@ def test_the_envelope_why_reads_a_flights_log(tmp_path, capsys):
     row lists the failed bar, finite estimate errors and the share of detections fused."""
     import yaml
 
-    from fwsim.cases import terminal_case
-    from fwsim.loop import run
-    from fwsim.scenario import parse_scenario
+    from fwsim.batch.cases import terminal_case
+    from fwsim.sim.loop import run
+    from fwsim.scenario.model import parse_scenario
     text = yaml.safe_dump(terminal_case(-30.0, 30.0, 0.0, 5.0), sort_keys=False)
     (tmp_path / "logs").mkdir()
     result = run(parse_scenario(text), text, tmp_path / "logs" / "t.mcap")
@@ -272,8 +272,8 @@ def test_the_envelope_why_names_the_topic_a_short_log_lacks(tmp_path, capsys):
     import yaml
 
     from fwsim import PROJECT_ROOT as root
-    from fwsim.loop import run
-    from fwsim.scenario import parse_scenario
+    from fwsim.sim.loop import run
+    from fwsim.scenario.model import parse_scenario
     data = yaml.safe_load((root / "scenarios" / "paper_mission.yaml").read_text())
     data["duration_s"] = 1.0  # over long before the lock
     text = yaml.safe_dump(data, sort_keys=False)
@@ -396,7 +396,7 @@ def test_the_envelope_aim_line_offset_by_hand():
 def test_longest_hidden_stretch_by_hand():
     """The longest stretch without a frame that sees the ship: from the last frame that saw it (or the first
     frame) to the next that sees it (or the last frame)."""
-    from fwsim.metrics import longest_gap_s
+    from fwsim.analysis.metrics import longest_gap_s
     t = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
     assert longest_gap_s(t, [True] * 7) == 0.0
     assert longest_gap_s(t, [True, False, False, True, True, False, True]) == 3.0  # seen at 0, then at 3

@@ -17,10 +17,10 @@ from fwsim import SCENARIO_DIR
 from fwsim.log import LogWriter, read_log
 from fwsim.log.rerun_export import TIMELINE, export_rrd
 from fwsim.log.rerun_live import DEFAULT_URL, LiveTarget, LiveViewError, RerunLive, parse_target
-from fwsim.loop import run
-from fwsim.messages import AirframeState, FlightSoftwareStatus
-from fwsim.scenario import load_scenario
-from fwsim.target import TargetState
+from fwsim.sim.loop import run
+from fwsim.interface.messages import AirframeState, FlightSoftwareStatus
+from fwsim.scenario.model import load_scenario
+from fwsim.world.target import TargetState
 
 CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
 DURATION_S = 4.0

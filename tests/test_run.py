@@ -11,9 +11,9 @@ import pytest
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main as main_cli
 from fwsim.log import read_log
-from fwsim.loop import run
-from fwsim.metrics import compute_metrics
-from fwsim.scenario import load_scenario
+from fwsim.sim.loop import run
+from fwsim.analysis.metrics import compute_metrics
+from fwsim.scenario.model import load_scenario
 
 CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
 
@@ -150,7 +150,7 @@ def test_a_signal_leaves_a_readable_log(tmp_path, sig, code, word):
 def test_a_second_signal_interrupts_at_once_unless_the_log_is_being_finished():
     """A second signal raises at once (a stuck loop), but not while the loop finishes the log after the first:
     a process pool that breaks terminates its other workers, and their logs must still get their footers."""
-    from fwsim.loop import Interrupted, _StopOnSigint
+    from fwsim.sim.loop import Interrupted, _StopOnSigint
     flag = _StopOnSigint()
     flag._handle(signal.SIGTERM, None)
     assert flag.requested and flag.signum == signal.SIGTERM

@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from fwsim import SCENARIO_DIR
-from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
+from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
 
 GOOD = """
 name: t
@@ -72,7 +72,7 @@ def test_shipped_scenarios_validate(path):
 
 @pytest.mark.parametrize("path", sorted(BATCH_DIR.glob("*.yaml")), ids=lambda p: p.name)
 def test_shipped_batch_specs_validate(path, tmp_path):
-    from fwsim.batch import load_spec
+    from fwsim.batch.runner import load_spec
     name, jobs = load_spec(path, tmp_path)
     assert name and jobs
 
@@ -89,7 +89,7 @@ def test_cli_reports_bad_scenario_in_one_line(tmp_path):
 
 
 def test_parse_sets_reads_yaml_values_and_names_a_bad_item():
-    from fwsim.scenario import ScenarioError, parse_sets
+    from fwsim.scenario.model import ScenarioError, parse_sets
     assert parse_sets(["seed=3", "world.wind_enu_m_s=[5, -4, 0]", " a.b = x "]) == \
         {"seed": 3, "world.wind_enu_m_s": [5, -4, 0], "a.b": "x"}
     with pytest.raises(ScenarioError, match="--set seed3: expected PATH=VALUE"):
@@ -97,15 +97,15 @@ def test_parse_sets_reads_yaml_values_and_names_a_bad_item():
 
 
 def test_a_terminal_case_in_wind_starts_on_the_steady_orbit():
-    """fwsim.cases.terminal_case with a wind: the start heading is the air heading whose ground motion,
+    """fwsim.batch.cases.terminal_case with a wind: the start heading is the air heading whose ground motion,
     relative to the ship, runs along the loiter circle (no radial part), and the wind is the world's."""
     import math
 
     import numpy as np
     import yaml
 
-    from fwsim.cases import terminal_case
-    from fwsim.scenario import parse_scenario
+    from fwsim.batch.cases import terminal_case
+    from fwsim.scenario.model import parse_scenario
     wind = [5.0, -4.0, 0.0]
     for still_air in (True, False):
         d = terminal_case(-30.0, 30.0, 75.0, 10.0, wind_enu_m_s=None if still_air else wind)
@@ -151,11 +151,11 @@ def test_the_readmes_scenario_example_is_a_valid_scenario():
 
 @pytest.mark.parametrize("name", ["paper_mission", "autopilot_checkout", "camera_demo", "paper_as_printed"])
 def test_fast_yaml_loader_and_dumper_give_pyyamls_values_and_text(name):
-    """The per-run YAML goes through libyaml where PyYAML has it (fwsim.yamlfile.FAST_SAFE_LOADER / DUMPER):
+    """The per-run YAML goes through libyaml where PyYAML has it (fwsim.scenario.yamlfile.FAST_SAFE_LOADER / DUMPER):
     the effective scenario it writes into every log is yaml.safe_dump's text, and the autopilot gains it reads
     are yaml.safe_load's values."""
     from fwsim import AIRCRAFT_DIR
-    from fwsim.yamlfile import FAST_SAFE_DUMPER, FAST_SAFE_LOADER
+    from fwsim.scenario.yamlfile import FAST_SAFE_DUMPER, FAST_SAFE_LOADER
     scenario, _ = load_scenario(SCENARIO_DIR / f"{name}.yaml")
     data = scenario.model_dump(mode="json")
     assert yaml.dump(data, Dumper=FAST_SAFE_DUMPER, sort_keys=False) == yaml.safe_dump(data, sort_keys=False)

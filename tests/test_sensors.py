@@ -1,8 +1,8 @@
 """Onboard sensors: seeded noise per source, sample-and-hold at each sensor's rate."""
 import numpy as np
 
-from fwsim.messages import AirframeState
-from fwsim.sensors import Sensors, SensorsConfig
+from fwsim.interface.messages import AirframeState
+from fwsim.sensors.onboard import Sensors, SensorsConfig
 
 
 def uav(t):
@@ -49,8 +49,8 @@ def test_the_per_tick_messages_keep_the_field_order_their_positional_builders_us
     a reordered message type must fail here, not mislabel a field in flight."""
     import dataclasses
 
-    from fwsim.gimbal import GimbalState
-    from fwsim.messages import Measurements
+    from fwsim.world.gimbal import GimbalState
+    from fwsim.interface.messages import Measurements
 
     names = lambda cls: tuple(f.name for f in dataclasses.fields(cls))  # noqa: E731
     assert names(Measurements) == (

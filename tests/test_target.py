@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from fwsim.frames import wrap_pi
-from fwsim.target import (
+from fwsim.interface.frames import wrap_pi
+from fwsim.world.target import (
     INTEGRATION_STEP_S,
     Ship,
     TargetConfig,
@@ -274,7 +274,7 @@ def test_mesh_world_moves_with_the_ship():
 def test_hull_volume_agrees_with_trimesh_point_in_mesh():
     import numpy as np
 
-    from fwsim.target import HullVolume, TargetConfig, ship_mesh_parts
+    from fwsim.world.target import HullVolume, TargetConfig, ship_mesh_parts
     cfg = TargetConfig()
     hull = HullVolume(cfg)
     pts = np.random.default_rng(0).uniform(hull.lo - 2.0, hull.hi + 2.0, (2000, 3))
@@ -287,7 +287,7 @@ def test_hull_volume_agrees_with_trimesh_point_in_mesh():
 
 
 def test_manoeuvre_turns_at_its_rate_and_keeps_the_past():
-    from fwsim.target import Ship, TargetConfig
+    from fwsim.world.target import Ship, TargetConfig
     ship = Ship(TargetConfig.model_validate({"heading_deg": 0.0, "speed_m_s": 5.0}))
     before = ship.state(5.0)
     duration = ship.manoeuvre(10.0, course_deg=90.0, speed_m_s=None, turn_rate_deg_s=1.5, accel_m_s2=0.5)
@@ -306,7 +306,7 @@ def test_manoeuvre_turns_at_its_rate_and_keeps_the_past():
 
 
 def test_manoeuvre_changes_speed_and_turns_the_short_way():
-    from fwsim.target import Ship, TargetConfig
+    from fwsim.world.target import Ship, TargetConfig
     ship = Ship(TargetConfig.model_validate({"heading_deg": 10.0, "speed_m_s": 4.0}))
     duration = ship.manoeuvre(0.0, course_deg=340.0, speed_m_s=8.0, turn_rate_deg_s=2.0, accel_m_s2=0.5)
     assert duration == pytest.approx(max(30.0 / 2.0, 4.0 / 0.5))
@@ -320,7 +320,7 @@ def test_manoeuvre_changes_speed_and_turns_the_short_way():
 @pytest.mark.parametrize("kind", ["bridge_aft", "bridge_forward", "patrol_boat", "ferry"])
 @pytest.mark.parametrize("dims", [(55.0, 25.0, 25.0), (28.0, 6.0, 9.0), (140.0, 24.0, 38.0)])
 def test_every_ship_type_scales_and_is_closed(kind, dims):
-    from fwsim.target import HULL_HEIGHT_FRAC, HullVolume
+    from fwsim.world.target import HULL_HEIGHT_FRAC, HullVolume
     L, W, H = dims
     cfg = TargetConfig(type=kind, length_m=L, width_m=W, height_m=H)
     np.testing.assert_allclose(ship_mesh(cfg).bounds, [[-L / 2, -W / 2, 0], [L / 2, W / 2, H]], atol=1e-9)

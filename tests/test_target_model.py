@@ -21,12 +21,12 @@ from controllers.target_model import (
     predicted_boxes_px,
 )
 from controllers.ukf import UkfConfig, UnscentedCore
-from fwsim.camera import Camera, CameraConfig, Pose
-from fwsim.frames import dcm_enu_from_frd
-from fwsim.geometry import uav_mesh
-from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
-from fwsim.messages import Measurements
-from fwsim.target import Ship, TargetConfig
+from fwsim.sensors.camera import Camera, CameraConfig, Pose
+from fwsim.interface.frames import dcm_enu_from_frd
+from fwsim.world.geometry import uav_mesh
+from fwsim.world.gimbal import camera_pose_world, pan_tilt_pointing_at
+from fwsim.interface.messages import Measurements
+from fwsim.world.target import Ship, TargetConfig
 
 CAM_CFG = CameraConfig(hfov_deg=60.0)
 FAR_UAV = Pose(np.eye(3), np.array([1e5, 1e5, 1e5]))  # the UAV out of every ray's way
@@ -615,7 +615,7 @@ def test_a_late_detection_is_brought_to_the_camera_pose_of_now():
     of the exposure, used with the camera pose of now, is off by tens of pixels; brought to now through the
     exposure's pose it lands on the target's image within a pixel (a still ship on the tracked plane)."""
     from controllers.ukf import CameraMotion
-    from fwsim.frames import dcm_enu_from_frd
+    from fwsim.interface.frames import dcm_enu_from_frd
     cam_model = PinholeCamera.from_config(CAM_CFG)
     p = _perception(ShipModel(ShipModelConfig(), cam_model))
     h = UkfConfig().target_plane_height_m

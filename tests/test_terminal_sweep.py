@@ -2,15 +2,15 @@
 
 Impact angles theta_f -20..-60 deg, six impact headings all round, ship courses all round at 0, 5 and
 10 m/s, each flown from the loiter ring with the full flight software: the batch spec
-scenarios/batches/terminal_sweep.yaml, flown with fwsim.batch. Every case must hit within 3 m of the aim
+scenarios/batches/terminal_sweep.yaml, flown with fwsim.batch.runner. Every case must hit within 3 m of the aim
 point and 3 deg of both impact angles. A failure lists every failing case.
 """
 import os
 
 import pytest
 
-from fwsim.batch import run_batch
-from fwsim.cases import case_line, sweep_rows, sweep_spec
+from fwsim.batch.runner import run_batch
+from fwsim.batch.cases import case_line, sweep_rows, sweep_spec
 
 
 @pytest.mark.slow

@@ -4,10 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fwsim import SCENARIO_DIR, topics
+from fwsim import SCENARIO_DIR
+
+from fwsim.interface import topics
 from fwsim.log import read_log
-from fwsim.loop import run
-from fwsim.scenario import ScenarioError, load_scenario
+from fwsim.sim.loop import run
+from fwsim.scenario.model import ScenarioError, load_scenario
 
 CHECKOUT = SCENARIO_DIR / "autopilot_checkout.yaml"
 FT = 0.3048

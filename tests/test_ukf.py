@@ -3,7 +3,7 @@
 Oracles: finite differences of the projection (feature kinematics), the
 paper's on-axis depth formula, a linear Kalman filter (filterpy) on a linear
 case, and a synthetic constant-velocity ship seen from an orbiting camera
-(truth pointing from fwsim.frames.pan_tilt_pointing_at, used only by the test).
+(truth pointing from fwsim.interface.frames.pan_tilt_pointing_at, used only by the test).
 """
 from __future__ import annotations
 
@@ -18,8 +18,8 @@ from pydantic import ValidationError
 from controllers.blocks import TargetEstimator, resolve_class
 from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
 from controllers.ukf import CameraMotion, TargetEstimate, UkfConfig, UkfTargetEstimator, UnscentedCore
-from fwsim import frames as F
-from fwsim.messages import Measurements
+from fwsim.interface import frames as F
+from fwsim.interface.messages import Measurements
 
 
 def exp_so3(w, t):
@@ -73,7 +73,7 @@ def test_feature_rates_match_finite_differences_of_the_projection():
 
 
 def test_camera_motion_from_measurements_matches_the_pan_tilt_pose_derivatives():
-    """V_c and omega_cam built from Measurements equal the derivatives of fwsim.frames.camera_pose_world."""
+    """V_c and omega_cam built from Measurements equal the derivatives of fwsim.interface.frames.camera_pose_world."""
     rng = np.random.default_rng(2)
     m = np.array([0.3, -0.1, 0.15])
     for _ in range(10):
@@ -225,7 +225,7 @@ class OrbitTruth:
 
     def sample(self, t, rng, detect=True, px=2.0, gnss=0.5, att=0.002, gyro=0.003, height=0.5, enc=0.0005,
                gnss_err=None):
-        """Measurements at t (sensor noise as fwsim.sensors' defaults); gnss_err: a held GNSS error (3,)."""
+        """Measurements at t (sensor noise as fwsim.sensors.onboard' defaults); gnss_err: a held GNSS error (3,)."""
         pos, vel, euler = self.uav(t)
         h = 1e-3
         de = F.wrap_pi(self.uav(t + h)[2] - self.uav(t - h)[2]) / (2 * h)
@@ -253,7 +253,7 @@ def run_orbit(duration_s=75.0, gap=(45.0, 48.0), seed=7):
     rows = []
     for k in range(int(duration_s * 30) + 1):
         t = k / 30.0
-        if k % 3 == 0:  # GNSS at 10 Hz, held in between (as fwsim.sensors does): correlated over 3 updates
+        if k % 3 == 0:  # GNSS at 10 Hz, held in between (as fwsim.sensors.onboard does): correlated over 3 updates
             gnss_err = rng.normal(0, 0.5, 3)
         meas = truth.sample(t, rng, detect=not (gap[0] <= t < gap[1]), gnss_err=gnss_err)
         est = ukf.step(meas, CameraMotion.from_measurements(meas, MOUNT))

@@ -1,7 +1,7 @@
 """The departure ablation: each of fwsim's departures from the paper switched off alone, and all of them.
 
 Every variant flies the paper mission and the terminal sweep (scenarios/batches/terminal_sweep.yaml), as one
-``fwsim.batch`` of ``1 + 42`` runs per variant, and the tool prints a Markdown table (docs/design/departures.md's):
+``fwsim.batch.runner`` of ``1 + 42`` runs per variant, and the tool prints a Markdown table (docs/design/departures.md's):
 
     python tools/ablation.py --workers 2 --out runs/ablation           # ~25 min on 2 cores
     python tools/ablation.py --only endgame,bias_cap                  # some rows only
@@ -22,8 +22,8 @@ import numpy as np
 import yaml
 
 from fwsim import SCENARIO_DIR
-from fwsim.batch import run_batch
-from fwsim.cases import SWEEP_SPEC, sweep_rows
+from fwsim.batch.runner import run_batch
+from fwsim.batch.cases import SWEEP_SPEC, sweep_rows
 
 #: name -> (what it is, the overrides that switch it off)
 DEPARTURES: dict[str, tuple[str, dict]] = {

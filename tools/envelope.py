@@ -20,7 +20,7 @@ without flying them); >= 90 %
 keep the estimator's horizontal error within 8 m after it has converged (its own std under 5 m; a run
 whose estimate never converges counts against this bar). A last
 column says whether that std is honest: the median run's share of estimates whose error is within twice
-it (about 86 % or more for a consistent filter). The statistics are fwsim report's (fwsim.report.summarise).
+it (about 86 % or more for a consistent filter). The statistics are fwsim report's (fwsim.analysis.report.summarise).
 Exit code 0 when every group meets every bar.
 
 ``--why-estimate`` adds, for each run failing the estimate bar, whether it never converged (its std at the
@@ -64,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fwsim.report import row_value, summarise, within
+from fwsim.analysis.report import row_value, summarise, within
 
 #: seconds before the end of a run at which --why gives the estimate's error (the end itself too)
 WHY_TIMES_S = (5.0, 2.0)
@@ -216,8 +216,8 @@ def aim_line_offset(t_s, aim_enu_m, range_m, uav_t_s, uav_pos_enu_m, truth_aim_a
 
 def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, switch_t_s: float,
                      bar_m: float = ESTIMATE_BAR_M, fused=None) -> dict | None:
-    """Why a run's estimate fails the estimate bar (fwsim.metrics' definitions: the horizontal error, the
-    larger horizontal std, convergence from :func:`fwsim.metrics.convergence_index`), or None when it meets
+    """Why a run's estimate fails the estimate bar (fwsim.analysis.metrics' definitions: the horizontal error, the
+    larger horizontal std, convergence from :func:`fwsim.analysis.metrics.convergence_index`), or None when it meets
     it. ``est_xy`` / ``std_xy``: the estimate's east, north and their stds; the truth interpolated to the
     estimates' times; ``switch_t_s``: the last dive's start (NaN: none). Returns
     ``kind``: "never converged" (the last std at or over CONVERGED_STD_M) or "over 8 m" (after convergence);
@@ -231,7 +231,7 @@ def estimate_failure(t_s, est_xy, std_xy, truth_t_s, truth_xy, lock_t_s: float, 
     a box), also the std at the last fused box (``std_last_box_m``) and how long before the end that box came
     (``last_box_s_before_end``), NaN without: a std already over the threshold there went over it with the
     boxes, not in the coast after them."""
-    from fwsim.metrics import CONVERGED_STD_M, convergence_index, estimate_errors_m
+    from fwsim.analysis.metrics import CONVERGED_STD_M, convergence_index, estimate_errors_m
     ok, err, std = estimate_errors_m(t_s, est_xy, std_xy, truth_t_s, truth_xy)
     if not ok.any():
         return None
@@ -260,9 +260,9 @@ def _estimates(out_dir: Path, rows: list[dict]):
     """For each run that did not fail: (its row, (its /fsw/estimate and /target/state tables, the lock time,
     the last dive's start from the summary, NaN without one)), or (its row, the exception) when its log
     cannot be read."""
-    from fwsim import topics
+    from fwsim.interface import topics
     from fwsim.log.reader import read_log
-    from fwsim.metrics import lock_time_s
+    from fwsim.analysis.metrics import lock_time_s
     for r in rows:
         if r.get("status") == "failed":
             continue
@@ -280,7 +280,7 @@ def why_estimate(out_dir: Path, rows: list[dict]) -> tuple[list[list[str]], dict
     """--why-estimate's table rows (strings), each run failing the estimate bar, from its log; and a tally:
     runs that never converged (and how many of them kept the error within the bar from the dive's start), and
     runs over the bar after convergence (how many within ``NEAR_CONVERGENCE_S`` of it, how many in the dive)."""
-    from fwsim.metrics import CONVERGED_STD_M
+    from fwsim.analysis.metrics import CONVERGED_STD_M
     table, tally = [], defaultdict(int)
     for r, got in _estimates(out_dir, rows):
         f = got  # the log's exception, or the run's failure (None: it meets the bar)
@@ -487,7 +487,7 @@ def loiter(out_dir: Path, rows: list[dict], by: str) -> list[list[str]]:
 
 
 def _failed_bar(row: dict) -> str:
-    """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.report.within`) fails."""
+    """Which of 3 m / 3 deg a run that is not within them (:func:`fwsim.analysis.report.within`) fails."""
     if row.get("hit") != 1.0:
         return "no hit"
     far = not _num(row.get("miss_distance_m")) <= 3.0
@@ -508,9 +508,9 @@ def _log_cell(log, needs: tuple[str, ...], make) -> str:
 
 def _aim_line_cell(log) -> str:
     """--why's aim-line cell for one log ("-" without a dive or a readable scenario)."""
-    from fwsim import topics
-    from fwsim.metrics import LoggedShip
-    from fwsim.scenario import parse_scenario
+    from fwsim.interface import topics
+    from fwsim.analysis.metrics import LoggedShip
+    from fwsim.scenario.model import parse_scenario
 
     def make() -> str:
         scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
@@ -581,8 +581,8 @@ def size_over_ship(ship_heading: dict, at_s: float, class_dims_m, ship_dims_m) -
 
 def _size_cell(log) -> str:
     """--why's size cell for one log, at the dive's start ("-" without a dive, the topics or the scenario)."""
-    from fwsim import topics
-    from fwsim.scenario import parse_scenario
+    from fwsim.interface import topics
+    from fwsim.scenario.model import parse_scenario
 
     def make() -> str:
         sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
@@ -595,8 +595,7 @@ def _size_cell(log) -> str:
 
 def _heading_cell(log) -> str:
     """--why's heading cell for one log, at the dive's start ("-" without a dive or the topics)."""
-    from fwsim import topics
-
+    from fwsim.interface import topics
     def make() -> str:
         tru = log.table(topics.TARGET_STATE)
         return heading_in_use(log.table(topics.FSW_SHIP_HEADING), tru["t_s"], tru["heading_ned_rad"],
@@ -606,13 +605,13 @@ def _heading_cell(log) -> str:
 
 def _course_model_cell(log) -> str:
     """--why's course-model cell for one log ("-" when the block was off or the log predates it)."""
-    from fwsim import topics
+    from fwsim.interface import topics
     return _log_cell(log, (topics.FSW_COURSE_TURN,), lambda: course_model(log.table(topics.FSW_COURSE_TURN)))
 
 
 def why(out_dir: Path, rows: list[dict]) -> list[list[str]]:
     """--why's table rows (strings): each run outside 3 m / 3 deg, from its log."""
-    from fwsim import topics
+    from fwsim.interface import topics
     from fwsim.log.reader import read_log
     table = []
     for r in sorted(rows, key=lambda r: -float(r.get("miss_distance_m") or 0.0)):
@@ -683,7 +682,7 @@ def main(argv=None) -> int:
     if args.paired and len(args.out_dirs) != 2:
         print(f"error: --paired compares two folders, got {len(args.out_dirs)}", file=sys.stderr)
         return 2
-    from fwsim.report import ReportError, load_summary
+    from fwsim.analysis.report import ReportError, load_summary
     rows, per_dir = [], []
     for out_dir in args.out_dirs:
         try:

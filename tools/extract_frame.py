@@ -10,7 +10,7 @@ from pathlib import Path
 
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log import read_log
 
 

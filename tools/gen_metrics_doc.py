@@ -1,4 +1,4 @@
-"""Write docs/guide/metrics.md from the metrics table in fwsim/metrics.py (METRICS).
+"""Write docs/guide/metrics.md from the metrics table in fwsim/analysis/metrics.py (METRICS).
 
     python tools/gen_metrics_doc.py            # regenerate the page
     python tools/gen_metrics_doc.py --check    # exit 1 if the page is stale (what the test checks)
@@ -9,7 +9,7 @@ import argparse
 import sys
 
 from fwsim import PROJECT_ROOT
-from fwsim.metrics import metrics_doc
+from fwsim.analysis.metrics import metrics_doc
 
 PAGE = PROJECT_ROOT / "docs" / "guide" / "metrics.md"
 

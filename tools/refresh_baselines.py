@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 
 from fwsim import PROJECT_ROOT
-from fwsim.compare import compare_metrics, fly_baseline, load_baseline, write_baseline_metrics
+from fwsim.analysis.compare import compare_metrics, fly_baseline, load_baseline, write_baseline_metrics
 
 BASELINE_DIR = PROJECT_ROOT / "tests" / "baselines"
 

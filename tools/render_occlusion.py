@@ -16,11 +16,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from fwsim.camera import Camera, CameraConfig, Pose, RenderConfig
-from fwsim.frames import dcm_enu_from_frd
-from fwsim.geometry import uav_mesh
-from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
-from fwsim.target import Ship, TargetConfig
+from fwsim.sensors.camera import Camera, CameraConfig, Pose, RenderConfig
+from fwsim.interface.frames import dcm_enu_from_frd
+from fwsim.world.geometry import uav_mesh
+from fwsim.world.gimbal import camera_pose_world, pan_tilt_pointing_at
+from fwsim.world.target import Ship, TargetConfig
 
 
 def main(argv=None) -> int:

@@ -4,7 +4,7 @@
     python tools/scaling.py loiter             # a 1-hour loiter (no switch): peak memory, log size
     python tools/scaling.py loiter --minutes 10
 
-``batch`` flies ``scenarios/batches/paper_mission_seeds.yaml`` with ``fwsim.batch``
+``batch`` flies ``scenarios/batches/paper_mission_seeds.yaml`` with ``fwsim.batch.runner``
 twice (1 worker, then 2) and prints both wall times, their ratio, and paper
 missions per hour per core. ``loiter`` flies the paper mission with
 ``controllers.switch.enabled: false`` for the given time (default 60 min) and
@@ -21,11 +21,11 @@ import time
 from pathlib import Path
 
 from fwsim import SCENARIO_DIR
-from fwsim.bench import peak_memory_mb
+from fwsim.sim.bench import peak_memory_mb
 
 
 def batch(out: Path) -> int:
-    from fwsim.batch import run_batch
+    from fwsim.batch.runner import run_batch
     spec_path = SCENARIO_DIR / "batches" / "paper_mission_seeds.yaml"
     walls = {}
     for workers in (1, 2):
@@ -41,8 +41,8 @@ def batch(out: Path) -> int:
 
 
 def loiter(minutes: float) -> int:
-    from fwsim.loop import run
-    from fwsim.scenario import load_scenario
+    from fwsim.sim.loop import run
+    from fwsim.scenario.model import load_scenario
     overrides = {"controllers.switch.enabled": False, "duration_s": 60.0 * minutes}
     scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", overrides)
     marks: dict[int, float] = {}

@@ -31,8 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fwsim import topics
-
+from fwsim.interface import topics
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 

@@ -1,8 +1,8 @@
 """Sweep the terminal phase over impact angles and ship courses/speeds (JSBSim, full flight software).
 
 The cases are the batch spec ``scenarios/batches/terminal_sweep.yaml`` (each
-:func:`fwsim.cases.terminal_case`, from the loiter ring, ~35 s of flight),
-flown with ``fwsim.batch``. Prints one row per case and a summary against the
+:func:`fwsim.batch.cases.terminal_case`, from the loiter ring, ~35 s of flight),
+flown with ``fwsim.batch.runner``. Prints one row per case and a summary against the
 bounds (hit, miss <= 3 m, both impact-angle errors <= 3 deg); the batch's
 summary (CSV, JSON, Parquet) and the logs go to ``--out``. The same sweep is
 the slow test ``tests/test_terminal_sweep.py`` (``pytest -m slow``).
@@ -18,9 +18,9 @@ import argparse
 import sys
 import time
 
-from fwsim.batch import run_batch
-from fwsim.cases import case_line, sweep_rows, sweep_spec
-from fwsim.scenario import ScenarioError, parse_sets
+from fwsim.batch.runner import run_batch
+from fwsim.batch.cases import case_line, sweep_rows, sweep_spec
+from fwsim.scenario.model import ScenarioError, parse_sets
 
 
 def main(argv=None) -> int:

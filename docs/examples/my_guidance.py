@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.messages import Guidance
-from fwsim.messages import AccelCommand
+from fwsim.interface.messages import AccelCommand
 
 
 class PurePursuit:

@@ -18,7 +18,7 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Metadata, Schema
 from mcap.writer import MCAP0_MAGIC
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log.writer import EPOCH_KEY, METADATA_NAME, SCENARIO_ATTACHMENT, STATUS_METADATA_NAME
 
 _LEVEL_NAMES = {value: name for name, value in Log.Level.items()}

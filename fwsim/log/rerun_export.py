@@ -36,7 +36,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log.reader import RunLog, read_log
 from fwsim.log.truth import truth_at
 

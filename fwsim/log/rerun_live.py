@@ -37,7 +37,7 @@ from urllib.parse import urlsplit
 import numpy as np
 import rerun as rr
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log import rerun_export as rx
 from fwsim.log.rerun_export import (
     CAMERA_ENTITY,

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fwsim import topics
-
+from fwsim.interface import topics
 __all__ = ["interp_at", "truth_at", "TruthStream"]
 
 

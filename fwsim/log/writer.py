@@ -25,7 +25,7 @@ from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log.schema import spec_for
 
 METADATA_NAME = "fwsim"
@@ -298,7 +298,7 @@ class LogWriter:
         self._json_schemas: dict[type, int] = {}
         self._proto_channels: dict[str, list] = {}  # topic -> [channel_id, sequence]
         self._proto_schemas: dict[str, int] = {}
-        self._quat = None  # fwsim.frames.quat_enu_from_frd, imported on first use
+        self._quat = None  # fwsim.interface.frames.quat_enu_from_frd, imported on first use
         # Reused protobuf messages (set fields, serialise; no per-call allocation).
         self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
         self._transforms: dict[tuple[str, str], FrameTransform] = {}  # write_transform's, by (parent, child)
@@ -390,7 +390,7 @@ class LogWriter:
         self.write(topics.UAV_STATE, state)
         quat = self._quat
         if quat is None:
-            from fwsim.frames import quat_enu_from_frd
+            from fwsim.interface.frames import quat_enu_from_frd
 
             quat = self._quat = quat_enu_from_frd
         w, x, y, z = quat(state.euler_ned_rad).tolist()

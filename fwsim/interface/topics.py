@@ -6,16 +6,16 @@ Rerun views name topics from here; nothing else spells them out.
 from __future__ import annotations
 
 # -- the harness: the truth, and what the sensors and the camera saw
-UAV_STATE = "/uav/state"  # fwsim.messages.AirframeState (JSON)
+UAV_STATE = "/uav/state"  # fwsim.interface.messages.AirframeState (JSON)
 TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames in the world
 UAV_POSE = "/uav/pose"  # foxglove.PoseInFrame
 SCENE = "/scene"  # foxglove.SceneUpdate: the UAV and ship models, frame-locked (Foxglove's 3D panel)
 SCENE_PATHS = "/scene/paths"  # foxglove.SceneUpdate: the flown paths of the UAV and the ship, a segment a second
 UAV_FIX = "/uav/fix"  # foxglove.LocationFix: the UAV's latitude, longitude, altitude (Foxglove's map)
-TARGET_STATE = "/target/state"  # fwsim.target.TargetState
-GIMBAL_STATE = "/gimbal/state"  # fwsim.gimbal.GimbalState
-CAMERA_FRAME = "/camera/frame"  # fwsim.camera.FrameGeometry: what one frame shows of the ship (truth)
-CAMERA_DETECTION = "/camera/detection"  # fwsim.camera.Detection: the detector's output
+TARGET_STATE = "/target/state"  # fwsim.world.target.TargetState
+GIMBAL_STATE = "/gimbal/state"  # fwsim.world.gimbal.GimbalState
+CAMERA_FRAME = "/camera/frame"  # fwsim.sensors.camera.FrameGeometry: what one frame shows of the ship (truth)
+CAMERA_DETECTION = "/camera/detection"  # fwsim.sensors.camera.Detection: the detector's output
 CAMERA_IMAGE = "/camera/image"  # foxglove.CompressedImage: rendered frames
 CAMERA_CALIBRATION = "/camera/calibration"  # foxglove.CameraCalibration
 CAMERA_ANNOTATIONS = "/camera/annotations"  # foxglove.ImageAnnotations: boxes over each /camera/image
@@ -23,7 +23,7 @@ AUTOPILOT_COMMAND = "/autopilot/command"  # RateCommand | AccelCommand from the 
 AUTOPILOT_STATUS = "/autopilot/status"  # the inner loops' set-points
 ACTUATORS = "/actuators"  # ActuatorCommand
 EVENTS = "/events"  # foxglove.Log: phase switches, lock, warnings, the end of the run
-WORLD_AIR = "/world/air"  # fwsim.messages.AirState: the air's velocity (wind, gusts, turbulence), when not still
+WORLD_AIR = "/world/air"  # fwsim.interface.messages.AirState: the air's velocity (wind, gusts, turbulence), when not still
 
 # -- the flight software (controllers/)
 FSW_STATUS = "/fsw/status"  # FlightSoftwareStatus, every tick

@@ -2,7 +2,7 @@
 
 What the camera sees comes from geometry, not a formula: rays from the
 camera centre are cast (Embree, through embreex) against the posed UAV mesh
-(fwsim.geometry) and the ship mesh (fwsim.target); a ship pixel is visible
+(fwsim.world.geometry) and the ship mesh (fwsim.world.target); a ship pixel is visible
 when its ray hits the ship before any part of the UAV. The UAV's own wing
 therefore hides the ship when a bank puts it above the wing plane.
 
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydantic import Field, model_validator
 
-from fwsim.configbase import StrictModel
-from fwsim.gimbal import GimbalConfig
+from fwsim.interface.configbase import StrictModel
+from fwsim.world.gimbal import GimbalConfig
 
 _MISS = 1e30  # embree reports a miss as a huge distance
 # render colours (BGR) and the sun
@@ -426,7 +426,7 @@ class Detector:
 
     def observe(self, frame: FrameGeometry, blackout: bool = False, clutter: np.ndarray | None = None) -> None:
         """One camera frame through the detector. ``blackout``: it reports nothing; ``clutter``: a false box
-        (u0, v0, u1, v1) it reports instead of what it saw (fwsim.events)."""
+        (u0, v0, u1, v1) it reports instead of what it saw (fwsim.world.events)."""
         c = self.cfg
         t_arrive = frame.t_s + c.latency_s
         # draw every random number each frame, so one frame's outcome never shifts the next's stream

@@ -37,11 +37,11 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from fwsim.configbase import StrictModel
+from fwsim.interface.configbase import StrictModel
 
-# The pan-tilt kinematics live in fwsim.frames (the flight software needs them too);
+# The pan-tilt kinematics live in fwsim.interface.frames (the flight software needs them too);
 # re-exported here for the harness.
-from fwsim.frames import (  # noqa: F401
+from fwsim.interface.frames import (  # noqa: F401
     R_frd_from_cam,
     camera_angular_velocity,
     camera_pose_world,

@@ -7,7 +7,7 @@ view it). The headline, also printed:
 * runs, completed, failed;
 * hits, and the hit probability with its 95 % Wilson score interval;
 * CEP50 / CEP90: the 50th and 90th percentiles of the miss distance (the
-  closest approach to the aim point, ``fwsim.metrics``; the median and 90th
+  closest approach to the aim point, ``fwsim.analysis.metrics``; the median and 90th
   percentile radius, not a fitted distribution);
 * the impact flight-path and heading errors: mean, standard deviation and the
   95th percentile of their magnitude;

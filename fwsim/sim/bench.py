@@ -13,10 +13,11 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from fwsim import SCENARIO_DIR, topics
+from fwsim import SCENARIO_DIR
 
+from fwsim.interface import topics
 if TYPE_CHECKING:
-    from fwsim.loop import RunResult
+    from fwsim.sim.loop import RunResult
 
 
 def _best_of(fn, repeats: int) -> float:
@@ -25,7 +26,7 @@ def _best_of(fn, repeats: int) -> float:
 
 def jsbsim_raw_steps_per_s(seconds: float = 30.0, repeats: int = 3) -> float:
     """JSBSim alone: ``fdm.run()`` in a loop with the trimmed controls held."""
-    from fwsim.airframe import Airframe
+    from fwsim.world.airframe import Airframe
     a = Airframe("fwuav")
     n = int(seconds / a.dt_s)
 
@@ -41,8 +42,8 @@ def jsbsim_raw_steps_per_s(seconds: float = 30.0, repeats: int = 3) -> float:
 
 def wrapper_steps_per_s(seconds: float = 30.0, repeats: int = 3) -> float:
     """``Airframe.step``: commands in, the full truth state out, per tick."""
-    from fwsim.airframe import Airframe
-    from fwsim.messages import ActuatorCommand
+    from fwsim.world.airframe import Airframe
+    from fwsim.interface.messages import ActuatorCommand
     a = Airframe("fwuav")
     n = int(seconds / a.dt_s)
 
@@ -62,11 +63,11 @@ def detection_frame_ms(frames: int = 600) -> tuple[float, float]:
     camera pointed at it, the pose varying a little every frame."""
     import numpy as np
 
-    from fwsim.camera import Camera, CameraConfig, Pose
-    from fwsim.frames import dcm_enu_from_frd
-    from fwsim.geometry import uav_mesh
-    from fwsim.gimbal import camera_pose_world, pan_tilt_pointing_at
-    from fwsim.target import Ship, TargetConfig
+    from fwsim.sensors.camera import Camera, CameraConfig, Pose
+    from fwsim.interface.frames import dcm_enu_from_frd
+    from fwsim.world.geometry import uav_mesh
+    from fwsim.world.gimbal import camera_pose_world, pan_tilt_pointing_at
+    from fwsim.world.target import Ship, TargetConfig
     ship = Ship(TargetConfig())
     cam = Camera(CameraConfig(), uav_mesh("fwuav"), ship.mesh)
     R_s, t_s = ship.pose(0.0)[1], ship.pose(0.0)[0]
@@ -111,7 +112,7 @@ def log_writer_us(n: int = 3000) -> tuple[float, float]:
     import numpy as np
 
     from fwsim.log import LogWriter
-    from fwsim.messages import ActuatorCommand, AirframeState
+    from fwsim.interface.messages import ActuatorCommand, AirframeState
     st = AirframeState(0.0, np.array([1.0, 2, 3]), np.array([20.0, 1, 0]), np.array([0.1, 0.05, 1.0]),
                        np.zeros(3), 22.0, 0.05, 0.0, np.array([0, 0, -9.8]), 0.3, np.zeros(3), 3.0)
     act = ActuatorCommand(0.0, 0.1, -0.05, 0.0, 0.3)
@@ -135,8 +136,8 @@ def peak_memory_mb() -> float:
 
 def closed_loop(scenario_path: Path, repeats: int = 2) -> tuple[float, float, float]:
     """(sim seconds, best wall seconds, real-time factor) of a full run with logging."""
-    from fwsim.loop import run
-    from fwsim.scenario import load_scenario
+    from fwsim.sim.loop import run
+    from fwsim.scenario.model import load_scenario
     scenario, text = load_scenario(scenario_path)
     walls = []
     sim = 0.0
@@ -151,9 +152,9 @@ def closed_loop(scenario_path: Path, repeats: int = 2) -> tuple[float, float, fl
 
 def block_breakdown(scenario, text: str) -> tuple[RunResult, list]:
     """One profiled run of ``scenario`` (log in a temporary folder): its result and its blocks
-    (:class:`fwsim.profiling.BlockTime`, most expensive first)."""
-    from fwsim.loop import run
-    from fwsim.profiling import BlockTimer
+    (:class:`fwsim.sim.profiling.BlockTime`, most expensive first)."""
+    from fwsim.sim.loop import run
+    from fwsim.sim.profiling import BlockTimer
     with tempfile.TemporaryDirectory() as tmp:
         r = run(scenario, text, Path(tmp) / "profiled.mcap", profile=BlockTimer())
     return r, r.blocks
@@ -167,8 +168,8 @@ def blocks_json(blocks) -> dict[str, dict[str, float]]:
 
 def run_bench(quick: bool = False) -> dict[str, float | str | dict]:
     """Every figure of ``fwsim bench``. The paper mission flies unprofiled for its real-time factor (best
-    of two) and once more under a :class:`fwsim.profiling.BlockTimer` for ``paper_mission_blocks``."""
-    from fwsim.scenario import load_scenario
+    of two) and once more under a :class:`fwsim.sim.profiling.BlockTimer` for ``paper_mission_blocks``."""
+    from fwsim.scenario.model import load_scenario
     seconds = 10.0 if quick else 30.0
     repeats = 1 if quick else 3
     raw = jsbsim_raw_steps_per_s(seconds, repeats)

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from fwsim import SCENARIO_DIR
-from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
+from fwsim.interface.frames import dcm_enu_from_frd, pan_tilt_pointing_at
 
 __all__ = ["terminal_case", "sweep_cases", "sweep_spec", "sweep_rows", "case_line", "CASE_KEYS", "SWEEP_SPEC"]
 
@@ -58,7 +58,7 @@ def terminal_case(theta_f_deg: float, psi_f_deg: float, ship_heading_deg: float,
     R = dcm_enu_from_frd(euler)
     pan, tilt = pan_tilt_pointing_at(R.T @ (np.zeros(3) - (pos + R @ mount)))
     d.update(name=f"terminal_th{theta_f_deg:+.0f}_psi{psi_f_deg:.0f}_ship{ship_heading_deg:.0f}at{ship_speed_m_s:g}",
-             description="terminal phase from the loiter ring (fwsim.cases.terminal_case)", seed=int(seed),
+             description="terminal phase from the loiter ring (fwsim.batch.cases.terminal_case)", seed=int(seed),
              duration_s=float(duration_s))
     d["initial"] = {"pos_enu_m": [round(float(x), 3) for x in pos], "airspeed_m_s": float(airspeed_m_s),
                     "heading_deg": round(heading_deg % 360.0, 4)}

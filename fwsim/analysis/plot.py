@@ -26,7 +26,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log import RunLog, read_log
 from fwsim.log.truth import interp_at
 
@@ -386,8 +386,8 @@ def _ship_visibility(log: RunLog) -> Figure:
     UAV's body frame (truth): its angle below the wing plane (the body x-y plane; negative above it) and its
     azimuth off the nose. The camera hangs under the fuselage: the wing hides a ship above the plane to the
     side, the nose one above it ahead."""
-    from fwsim.frames import dcm_enu_from_frd
-    from fwsim.metrics import lock_time_s, longest_gap_s, seen_frames
+    from fwsim.interface.frames import dcm_enu_from_frd
+    from fwsim.analysis.metrics import lock_time_s, longest_gap_s, seen_frames
     fr, st, tg = log.table(topics.CAMERA_FRAME), log.table(topics.UAV_STATE), log.table(topics.TARGET_STATE)
     t = fr["t_s"]
     if t.size < 2:
@@ -474,7 +474,7 @@ def _target_estimate(log: RunLog) -> Figure:
 @figure("target_estimate_error", needs=(topics.FSW_ESTIMATE, topics.TARGET_STATE),
         title="Target estimate error, horizontal (estimate - truth)")
 def _target_estimate_error(log: RunLog) -> Figure:
-    """Horizontal (x, y) errors, as fwsim.metrics scores them: the filter estimates a point
+    """Horizontal (x, y) errors, as fwsim.analysis.metrics scores them: the filter estimates a point
     at its configured plane height, the truth is the waterline centre."""
     est, tg = log.table(topics.FSW_ESTIMATE), log.table(topics.TARGET_STATE)
     if "pos_enu_m" not in est:

@@ -4,7 +4,7 @@
 
     f = fwsim.fly("scenarios/paper_mission.yaml", seed=3, **{"controllers.ukf.pixel_noise_px": 3})
     f.status, f.reason                  # "completed", "hit the ship at t = 176.88 s"
-    f.metrics["flight_time_s"]          # fwsim.metrics, computed from the log on first use
+    f.metrics["flight_time_s"]          # fwsim.analysis.metrics, computed from the log on first use
     f.log.table("/uav/state")           # the log (fwsim.log.RunLog), read on first use
     f.close()                           # (or ``with fwsim.fly(...) as f:``) removes a temporary log
 
@@ -12,7 +12,7 @@
 
 The heavy modules (JSBSim, CasADi, the flight software) are imported by the
 first call, not by ``import fwsim``. A scenario or spec that cannot be used
-raises :class:`fwsim.scenario.ScenarioError` (one line per problem, as the
+raises :class:`fwsim.scenario.model.ScenarioError` (one line per problem, as the
 command line prints them); an error that ends a run raises too, after the log
 has recorded it (a user's block: :class:`controllers.blocks.PluginError`,
 naming the block, the method and the line of the user's file).
@@ -35,7 +35,7 @@ def _resolve(scenario: Any, overrides: dict[str, Any]):
     """(Scenario, YAML text for the log) from a path, a dict or a Scenario, the overrides applied."""
     import yaml
 
-    from fwsim.scenario import Scenario, ScenarioError, dump_scenario, load_scenario, parse_scenario
+    from fwsim.scenario.model import Scenario, ScenarioError, dump_scenario, load_scenario, parse_scenario
     if isinstance(scenario, (str, Path)):
         return load_scenario(scenario, overrides)  # a relative path from the current folder, as fwsim run
     if isinstance(scenario, Scenario):
@@ -50,13 +50,13 @@ def _resolve(scenario: Any, overrides: dict[str, Any]):
 
 
 def fly(scenario: Any, log: str | Path | None = None, **overrides: Any) -> Flight:
-    """Fly a scenario (a file's path, a dict of its fields or a :class:`fwsim.scenario.Scenario`) and return
+    """Fly a scenario (a file's path, a dict of its fields or a :class:`fwsim.scenario.model.Scenario`) and return
     its :class:`Flight`.
 
     ``overrides`` set fields by their dotted paths, as ``fwsim run --set`` does (``seed=3``,
     ``**{"controllers.ukf.pixel_noise_px": 3}``), with Python values. ``log``: where the MCAP log goes; without
     it a temporary file that the Flight owns and removes when it is closed or garbage-collected."""
-    from fwsim.loop import run
+    from fwsim.sim.loop import run
 
     sc, text = _resolve(scenario, overrides)
     folder = None
@@ -76,7 +76,7 @@ def fly(scenario: Any, log: str | Path | None = None, **overrides: Any) -> Fligh
 
 class Flight:
     """One flown scenario: ``status`` and ``reason`` (how it ended), ``metrics`` (a read-only mapping,
-    :func:`fwsim.metrics.compute_metrics`), ``log`` (:class:`fwsim.log.RunLog`), ``log_path``, ``scenario``,
+    :func:`fwsim.analysis.metrics.compute_metrics`), ``log`` (:class:`fwsim.log.RunLog`), ``log_path``, ``scenario``,
     ``sim_time_s`` and ``wall_time_s``. A temporary log is removed by :meth:`close` (a context manager
     closes it too, and so does the garbage collector); ``metrics`` and ``log`` read before that stay."""
 
@@ -106,10 +106,10 @@ class Flight:
 
     @property
     def metrics(self) -> Mapping[str, Any]:
-        """The run's metrics (:func:`fwsim.metrics.compute_metrics`), computed on first use."""
+        """The run's metrics (:func:`fwsim.analysis.metrics.compute_metrics`), computed on first use."""
         if self._metrics is None:
             self._check_open("metrics")
-            from fwsim.metrics import compute_metrics
+            from fwsim.analysis.metrics import compute_metrics
             self._metrics = MappingProxyType(compute_metrics(self.log))
         return self._metrics
 
@@ -140,7 +140,7 @@ def batch(spec: Any, workers: int | None = None, out: str | Path | None = None, 
     return its summary rows, one dict per run in spec order (``fwsim batch``'s summary.json). ``workers``:
     parallel runs (default: the CPU count); ``out``: the folder for the logs and summary files (default
     ``runs/<the spec's name>``, as ``fwsim batch``); ``resume`` keeps runs whose log is already there."""
-    from fwsim.batch import run_batch
+    from fwsim.batch.runner import run_batch
     if isinstance(spec, Mapping):
         spec = copy.deepcopy(dict(spec))
         spec.setdefault("name", "batch")
@@ -148,7 +148,7 @@ def batch(spec: Any, workers: int | None = None, out: str | Path | None = None, 
     else:
         name = Path(spec).stem
     if workers is not None and workers < 1:
-        from fwsim.scenario import ScenarioError
+        from fwsim.scenario.model import ScenarioError
         raise ScenarioError(f"fwsim.batch: workers: expected 1 or more parallel runs (got {workers})")
     result = run_batch(spec, Path(out) if out is not None else Path("runs") / name, workers=workers, resume=resume)
     return result.rows

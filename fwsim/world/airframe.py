@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from fwsim import AIRCRAFT_DIR
-from fwsim.frames import GeoOrigin, enu_from_ned
-from fwsim.messages import ActuatorCommand, AirframeState
+from fwsim.interface.frames import GeoOrigin, enu_from_ned
+from fwsim.interface.messages import ActuatorCommand, AirframeState
 
 # JSBSim prints a banner on construction unless told otherwise.
 os.environ.setdefault("JSBSIM_DEBUG", "0")

@@ -18,12 +18,12 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from controllers.config import Controllers
-from fwsim.camera import CameraConfig
-from fwsim.configbase import StrictModel
-from fwsim.events import Event
-from fwsim.sensors import SensorsConfig
-from fwsim.target import TargetConfig
-from fwsim.yamlfile import load_yaml_text, read_text, short
+from fwsim.sensors.camera import CameraConfig
+from fwsim.interface.configbase import StrictModel
+from fwsim.world.events import Event
+from fwsim.sensors.onboard import SensorsConfig
+from fwsim.world.target import TargetConfig
+from fwsim.scenario.yamlfile import load_yaml_text, read_text, short
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
@@ -163,7 +163,7 @@ class Scenario(StrictModel):
         description="the GNSS, IMU, air data and altimeter models")
     controllers: Controllers = Field(default_factory=Controllers,
         description="the flight software: which blocks fly the mission and their settings")
-    events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.events)")
+    events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.world.events)")
     start_time: str | None = Field(None, description="the date and time (ISO 8601; UTC unless it names an offset) "
                                                      "the log's clock starts at; sim time stays in the messages; "
                                                      "none: the run's wall-clock start")
@@ -196,7 +196,7 @@ class Scenario(StrictModel):
     @model_validator(mode="after")
     def _within_the_flat_earth_mapping(self):
         """The start within MAX_RANGE_FROM_ORIGIN_M of the world origin, horizontally: the ENU <-> geodetic
-        mapping (fwsim/frames.py, GeoOrigin) scales latitude and longitude about the origin, so distances
+        mapping (fwsim/interface/frames.py, GeoOrigin) scales latitude and longitude about the origin, so distances
         distort with distance from it (1.6e-4 per km of northing at mid latitudes)."""
         x, y, _ = self.initial.pos_enu_m
         r = (x * x + y * y) ** 0.5
@@ -321,7 +321,7 @@ def dump_scenario(scenario: Scenario) -> str:
     (:func:`parse_scenario`) to the same scenario."""
     import yaml
 
-    from fwsim.yamlfile import FAST_SAFE_DUMPER
+    from fwsim.scenario.yamlfile import FAST_SAFE_DUMPER
     body = yaml.dump(scenario.model_dump(mode="json"), Dumper=FAST_SAFE_DUMPER, sort_keys=False, allow_unicode=True)
     return f"# {scenario.name}: every field, the defaults filled in (fwsim scenario show)\n{body}"
 

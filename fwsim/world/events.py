@@ -24,7 +24,7 @@ from typing import Annotated, Literal, Union
 import numpy as np
 from pydantic import Field, model_validator
 
-from fwsim.configbase import StrictModel
+from fwsim.interface.configbase import StrictModel
 
 __all__ = ["Event", "EventRunner", "EVENT_KINDS"]
 

@@ -11,12 +11,12 @@ A batch spec (YAML) lists scenario files and what to sweep::
           initial.airspeed_m_s: [20, 24]
           initial.heading_deg: [0, 90]
         set: {duration_s: 20}            # fixed overrides for every run of this entry
-      - generator: fwsim.cases:terminal_case   # or a generated scenario: a function -> scenario dict
+      - generator: fwsim.batch.cases:terminal_case   # or a generated scenario: a function -> scenario dict
         cases:                           # one run per case: the function's keyword arguments
           - {theta_f_deg: -30, psi_f_deg: 30, ship_heading_deg: 0, ship_speed_m_s: 5}
         args: {duration_s: 90}           # keyword arguments for every case
         seeds: [1]
-      - scenario: ../scenarios/paper_mission.yaml   # or Monte Carlo draws (fwsim.dispersions)
+      - scenario: ../scenarios/paper_mission.yaml   # or Monte Carlo draws (fwsim.batch.dispersions)
         samples: 100                     # sample k flies the scenario's seed + k
         dispersions: {target.speed_m_s: {uniform: [0, 10]}, target.heading_deg: {uniform_angle_deg: true}}
 
@@ -27,7 +27,7 @@ point, canonical JSON; for a generated scenario its arguments too), and writes
 its log to ``OUT/logs/<id>.mcap``. A generated run's arguments are columns
 ``case.<name>`` of the summary. Each run
 becomes one summary row (:data:`BASE_COLUMNS`, one ``set.<path>`` column per
-override, then every metric of :func:`fwsim.metrics.compute_metrics`); a run
+override, then every metric of :func:`fwsim.analysis.metrics.compute_metrics`); a run
 that raises is a failed row with its error, never a lost batch. The summary is
 written as ``OUT/summary.csv``, ``OUT/summary.json`` and, when pyarrow is
 importable, ``OUT/summary.parquet``.
@@ -59,8 +59,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 import fwsim
-from fwsim.scenario import ScenarioError, load_scenario
-from fwsim.yamlfile import load_yaml_file
+from fwsim.scenario.model import ScenarioError, load_scenario
+from fwsim.scenario.yamlfile import load_yaml_file
 
 #: Columns every summary row has, in this order; ``set.<path>`` override
 #: columns follow, then the metrics.
@@ -88,7 +88,7 @@ class RunJob:
     log_path: str  # absolute path of its MCAP log
     generator: str = ""  # "module:function" making the scenario (a dict) from the case's arguments
     case: dict[str, Any] = field(default_factory=dict)  # those arguments
-    dispersed: tuple[str, ...] = ()  # the override paths drawn from distributions (fwsim.dispersions)
+    dispersed: tuple[str, ...] = ()  # the override paths drawn from distributions (fwsim.batch.dispersions)
 
     def all_overrides(self) -> dict[str, Any]:
         return {**self.overrides, "seed": self.seed}
@@ -295,7 +295,7 @@ def _cases(entry: dict, where: str) -> list[dict[str, Any]]:
 
 def _samples(entry: dict, where: str, batch_seed: int, index: int) -> list[dict[str, Any]]:
     """The drawn overrides of each sample (``dispersions`` with ``samples``); [{}] without dispersions."""
-    from fwsim.dispersions import draw, parse_dispersions
+    from fwsim.batch.dispersions import draw, parse_dispersions
     if "dispersions" not in entry:
         if "samples" in entry:
             raise BatchSpecError(f"{where}: 'samples' goes with 'dispersions'")
@@ -393,7 +393,7 @@ def _load(scenario_file: str, generator: str, case: dict, overrides: dict):
     if generator:
         import yaml
 
-        from fwsim.scenario import parse_scenario
+        from fwsim.scenario.model import parse_scenario
         text = yaml.safe_dump(_generator(generator)(**case), sort_keys=False)
         return parse_scenario(text, f"{generator}({_canonical(case)})", overrides), text
     return load_scenario(scenario_file, overrides)
@@ -423,9 +423,9 @@ def row_from_log(job: RunJob, wall_time_s: float = math.nan, error: str = "") ->
     ``error`` is the exception the run raised ("" if none): such a run is
     failed whatever its log says.
     """
-    from fwsim import topics
+    from fwsim.interface import topics
     from fwsim.log import read_log
-    from fwsim.metrics import compute_metrics
+    from fwsim.analysis.metrics import compute_metrics
 
     row = _base_row(job, wall_time_s, error)
     log_path = Path(job.log_path)
@@ -486,7 +486,7 @@ def run_one(job: RunJob) -> dict[str, Any]:
     What the run prints (JSBSim's messages) goes to ``logs/<id>.console.txt``
     (kept only when not empty), not to the terminal of the batch.
     """
-    from fwsim.loop import run
+    from fwsim.sim.loop import run
 
     t0 = time.perf_counter()
     error = ""
@@ -817,15 +817,3 @@ def _write_parquet(rows: list[dict[str, Any]], cols: list[str], path: Path, info
         info.setdefault("warnings", []).append(f"summary.parquet not written: {exc}")
         return []
     return [path]
-
-
-class _CallableModule(type(sys)):
-    """This module, callable: ``fwsim.batch(spec, ...)`` is :func:`fwsim.api.batch` even once the module
-    ``fwsim.batch`` is imported (the import puts the module where the package exports the function)."""
-
-    def __call__(self, *args, **kwargs):
-        from fwsim.api import batch
-        return batch(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

@@ -59,10 +59,10 @@ from typing import Any
 
 import numpy as np
 
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim.log import RunLog, read_log
 from fwsim.log.truth import interp_at
-from fwsim.yamlfile import short
+from fwsim.scenario.yamlfile import short
 
 CONVERGED_STD_M = 5.0
 MISS_EXTENSION_S = 3.0  # path continued past the impact when scoring the miss distance
@@ -261,7 +261,7 @@ _BETTER_TEXT = {"lower": "lower", "higher": "higher", "zero": "nearer 0", "neith
 def metrics_doc() -> str:
     """The metrics reference page (docs/guide/metrics.md), generated from :data:`METRICS`."""
     lines = ["# Metrics reference", "",
-             "<!-- generated from fwsim/metrics.py (METRICS) by `python tools/gen_metrics_doc.py`; "
+             "<!-- generated from fwsim/analysis/metrics.py (METRICS) by `python tools/gen_metrics_doc.py`; "
              "edit the table there, not this page -->", "",
              "`fwsim metrics LOG` computes these from a run's log (never from the live run) and prints them "
              "grouped, in this order; `fwsim metrics LOG --json` prints them as strict JSON. A metric with no "
@@ -497,7 +497,7 @@ def _phases(log: RunLog, m: dict) -> str:
 def _impact_metrics(log: RunLog, m: dict) -> None:
     """Terminal phase: switch time, impact time, miss distance to the aim point, hit, impact angles; None with a
     ``terminal_note`` (why) for those a run that never dived (or never hit anything) does not have."""
-    from fwsim.scenario import parse_scenario
+    from fwsim.scenario.model import parse_scenario
     note = _phases(log, m)
     ended = not note
     try:
@@ -530,13 +530,13 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
 
 
 def _ship(log: RunLog, scenario):
-    from fwsim.target import Ship
+    from fwsim.world.target import Ship
     return LoggedShip(log, scenario) if topics.TARGET_STATE in log.topics else Ship(scenario.target)
 
 
 def _hit(st, ship, scenario) -> bool:
     """The run's last state inside the hull or superstructure."""
-    from fwsim.target import HullVolume
+    from fwsim.world.target import HullVolume
     p_ship, R = ship.pose(float(st["t_s"][-1]))
     return bool(HullVolume(scenario.target).contains(R.T @ (st["pos_enu_m"][-1] - p_ship)))
 
@@ -583,7 +583,7 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     if "loiter_radius_m" in fs:  # the ring the loiter flew (whichever block flew it)
         R, H = float(fs["loiter_radius_m"][p2[0]]), float(fs["loiter_altitude_m"][p2[0]])
     else:  # a log from before the ring was logged: from its scenario
-        from fwsim.scenario import parse_scenario
+        from fwsim.scenario.model import parse_scenario
         try:
             sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False).controllers
         except Exception:
@@ -616,7 +616,7 @@ class LoggedShip:
     its pose and aim point at a logged time, or carried on at its last velocity past the log's end."""
 
     def __init__(self, log: RunLog, scenario):
-        from fwsim.target import aim_point_ship_m
+        from fwsim.world.target import aim_point_ship_m
         tg = log.table(topics.TARGET_STATE)
         self._t = tg["t_s"]
         self._pos, self._vel, self._heading = tg["pos_enu_m"], tg["vel_enu_m_s"], tg["heading_ned_rad"]
@@ -624,7 +624,7 @@ class LoggedShip:
         self._aim = aim_point_ship_m(scenario.target)
 
     def pose(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-        from fwsim.target import r_enu_from_ship
+        from fwsim.world.target import r_enu_from_ship
         i = self._index.get(float(t_s))
         if i is None:  # between or past the logged states
             i = max(int(np.searchsorted(self._t, t_s, side="right")) - 1, 0)

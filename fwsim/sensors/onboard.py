@@ -5,7 +5,7 @@ seeded from the scenario seed and the sensor's name (so adding a sensor never
 shifts another's noise). Each sensor also has its own update rate: between
 updates the mission computer holds the last sample (as it would hold the last
 GNSS fix). The flight software reads them at its own rate; the camera
-detection arrives through ``Detector`` (fwsim.camera) at the camera's rate,
+detection arrives through ``Detector`` (fwsim.sensors.camera) at the camera's rate,
 with its own latency.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ import zlib
 import numpy as np
 from pydantic import Field
 
-from fwsim.configbase import StrictModel
-from fwsim.messages import AirframeState, Measurements
+from fwsim.interface.configbase import StrictModel
+from fwsim.interface.messages import AirframeState, Measurements
 
 _NAN3 = np.full(3, np.nan)  # copied for each message's wind_enu_m_s (Measurements' default)
 

@@ -3,7 +3,7 @@
     fwsim scenario schema > fwsim.schema.json             # scenario_schema()
     fwsim scenario reference --out docs/guide/reference.md  # reference_markdown()
 
-Both are made from the pydantic models of :class:`fwsim.scenario.Scenario` (the harness's sections and the flight
+Both are made from the pydantic models of :class:`fwsim.scenario.model.Scenario` (the harness's sections and the flight
 software's ``controllers``, ``controllers/config.py``): a field's type, default, bounds and description are the
 model's own. The page gives each field's unit from its name's suffix (``_m``, ``_m_s``, ``_deg``, ``_s``, ``_hz``,
 ``_px`` ...). A test regenerates the page and fails when the committed one is stale.
@@ -45,7 +45,7 @@ def unit_of(name: str) -> str:
 def scenario_schema() -> dict[str, Any]:
     """The JSON Schema of a scenario file (pydantic's, with a block choice's short form allowed: ``estimator:
     ukf`` as well as ``estimator: {use: ukf}``)."""
-    from fwsim.scenario import Scenario
+    from fwsim.scenario.model import Scenario
     schema = Scenario.model_json_schema()
     defs = schema.get("$defs", {})
     choice = defs.get("BlockChoice")
@@ -200,7 +200,7 @@ def _variant(model: type[BaseModel]) -> str:
 def sections(model: type[BaseModel] | None = None, path: str = "", when: str = "") -> list[Section]:
     """Every model of the scenario, depth first, each with its fields' rows."""
     if model is None:
-        from fwsim.scenario import Scenario
+        from fwsim.scenario.model import Scenario
         model = Scenario
     rows, below = [], []
     for name, f in model.model_fields.items():
@@ -234,7 +234,7 @@ def _table(section: Section) -> list[str]:
 
 INTRO = """# Scenario field reference
 
-Every field of a scenario file, generated from the models (`fwsim/scenario.py` and the flight software's
+Every field of a scenario file, generated from the models (`fwsim/scenario/model.py` and the flight software's
 `controllers/config.py`); do not edit this page by hand: `{regenerate}` writes it again. A field's dotted path
 is what `--set` and `fwsim.fly` take (`--set controllers.ukf.pixel_noise_px=3`); `[]` stands for each item of a
 list. The unit comes from the field's name (`_m`, `_m_s`, `_deg`, `_s`, `_hz`, `_px` ...). A field without a

@@ -32,21 +32,21 @@ import yaml
 
 import fwsim
 from controllers.mission import flight_software
-from fwsim import topics
+from fwsim.interface import topics
 from fwsim._entry import STOP_SIGNALS, Signalled
-from fwsim.airframe import aircraft_file, aircraft_hash
+from fwsim.world.airframe import aircraft_file, aircraft_hash
 from fwsim.autopilot import Autopilot, load_autopilot_params
-from fwsim.camera import Detector
-from fwsim.events import EventRunner
-from fwsim.frames import quat_from_dcm
+from fwsim.sensors.camera import Detector
+from fwsim.world.events import EventRunner
+from fwsim.interface.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
-from fwsim.messages import GimbalCommand
-from fwsim.profiling import BlockTimer, time_flight_software, time_harness
-from fwsim.scenario import Scenario, start_epoch_ns
-from fwsim.sensors import Sensors, rng_for
-from fwsim.world import World
-from fwsim.yamlfile import FAST_SAFE_DUMPER
+from fwsim.interface.messages import GimbalCommand
+from fwsim.sim.profiling import BlockTimer, time_flight_software, time_harness
+from fwsim.scenario.model import Scenario, start_epoch_ns
+from fwsim.sensors.onboard import Sensors, rng_for
+from fwsim.world.world import World
+from fwsim.scenario.yamlfile import FAST_SAFE_DUMPER
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class RunResult:
     reason: str
     sim_time_s: float
     wall_time_s: float
-    blocks: list | None = None  # fwsim.profiling.BlockTime per block, with run(..., profile=BlockTimer())
+    blocks: list | None = None  # fwsim.sim.profiling.BlockTime per block, with run(..., profile=BlockTimer())
 
     @property
     def real_time_factor(self) -> float:
@@ -204,7 +204,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     view); one that raises is detached and the run goes on. Ends at
     ``duration_s``, at sea contact (``stop.min_height_m``), or on an error
     (the log records why). KeyboardInterrupt is logged as 'interrupted' and
-    re-raised. ``profile``: a :class:`fwsim.profiling.BlockTimer` that times
+    re-raised. ``profile``: a :class:`fwsim.sim.profiling.BlockTimer` that times
     every block (``RunResult.blocks``).
     """
     log_path = Path(log_path)

@@ -1,7 +1,7 @@
 """Compare the metrics of two runs with tolerances; regression baselines.
 
 A metrics source is a run log (``.mcap``: metrics computed with
-:func:`fwsim.metrics.compute_metrics`), a metrics file (``.json`` from
+:func:`fwsim.analysis.metrics.compute_metrics`), a metrics file (``.json`` from
 ``fwsim metrics --json``) or a baseline file (``.yaml``, below).
 
 Tolerances, per metric (``TOLERANCE_KEYS``)::
@@ -20,7 +20,7 @@ be equal. Text metrics (``status``, ``end_reason``) must match exactly unless
 ignored. A missing value (NaN, ``null``) equals a missing value.
 
 Verdicts. A change beyond the tolerance is labelled by the metric's better
-direction (``fwsim.metrics.METRICS``: lower, higher, nearer zero, or neither):
+direction (``fwsim.analysis.metrics.METRICS``: lower, higher, nearer zero, or neither):
 
 * ``ok``: within the tolerance;
 * ``improved``: beyond it in the better direction (reported; fails only with
@@ -71,8 +71,8 @@ from typing import Any
 
 import yaml
 
-from fwsim.scenario import ScenarioError
-from fwsim.yamlfile import load_yaml_file
+from fwsim.scenario.model import ScenarioError
+from fwsim.scenario.yamlfile import load_yaml_file
 
 TOLERANCE_KEYS = ("abs", "rel", "min", "max", "ignore")
 DEFAULT_KEY = "default"
@@ -199,7 +199,7 @@ def _direction(better: str, base: float, run: float) -> int:
 
 def check_metric(metric: str, baseline: Any, run: Any, tol: Tolerance, better: str | None = None) -> Check:
     """One metric's verdict (see the module docstring for the rules); ``better``: the metric's direction
-    (default: from fwsim.metrics' table)."""
+    (default: from fwsim.analysis.metrics' table)."""
     if tol.ignore:
         return Check(metric, baseline, run, tol, "ignored")
     if baseline is None:
@@ -229,7 +229,7 @@ def check_metric(metric: str, baseline: Any, run: Any, tol: Tolerance, better: s
     if not change:
         return Check(metric, baseline, run, tol, "ok")
     if better is None:
-        from fwsim.metrics import better_of
+        from fwsim.analysis.metrics import better_of
         better = better_of(metric)
     way = _direction(better, b, r)
     verdict = "improved" if way > 0 else "REGRESSION" if way < 0 else "CHANGED"
@@ -345,7 +345,7 @@ class ABRow:
 
 
 def _ab_verdict(name: str, a: Any, b: Any, tol: Tolerance) -> str:
-    from fwsim.metrics import better_of
+    from fwsim.analysis.metrics import better_of
     if a is None or b is None:
         return "only in B" if a is None else "only in A"
     if isinstance(a, str) or isinstance(b, str):
@@ -387,7 +387,7 @@ class ABComparison:
 def ab_compare(a: dict[str, Any], b: dict[str, Any], tolerances: dict[str, Tolerance] | None = None,
                a_label: str = "A", b_label: str = "B") -> ABComparison:
     """Per metric (in the metrics table's order), which of two runs is better, by the metric's direction."""
-    from fwsim.metrics import ordered
+    from fwsim.analysis.metrics import ordered
     names = list(ordered(dict.fromkeys([*a, *b])))
     tols = {n: _tolerance_of(n, a, b, tolerances, AB_SAME) for n in names}
     rows = [ABRow(n, a.get(n), b.get(n), "same" if tols[n].ignore else _ab_verdict(n, a.get(n), b.get(n), tols[n]))
@@ -455,7 +455,7 @@ def load_metrics(path: str | Path) -> MetricsSource:
     suffix = path.suffix.lower()
     if suffix == ".mcap":
         from fwsim.log.reader import read_flight_log
-        from fwsim.metrics import compute_metrics
+        from fwsim.analysis.metrics import compute_metrics
         try:
             log = read_flight_log(path)
         except ValueError as exc:
@@ -496,7 +496,7 @@ def load_tolerance_file(path: str | Path) -> dict[str, Tolerance]:
 
 def _baseline_flown(b: "Baseline") -> dict[str, Any] | None:
     """What a baseline's run flies: its scenario file with its overrides (None if that file is gone)."""
-    from fwsim.scenario import ScenarioError, load_scenario
+    from fwsim.scenario.model import ScenarioError, load_scenario
     try:
         scenario, _ = load_scenario(b.scenario, b.overrides)
     except ScenarioError:
@@ -570,9 +570,9 @@ def load_baseline(path: str | Path, require_metrics: bool = True) -> Baseline:
 
 def fly_baseline(baseline: Baseline, log_path: str | Path) -> dict[str, Any]:
     """Fly the baseline's scenario with its overrides; the metrics of that run."""
-    from fwsim.loop import run
-    from fwsim.metrics import compute_metrics
-    from fwsim.scenario import load_scenario
+    from fwsim.sim.loop import run
+    from fwsim.analysis.metrics import compute_metrics
+    from fwsim.scenario.model import load_scenario
 
     scenario, text = load_scenario(baseline.scenario, baseline.overrides)
     result = run(scenario, text, Path(log_path))

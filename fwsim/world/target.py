@@ -60,8 +60,8 @@ from typing import TYPE_CHECKING, Annotated, Literal, get_args
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
-from fwsim.configbase import StrictModel
-from fwsim.frames import wrap_pi
+from fwsim.interface.configbase import StrictModel
+from fwsim.interface.frames import wrap_pi
 
 if TYPE_CHECKING:  # trimesh is imported lazily: the scenario schema imports this module
     import trimesh
@@ -230,7 +230,7 @@ class Ship:
             self._nodes_n = [0.0]
         elif m.model == "speed_changes":
             self._knot_t, self._knot_v, self._knot_d = _speed_knots(self._v, m.times_s, m.speeds_m_s, m.accel_m_s2)
-        self._manoeuvres: list[_Manoeuvre] = []  # fwsim.events target_manoeuvre, oldest first
+        self._manoeuvres: list[_Manoeuvre] = []  # fwsim.world.events target_manoeuvre, oldest first
 
     # ------------------------------------------------------------------ truth
 

@@ -11,15 +11,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fwsim.airframe import Airframe
-from fwsim.camera import Camera, FrameGeometry, Pose
-from fwsim.frames import GeoOrigin, dcm_enu_from_frd
-from fwsim.geometry import uav_mesh
-from fwsim.gimbal import Gimbal, GimbalState, camera_pose_world
-from fwsim.messages import ActuatorCommand, AirframeState, AirState, GimbalCommand
-from fwsim.scenario import Scenario
-from fwsim.sensors import rng_for
-from fwsim.target import HullVolume, Ship, TargetState, r_enu_from_ship
+from fwsim.world.airframe import Airframe
+from fwsim.sensors.camera import Camera, FrameGeometry, Pose
+from fwsim.interface.frames import GeoOrigin, dcm_enu_from_frd
+from fwsim.world.geometry import uav_mesh
+from fwsim.world.gimbal import Gimbal, GimbalState, camera_pose_world
+from fwsim.interface.messages import ActuatorCommand, AirframeState, AirState, GimbalCommand
+from fwsim.scenario.model import Scenario
+from fwsim.sensors.onboard import rng_for
+from fwsim.world.target import HullVolume, Ship, TargetState, r_enu_from_ship
 
 #: the UAV farther than this from the ship's origin cannot be inside it (uav_inside_ship's quick test)
 _NEAR_SHIP_M = 60.0
@@ -83,7 +83,7 @@ class World:
         return self._compose(uav, self.gimbal.reset())
 
     def manoeuvre_ship(self, t_s: float, ev) -> float:
-        """Start a target_manoeuvre event (fwsim.events) at ``t_s``; how long it takes."""
+        """Start a target_manoeuvre event (fwsim.world.events) at ``t_s``; how long it takes."""
         return self.ship.manoeuvre(t_s, ev.course_deg, ev.speed_m_s, ev.turn_rate_deg_s, ev.accel_m_s2)
 
     @property

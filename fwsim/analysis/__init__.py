@@ -1,0 +1,1 @@
+"""What a log says: metrics, comparisons, batch reports and plots (all read logs only)."""

@@ -1,0 +1,1 @@
+"""The types both sides share: messages, frames and topics (the flight software imports only these)."""

@@ -1,0 +1,1 @@
+"""Scenario YAML -> validated configuration; the field reference and JSON Schema."""

@@ -1,0 +1,1 @@
+"""The loop that flies a scenario, the Python API, and the block timers behind ``fwsim bench``."""

@@ -1,0 +1,1 @@
+"""The simulated world (truth side): JSBSim airframe, ship, gimbal, meshes, timed events."""
