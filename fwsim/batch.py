@@ -510,12 +510,12 @@ _IN_POOL_WORKER = False
 def _pool_worker_init(nmpc_worker: str = "inline") -> None:
     global _IN_POOL_WORKER
     _IN_POOL_WORKER = True
-    from controllers.nmpc_worker import ENV
+    from controllers.guidance.nmpc_worker import ENV
     os.environ.setdefault(ENV, nmpc_worker)  # a user's FWSIM_NMPC_WORKER stands
 
 
 def _nmpc_worker_for(workers: int) -> str:
-    """Where a pool worker's NMPC solves (``controllers.nmpc_worker``): in a process of its own when the
+    """Where a pool worker's NMPC solves (``controllers.guidance.nmpc_worker``): in a process of its own when the
     machine has a spare core for each worker's, else on the worker's thread (the same numbers either way)."""
     return "process" if (os.cpu_count() or 1) >= 2 * workers else "inline"
 
@@ -610,9 +610,9 @@ def _run_ray(jobs: list[RunJob], on_row: RowCallback, run_fn: Callable) -> None:
     system and fwsim installed on every node."""
     import ray
 
-    from controllers.nmpc_worker import ENV
+    from controllers.guidance.nmpc_worker import ENV
 
-    # one CPU a run: its NMPC solves on its own thread (controllers.nmpc_worker; the same numbers either way)
+    # one CPU a run: its NMPC solves on its own thread (controllers.guidance.nmpc_worker; the same numbers either way)
     remote = ray.remote(num_cpus=1, max_retries=1,
                         runtime_env={"env_vars": {ENV: os.environ.get(ENV, "inline")}})(run_fn)
     refs = {remote.remote(j): j for j in jobs}

@@ -503,7 +503,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _check_environment() -> None:
     """Environment variables fwsim reads, checked before anything flies (a bad one: exit code 2)."""
-    from controllers.nmpc_worker import ENV, worker_choice
+    from controllers.guidance.nmpc_worker import ENV, worker_choice
     try:
         worker_choice()
     except ValueError as exc:

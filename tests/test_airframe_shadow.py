@@ -1,14 +1,14 @@
-"""The flight software's model of its own airframe (controllers.airframe) against the harness's ray-cast
+"""The flight software's model of its own airframe (controllers.perception.airframe) against the harness's ray-cast
 camera: the pixels it hides, and the ship boxes it cuts."""
 import math
 
 import numpy as np
 import pytest
 
-from controllers.airframe import AirframeShadow
-from controllers.camera_model import PinholeCamera
+from controllers.perception.airframe import AirframeShadow
+from controllers.navigation.camera_model import PinholeCamera
 from controllers.config import AirframeConfig, Controllers
-from controllers.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
+from controllers.perception.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
 from fwsim.geometry import uav_mesh
@@ -93,7 +93,7 @@ def _detection(cp, Rc, R_fc, box, h):
     """A detection of ``box`` from that camera pose, as the flight software gets it (the gimbal's angles from
     the camera's rotation in the body frame), the camera's motion, and the image of the tracked point ``h``
     above the ship's waterline centre (the origin)."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     from fwsim.messages import Measurements
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
@@ -173,9 +173,9 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
     half of the ship the airframe hid. Whole boxes get the same fix either way."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
     from controllers.messages import TargetState
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
-    from controllers.ukf import UkfConfig
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
+    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -216,9 +216,9 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
     with the whole ship's prediction; with the rule off it takes the cut one and the fix moves off."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
     from controllers.messages import TargetState
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
-    from controllers.ukf import UkfConfig
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
+    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
@@ -271,8 +271,8 @@ def test_the_cut_gives_the_share_of_the_ship_hidden():
 
 def _perception(airframe, fsw_cam):
     from controllers.config import AcquisitionConfig, DetectionGateConfig
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
 
     p = Perception(DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0),
                    AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam), fsw_cam,
@@ -286,8 +286,8 @@ def test_the_cut_is_made_where_the_detection_puts_the_ship():
     detection puts the ship in the image (``align_iterations``, while the course is unknown; here on the
     ship's own heading) fixes a cut box nearer the tracked point than the cut made where the estimate puts it,
     whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
-    from controllers.target_model import box_centre_offset_px, predicted_boxes_px
-    from controllers.ukf import UkfConfig
+    from controllers.perception.target_model import box_centre_offset_px, predicted_boxes_px
+    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -327,7 +327,7 @@ def test_a_mostly_hidden_ship_of_unknown_course_is_skipped():
     (``airframe_hidden``) while the ship's course is unknown (its heading from the box shapes alone: the cut
     rests on it), and used when the course is known."""
     from controllers.messages import FusionReason, TargetState
-    from controllers.ukf import UkfConfig
+    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m

@@ -12,7 +12,7 @@ import controllers
 from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 from controllers.mission import FlightSoftware
-from controllers.phases import PhaseState, Ring, approach_bearing_deg, next_phase, window_bearing_deg
+from controllers.phases.phases import PhaseState, Ring, approach_bearing_deg, next_phase, window_bearing_deg
 from fwsim.messages import Measurements, RateCommand
 from fwsim.scenario import parse_scenario
 

@@ -37,7 +37,7 @@ A ship of the class's layout but another size is learnt from its boxes
 (:class:`ShipSize`, ``size_fit``): its length, beam and height scale the
 outline the correction projects once enough boxes have been seen at a known
 heading. The UAV's own airframe hiding part of the ship is modelled by the
-perception (``controllers.airframe``: the predicted boxes are cut as the
+perception (``controllers.perception.airframe``: the predicted boxes are cut as the
 detector's are, :func:`projected_points_px` and :attr:`ShipOutline.parts` give
 it the silhouette). What it does not model: a ship of another layout than the
 class's (the fit then finds the sizes that best explain the boxes with the
@@ -56,9 +56,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from controllers.camera_model import PinholeCamera, depth_on_plane
+from controllers.navigation.camera_model import PinholeCamera, depth_on_plane
 from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
-from controllers.ukf import ground_from_pixel_jacobian
+from controllers.estimation.ukf import ground_from_pixel_jacobian
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
@@ -122,7 +122,7 @@ class ShipOutline:
         pts += box(*mast)
         self.points_ship_m = np.array(pts, dtype=float)
         #: the rows of each convex solid (hull, deckhouse, wheelhouse, funnel, mast): a silhouette is the union
-        #: of their projections' convex hulls (``controllers.airframe``)
+        #: of their projections' convex hulls (``controllers.perception.airframe``)
         self.parts = [slice(0, n_hull)] + [slice(k, k + 8) for k in range(n_hull, len(pts), 8)]
         #: the outline without the mast (a detector's box often leaves a thin mast out: the size fit's boxes)
         self.body = _Points(self.points_ship_m[:n_body])
@@ -532,7 +532,7 @@ def _at_image_border(camera: PinholeCamera, b: np.ndarray, e: float) -> bool:
 def _pixel_on_plane(camera: PinholeCamera, uv, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
     """(the point (3,) where pixel ``uv``'s ray meets the plane z = ``plane_z``, its normalised image
     coordinates x1, x2), or None where the ray does not come down to it
-    (:func:`~controllers.camera_model.depth_on_plane`)."""
+    (:func:`~controllers.navigation.camera_model.depth_on_plane`)."""
     x1, x2 = (float(uv[0]) - camera.cx) / camera.fx, (float(uv[1]) - camera.cy) / camera.fy
     Z = depth_on_plane(x1, x2, R, float(cam_pos[2]), plane_z)
     if not math.isfinite(Z):
@@ -939,8 +939,8 @@ class LayoutFit:
 
     def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
         """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v: m per px,
-        :func:`controllers.ukf.ground_from_pixel_jacobian`) or None where the ray does not come down to it
-        (:func:`~controllers.camera_model.depth_on_plane`)."""
+        :func:`controllers.estimation.ukf.ground_from_pixel_jacobian`) or None where the ray does not come down to it
+        (:func:`~controllers.navigation.camera_model.depth_on_plane`)."""
         hit = _pixel_on_plane(self.camera, uv, cam_pos, R, plane_z)
         if hit is None:
             return None

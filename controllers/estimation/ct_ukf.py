@@ -1,6 +1,6 @@
 """Target estimation for manoeuvring ships: the paper's UKF with the ship's turn rate and along-track acceleration.
 
-The paper's UKF (:mod:`controllers.ukf`) models the ship at constant velocity. A
+The paper's UKF (:mod:`controllers.estimation.ukf`) models the ship at constant velocity. A
 ship that turns (up to ~1.5 deg/s), zigzags or changes speed (~0.5 m/s^2) is
 then followed with a lag: the velocity trails the turn by the filter's time
 constant, and the position by the velocity's error times that. This filter
@@ -16,7 +16,7 @@ State ``x = [x1, x2, r_q (3), V_q (3), omega (rad/s), a (m/s^2)]`` (10):
 
 Process model (continuous, RK4 over each predict, as the UKF's)::
 
-    x1_dot, x2_dot     = the UKF's feature kinematics (controllers.ukf._sx_feature_rates, shared)
+    x1_dot, x2_dot     = the UKF's feature kinematics (controllers.estimation.ukf._sx_feature_rates, shared)
     r_q_dot            = V_q
     V_q_dot            = omega e_z x V_q + a V_q / max(|V_q,h|, min_speed_m_s)     (horizontal)
     omega_dot          = -omega (1 / turn_rate_time_s + f / fade_time_s)   + white noise
@@ -33,7 +33,7 @@ UKF's CV model and the extra states cost little (tests: not worse than the
 UKF on a straight line). On ships unlike the class they cost more: the box
 centres' errors make the turn rate wander on a straight ship (envelope, seed
 1648: velocity error in the loiter 0.48 m/s at the median run against the
-UKF's 0.16), which :mod:`controllers.imm` (an IMM of the two) avoids.
+UKF's 0.16), which :mod:`controllers.estimation.imm` (an IMM of the two) avoids.
 Paper missions (seeds 21, 22; tuned on 11-13), UKF -> this: a 1.5 deg/s
 turn, miss 3.35/2.90 -> 0.75/2.19 m, estimate error at impact 6.4/5.2 ->
 0.8/2.9 m; speed steps at 0.5 m/s^2, loiter position error 2.6/2.7 ->
@@ -70,7 +70,7 @@ acceleration on r_q / V_q with ``target_accel_noise_m_s2`` horizontally) plus
 Gauss-Markov variance).
 
 Measurement: the UKF's, unchanged (``z = [u, v, r_c]``, pinhole + flat-sea
-depth, paper eq. 9; the compiled update :class:`controllers.ukf._CompiledUpdate`
+depth, paper eq. 9; the compiled update :class:`controllers.estimation.ukf._CompiledUpdate`
 works on any state that starts ``[x1, x2, r_q, ...]``).
 
 Output: a :class:`ManoeuvreEstimate` (a :class:`~controllers.messages.TargetEstimate`
@@ -88,10 +88,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import PinholeCamera, closing_time_s, held_while_closing
+from controllers.navigation.camera_model import PinholeCamera, closing_time_s, held_while_closing
 from controllers.config import CtUkfConfig, UkfConfig
 from controllers.messages import TargetEstimate
-from controllers.ukf import UkfTargetEstimator, _CompiledProcess, _process_noise_of
+from controllers.estimation.ukf import UkfTargetEstimator, _CompiledProcess, _process_noise_of
 
 __all__ = ["CtUkfConfig", "CtUkfTargetEstimator", "ManoeuvreEstimate", "predict_ctra"]
 
@@ -115,7 +115,7 @@ class ManoeuvreEstimate(TargetEstimate):
 
 class _CtProcess(_CompiledProcess):
     """The process model of :class:`CtUkfTargetEstimator`, compiled: the UKF's RK4 and feature rates
-    (:class:`controllers.ukf._CompiledProcess`) with the coordinated turn and along-track acceleration.
+    (:class:`controllers.estimation.ukf._CompiledProcess`) with the coordinated turn and along-track acceleration.
     ``params = (turn_rate_time_s, accel_time_s, min_speed_m_s)``."""
 
     dim_x = 10

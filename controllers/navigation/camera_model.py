@@ -1,6 +1,6 @@
 """Pinhole camera and image-feature kinematics for the flight software (UKF, IBVS).
 
-A small, dependency-free module (numpy only) shared by ``controllers.ukf`` and
+A small, dependency-free module (numpy only) shared by ``controllers.estimation.ukf`` and
 the IBVS controller. The harness has its own camera (``fwsim.camera``), which
 flight software must not import; this one holds only what a mission computer
 knows: the intrinsics and the geometry.
