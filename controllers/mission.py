@@ -29,20 +29,20 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.perception.airframe import AirframeShadow
 from controllers.blocks import NO_LOITER, BlockContext, Recorder, build_block
-from controllers.navigation.camera_model import PinholeCamera, camera_motion
 from controllers.config import Controllers
 from controllers.estimation.estimation import Estimation
 from controllers.guidance.guidance import PathGuidance
+from controllers.guidance.script import ScriptedCommands
 from controllers.messages import DetectionFix, Guidance, TargetState
+from controllers.navigation.camera_model import PinholeCamera, camera_motion
 from controllers.navigation.nav import Navigation
+from controllers.perception.airframe import AirframeShadow
 from controllers.perception.perception import Perception
+from controllers.perception.target_model import ShipModel
 from controllers.phases.phases import PhaseState, Ring, entry_altitude_m, next_phase, radial_error_m, window_bearing_deg
 from controllers.pointing.pointing import Pointing
-from controllers.guidance.script import ScriptedCommands
 from controllers.pointing.search import GimbalSearch
-from controllers.perception.target_model import ShipModel
 from fwsim.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
 
 __all__ = ["FlightSoftware", "FlightSoftwareOutput", "ScriptedFlightSoftware", "flight_software"]

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from controllers.perception.airframe import AirframeShadow
-from controllers.navigation.camera_model import PinholeCamera
 from controllers.config import AirframeConfig, Controllers
+from controllers.navigation.camera_model import PinholeCamera
+from controllers.perception.airframe import AirframeShadow
 from controllers.perception.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
@@ -172,10 +172,10 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
     the airframe model puts the fix near the image of the tracked point; without it the fix is off by the
     half of the ship the airframe hid. Whole boxes get the same fix either way."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.estimation.ukf import UkfConfig
     from controllers.messages import TargetState
     from controllers.perception.perception import Perception
     from controllers.perception.target_model import ShipModel
-    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -215,10 +215,10 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
     (as when the estimate puts the ship a little into the silhouette and the ship is not there) is corrected
     with the whole ship's prediction; with the rule off it takes the cut one and the fix moves off."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.estimation.ukf import UkfConfig
     from controllers.messages import TargetState
     from controllers.perception.perception import Perception
     from controllers.perception.target_model import ShipModel
-    from controllers.estimation.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
@@ -286,8 +286,8 @@ def test_the_cut_is_made_where_the_detection_puts_the_ship():
     detection puts the ship in the image (``align_iterations``, while the course is unknown; here on the
     ship's own heading) fixes a cut box nearer the tracked point than the cut made where the estimate puts it,
     whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
-    from controllers.perception.target_model import box_centre_offset_px, predicted_boxes_px
     from controllers.estimation.ukf import UkfConfig
+    from controllers.perception.target_model import box_centre_offset_px, predicted_boxes_px
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -326,8 +326,8 @@ def test_a_mostly_hidden_ship_of_unknown_course_is_skipped():
     """A detection of which the cut says the airframe hides more than ``max_hidden_share`` is skipped
     (``airframe_hidden``) while the ship's course is unknown (its heading from the box shapes alone: the cut
     rests on it), and used when the course is known."""
-    from controllers.messages import FusionReason, TargetState
     from controllers.estimation.ukf import UkfConfig
+    from controllers.messages import FusionReason, TargetState
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m

@@ -10,8 +10,8 @@ import pytest
 from pydantic import BaseModel, ConfigDict, Field
 
 from controllers.blocks import BlockContext, TargetEstimator
-from controllers.messages import Guidance
 from controllers.estimation.ukf import UkfTargetEstimator
+from controllers.messages import Guidance
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main
 from fwsim.loop import run

@@ -15,11 +15,11 @@ import pytest
 from test_manoeuvre_estimator import TurningShip, orbit_measurements
 from test_ukf import CAM, MOUNT
 
-from controllers.navigation.camera_model import closing_time_s, held_while_closing
 from controllers.config import TurnFromCourseConfig
 from controllers.estimation.course_turn import CourseTurn, CourseTurnStatus, fit_periodic, lag_matrices
 from controllers.estimation.estimation import Estimation
 from controllers.estimation.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
+from controllers.navigation.camera_model import closing_time_s, held_while_closing
 from fwsim import SCENARIO_DIR, topics
 from fwsim.scenario import ScenarioError, load_scenario, parse_scenario
 from fwsim.target import Ship, TargetConfig

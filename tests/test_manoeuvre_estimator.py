@@ -18,9 +18,10 @@ from test_ukf import CAM, MOUNT, OrbitTruth
 
 from controllers.blocks import TargetEstimator, builtin_names
 from controllers.config import CtUkfConfig
-from controllers.estimation.ct_ukf import CtUkfTargetEstimator, ManoeuvreEstimate, fx_ct_batch, predict_ctra
-from controllers.messages import TargetEstimate
+from controllers.estimation.ct_ukf import CtUkfTargetEstimator, ManoeuvreEstimate, fx_ct_batch
 from controllers.estimation.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
+from controllers.messages import TargetEstimate
+from controllers.ship_motion import predict_ctra
 from fwsim import SCENARIO_DIR
 from fwsim import frames as F
 from fwsim.scenario import ScenarioError, load_scenario, parse_scenario

@@ -237,8 +237,8 @@ def test_air_relative_loiter_predicts_the_target_in_the_air_mass(monkeypatch):
     """With ``air_relative`` (default) the loiter hands the NMPC the target's velocity minus the navigation's
     wind estimate; without it, or with no estimate, the velocity over the ground."""
     from controllers.guidance.guidance import NmpcLoiter
-    from controllers.messages import TargetState
     from controllers.guidance.nmpc_worker import ENV
+    from controllers.messages import TargetState
 
     monkeypatch.setenv(ENV, "inline")  # the solve is wrapped in this process
 

@@ -7,9 +7,9 @@ import pytest
 
 from controllers.config import NmpcConfig
 from controllers.guidance.guidance import NmpcLoiter
-from controllers.messages import TargetState
 from controllers.guidance.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements
 from controllers.guidance.nmpc_worker import ENV, InlineSolver, ProcessSolver, WorkerError, make_solver
+from controllers.messages import TargetState
 from fwsim.messages import Measurements
 
 FSW_DT = 1.0 / 30.0

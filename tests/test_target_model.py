@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from controllers.navigation.camera_model import PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, SizeFitConfig
 from controllers.messages import FusionReason, TargetState
+from controllers.navigation.camera_model import PinholeCamera
 from controllers.perception.perception import Perception
 from controllers.perception.target_model import (
     ShapeHeading,
@@ -155,8 +155,8 @@ def test_the_gate_may_allow_for_the_box_centres_systematic_error():
     the prediction. Against noise alone the gate turns it away; allowing for the box centre's systematic
     error (4 % of the box's sides, 20 px across) it passes and is fused as before; 200 px off it is still
     turned away."""
-    from controllers.messages import DetectionFix
     from controllers.estimation.ukf import CameraMotion, UkfTargetEstimator
+    from controllers.messages import DetectionFix
     cam = PinholeCamera.from_config(CAM_CFG)
     cp = np.array([-400.0, 0.0, 300.0])
     p = np.array([0.0, 0.0, UkfConfig().target_plane_height_m]) - cp
@@ -1004,8 +1004,8 @@ def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
 
 def test_the_ukf_weighs_a_doubtful_box_less():
     """A fix with centre_noise_px2 moves the estimate less than the same fix without it."""
-    from controllers.messages import DetectionFix
     from controllers.estimation.ukf import CameraMotion, UkfTargetEstimator
+    from controllers.messages import DetectionFix
     cfg = UkfConfig()
     cam = PinholeCamera.from_config(CAM_CFG)
     cp = np.array([-400.0, 0.0, 300.0])

@@ -16,8 +16,8 @@ from filterpy.kalman import KalmanFilter
 from pydantic import ValidationError
 
 from controllers.blocks import TargetEstimator, resolve_class
-from controllers.navigation.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
 from controllers.estimation.ukf import CameraMotion, TargetEstimate, UkfConfig, UkfTargetEstimator, UnscentedCore
+from controllers.navigation.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
 from fwsim import frames as F
 from fwsim.messages import Measurements
 
@@ -390,7 +390,7 @@ def test_the_compiled_update_equals_the_numpy_one():
 def test_ground_from_pixel_jacobian_against_finite_differences():
     """d(point on the plane)/d(u, v): the analytic form against central differences of the ray's meeting point
     with the plane, for oblique and steep views."""
-    from controllers.estimation.ukf import ground_from_pixel_jacobian
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     for euler, pan, tilt, px in (((0.1, -0.05, 0.4), -0.3, -0.6, (700.0, 300.0)),
                                  ((-0.5, 0.1, 2.0), 1.2, -1.2, (100.0, 650.0)),
                                  ((0.0, 0.0, 0.0), 0.0, -0.25, (640.0, 360.0))):
@@ -431,7 +431,7 @@ def test_the_box_centre_bias_widens_the_reported_std_only():
     """box_centre_bias_frac: the estimate's position std carries the systematic box-centre error through the
     latest view's geometry (J diag(s^2) J^T, s a fraction of the box's size); the state and the filter's own
     covariance are those of box_centre_bias_frac = 0."""
-    from controllers.estimation.ukf import ground_from_pixel_jacobian
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     runs = {k: _fly_with_an_80_by_30_box(UkfConfig(box_centre_bias_frac=k, box_centre_height_std_m=0.0), 90)
             for k in (0.0, 0.1)}
     (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[0.1]
@@ -489,7 +489,8 @@ def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only
     into the reported position std through the view's geometry, beside box_centre_bias_frac:
     ``J (diag(s^2) + S) J^T``; the state and the filter's covariance are those without it, and
     ``consider_heading_spread: false`` reports the std without it."""
-    from controllers.estimation.ukf import fix_from_measurements, ground_from_pixel_jacobian
+    from controllers.estimation.ukf import fix_from_measurements
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     truth = OrbitTruth()
     S = np.array([[9.0, 2.0], [2.0, 16.0]])  # px^2
     runs = {}

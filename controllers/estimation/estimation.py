@@ -35,9 +35,9 @@ import operator
 
 import numpy as np
 
-from controllers.navigation.camera_model import CameraMotion, closing_time_s
 from controllers.estimation.course_turn import CourseTurn
 from controllers.messages import DetectionFix, DetectionFusion, FusionReason, FusionResult, TargetEstimate, TargetState
+from controllers.navigation.camera_model import CameraMotion, closing_time_s
 from fwsim import topics
 from fwsim.messages import Measurements
 

@@ -58,11 +58,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 from controllers.config import CtUkfConfig, ImmConfig, UkfConfig
 from controllers.estimation.ct_ukf import I_ACCEL, I_TURN, CtUkfTargetEstimator, ManoeuvreEstimate
-from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult
 from controllers.estimation.ukf import UkfTargetEstimator, step_on_measurements
+from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 
 __all__ = ["ImmEstimate", "ImmTargetEstimator", "mix", "transition", "update_probabilities"]
 

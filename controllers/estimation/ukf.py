@@ -35,7 +35,7 @@ within twice the std). It is not fused; the estimate's reported position std
 (``TargetEstimate.pos_std_m``, horizontal axes) adds ``J diag(s^2) J^T``, a
 consider covariance: ``s`` is ``box_centre_bias_frac`` of the latest box's
 width and height (px) and ``J`` the pixel-to-plane Jacobian of that view
-(:func:`ground_from_pixel_jacobian`). While the ship's heading is not known the
+(:func:`controllers.navigation.camera_model.ground_from_pixel_jacobian`). While the ship's heading is not known the
 shape correction is a weighted mean over the headings it may have, and the
 detection carries the spread of that mean (``DetectionFix.offset_spread_px2``,
 px^2): another error common to consecutive frames, added to ``diag(s^2)``
@@ -73,7 +73,8 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from controllers.navigation.camera_model import MIN_RAY_DOWN as _CAMERA_MIN_RAY_DOWN
-from controllers.navigation.camera_model import CameraMotion, PinholeCamera, depth_on_plane, feature_rates
+from controllers.navigation.camera_model import (CameraMotion, PinholeCamera, depth_on_plane, feature_rates,
+                                                 ground_jacobian_rows)
 from controllers.config import UkfConfig
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult, TargetEstimate
 from fwsim.messages import Measurements
@@ -495,30 +496,6 @@ def _hx_batch(X: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_e
     return out
 
 
-def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float,
-                               fx: float, fy: float) -> np.ndarray:
-    """d(point on the plane)/d(u, v) (3 x 2, m per px) of the ray through the normalised pixel (x1, x2): the
-    point is ``r_c + Z d`` with ``d = R [x1, x2, 1]`` and ``Z = (cam_z - plane_z) / -d_z``, so
-    ``dG/dx_i = h (R[:, i] / -d_z + d R[2, i] / d_z^2)`` (h the camera's height above the plane); NaN where
-    the ray does not come down to the plane. Tested against finite differences."""
-    R = np.asarray(R_enu_from_cam, dtype=float)
-    d = R @ np.array([x1, x2, 1.0])
-    h = cam_z_m - plane_z_m
-    if not (d[2] < -1e-9 and h > 0.0):
-        return np.full((3, 2), np.nan)
-    return np.array(_ground_jacobian_rows(R.tolist(), d.tolist(), h, fx, fy, 3))
-
-
-def _ground_jacobian_rows(R: list, d: list, h: float, fx: float, fy: float, rows: int) -> list[list[float]]:
-    """The first ``rows`` rows of :func:`ground_from_pixel_jacobian` (``R`` and the ray ``d`` as nested lists,
-    the ray coming down, ``h > 0``): ``h (R[j, i] / -d_z + d_j R[2, i] / d_z^2) / f_i``, element by element
-    (Python floats: a 2 x 2 block costs less than one numpy call on it)."""
-    nd, dd = -d[2], d[2] * d[2]
-    r2x, r2y = R[2][0], R[2][1]
-    return [[h * (R[j][0] / nd + d[j] * r2x / dd) / fx, h * (R[j][1] / nd + d[j] * r2y / dd) / fy]
-            for j in range(rows)]
-
-
 def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
     """Horizontal covariance (2 x 2, m^2) on the target plane of an error ``height_std_m`` in the height of the
     point seen through the normalised pixel (x1, x2): along the ray ``d = R [x1, x2, 1]`` a point ``dz`` higher
@@ -879,7 +856,7 @@ class UkfTargetEstimator:
         h = motion.height_m - cfg.target_plane_height_m
         if not (d[2] < -1e-9 and h > 0.0):  # the ray does not come down to the plane
             return _ZERO23, None
-        J = _ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
+        J = ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
         (j00, j01), (j10, j11) = J
         if not (math.isfinite(j00) and math.isfinite(j01) and math.isfinite(j10) and math.isfinite(j11)):
             return _ZERO23, None

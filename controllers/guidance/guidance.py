@@ -23,15 +23,18 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from controllers.guidance.bpng import Bpng
-from controllers.messages import Guidance, TargetState
 from controllers.guidance.path import OrbitFollower, PathFollower
-from controllers.perception.target_model import ShipModel
+from controllers.messages import Guidance, TargetState
 from fwsim import topics
 from fwsim.messages import Measurements
+
+if TYPE_CHECKING:  # the perception's ship model, handed in by the mission
+    from controllers.perception.target_model import ShipModel
 
 __all__ = ["PathGuidance", "OrbitLoiter", "NmpcLoiter", "BpngTerminal"]
 
@@ -192,7 +195,7 @@ class BpngTerminal:
         vel = np.asarray(target.vel_enu_m_s, dtype=float)
         if target.turn_rate_rad_s == 0.0 and target.accel_along_m_s2 == 0.0:
             return vel, vel
-        from controllers.estimation.ct_ukf import predict_ctra
+        from controllers.ship_motion import predict_ctra
         t_go = max(float(np.linalg.norm(pos - nav.pos_enu_m)) / max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0),
                    0.1)
         p_f, v_f = predict_ctra(pos, vel, target.turn_rate_rad_s, target.accel_along_m_s2, t_go)

@@ -86,9 +86,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.guidance.cbf import G, cbf_rows, cbf_terms
 from controllers.compiled import Buffered
 from controllers.config import NmpcConfig
+from controllers.guidance.cbf import G, cbf_rows, cbf_terms
 from fwsim.frames import wrap_pi
 from fwsim.messages import Measurements, RateCommand
 

@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
-from controllers.navigation.camera_model import PinholeCamera
 from controllers.config import AirframeConfig
+from controllers.navigation.camera_model import PinholeCamera
 
 __all__ = ["AirframeShadow"]
 

@@ -75,9 +75,9 @@ from collections import deque
 
 import numpy as np
 
-from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
 from controllers.messages import DetectionFix, FusionReason, TargetState
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 from controllers.perception.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px, projected_points_px
 from fwsim import topics
 from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd

@@ -56,9 +56,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from controllers.navigation.camera_model import PinholeCamera, depth_on_plane
 from controllers.config import LayoutFitConfig, ShapeHeadingConfig, ShipModelConfig, SizeFitConfig
-from controllers.estimation.ukf import ground_from_pixel_jacobian
+from controllers.navigation.camera_model import PinholeCamera, depth_on_plane, ground_from_pixel_jacobian
 from fwsim.frames import dcm_ship_from_enu, heading_deg_from_course_enu
 
 __all__ = ["ShipModelConfig", "ShapeHeadingConfig", "ShapeHeading", "ShipModel", "ShipHeadingStatus", "ShipSize",
@@ -939,7 +938,7 @@ class LayoutFit:
 
     def _ground(self, uv: np.ndarray, cam_pos: np.ndarray, R: np.ndarray, plane_z: float):
         """(the ground point of pixel ``uv`` on the plane z = ``plane_z``, its derivative by u and by v: m per px,
-        :func:`controllers.estimation.ukf.ground_from_pixel_jacobian`) or None where the ray does not come down to it
+        :func:`controllers.navigation.camera_model.ground_from_pixel_jacobian`) or None where the ray does not come down to it
         (:func:`~controllers.navigation.camera_model.depth_on_plane`)."""
         hit = _pixel_on_plane(self.camera, uv, cam_pos, R, plane_z)
         if hit is None:

@@ -155,8 +155,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.navigation.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from controllers.config import IbvsConfig
+from controllers.navigation.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from fwsim.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, finite3, wrap_pi
 from fwsim.messages import GimbalCommand, Measurements
 

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import math
 
-from controllers.navigation.camera_model import CameraMotion, PinholeCamera, depth_on_plane
 from controllers.config import IbvsConfig, ReacquireConfig
-from controllers.pointing.ibvs import Ibvs
 from controllers.messages import DetectionFix, TargetState
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera, depth_on_plane
+from controllers.pointing.ibvs import Ibvs
 from controllers.pointing.search import GimbalSearch
 from fwsim import topics
 from fwsim.frames import dcm_enu_from_frd, pan_tilt_pointing_at
