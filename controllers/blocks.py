@@ -31,7 +31,8 @@ its own log topics and events. A user estimator can wrap the built-in one::
 
 docs/BLOCKS.md shows a whole one. What a block returns is typed
 (``controllers.messages``). Built-in classes live beside their algorithms:
-``controllers.estimation.ukf``, ``controllers.estimation.ct_ukf``, ``controllers.estimation.imm``, ``controllers.guidance.guidance``, ``controllers.pointing.pointing``.
+``controllers.estimation.ukf``, ``controllers.estimation.ct_ukf``, ``controllers.estimation.imm``,
+``controllers.guidance.guidance``, ``controllers.pointing.pointing``.
 
 This module imports nothing heavy (no solver, filter or OpenCV): the scenario
 validation uses it.

@@ -1,13 +1,13 @@
 """The flight software: ``Measurements`` in, autopilot and gimbal commands out, as the paper's block diagram.
 
-    nav    = navigation.step(meas)              own position between GNSS fixes        (controllers.navigation.nav)
-    cam    = camera_motion(nav, mount)          camera pose from attitude + encoders   (controllers.navigation.camera_model)
-    prior  = estimation.predict(nav, cam)       the target estimate brought to now     (controllers.estimation.estimation)
-    fix    = perception.step(nav, cam, prior)   detection -> corrected fix + decision  (controllers.perception.perception)
-    est    = estimation.update(nav, cam, fix)   fuse it (start, restart)               (controllers.estimation.estimation)
-    phase  = next_phase(phase, nav, est, ...)   pure decision, reason logged           (controllers.phases.phases)
-    guide  = guidance[phase].step(nav, est)     path | loiter (orbit, NMPC) | BPNG     (controllers.guidance.guidance)
-    gimbal = pointing.step(nav, cam, est, fix)  search | track (IBVS) | reacquire      (controllers.pointing.pointing)
+    nav    = navigation.step(meas)              own position between GNSS fixes        (navigation.nav)
+    cam    = camera_motion(nav, mount)          camera pose from attitude + encoders   (navigation.camera_model)
+    prior  = estimation.predict(nav, cam)       the target estimate brought to now     (estimation.estimation)
+    fix    = perception.step(nav, cam, prior)   detection -> corrected fix + decision  (perception.perception)
+    est    = estimation.update(nav, cam, fix)   fuse it (start, restart)               (estimation.estimation)
+    phase  = next_phase(phase, nav, est, ...)   pure decision, reason logged           (phases.phases)
+    guide  = guidance[phase].step(nav, est)     path | loiter (orbit, NMPC) | BPNG     (guidance.guidance)
+    gimbal = pointing.step(nav, cam, est, fix)  search | track (IBVS) | reacquire      (pointing.pointing)
 
 Phases (paper, "Simulation"): 1 acquisition (the initial path while the gimbal
 searches; the lock starts the estimator and IBVS takes the gimbal), 2 loiter

@@ -8,7 +8,8 @@ import pytest
 from controllers.config import AirframeConfig, Controllers
 from controllers.navigation.camera_model import PinholeCamera
 from controllers.perception.airframe import AirframeShadow
-from controllers.perception.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
+from controllers.config import ShipModelConfig
+from controllers.perception.ship_outline import ShipOutline, predicted_box_px, projected_points_px
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
 from fwsim.geometry import uav_mesh
@@ -287,7 +288,7 @@ def test_the_cut_is_made_where_the_detection_puts_the_ship():
     ship's own heading) fixes a cut box nearer the tracked point than the cut made where the estimate puts it,
     whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
     from controllers.estimation.ukf import UkfConfig
-    from controllers.perception.target_model import box_centre_offset_px, predicted_boxes_px
+    from controllers.perception.ship_outline import box_centre_offset_px, predicted_boxes_px
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m

@@ -4,7 +4,15 @@ import math
 import numpy as np
 import pytest
 
-from controllers.guidance.cbf import CbfConfig, alpha_right, body_z_component, cbf_rows, h_sides, h_value, lateral_offset
+from controllers.guidance.cbf import (
+    CbfConfig,
+    alpha_right,
+    body_z_component,
+    cbf_rows,
+    h_sides,
+    h_value,
+    lateral_offset,
+)
 from controllers.guidance.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
 from fwsim.frames import dcm_enu_from_frd, heading_ned_from_course_enu
 

@@ -1,4 +1,5 @@
-"""A turning ship through the paper's constant-velocity UKF (controllers.estimation.course_turn, controllers.turn_from_course).
+"""A turning ship through the paper's constant-velocity UKF (controllers.estimation.course_turn,
+controllers.turn_from_course).
 
 Oracles: the analytic circle of a ship turning at 1-1.5 deg/s seen from an
 orbiting camera (tests/test_manoeuvre_estimator.py's TurningShip), the UKF's own

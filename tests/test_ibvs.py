@@ -1,4 +1,5 @@
-"""Tests for controllers.pointing.ibvs: feature kinematics, the law vs the paper's form, limits, singularity, closed loop.
+"""Tests for controllers.pointing.ibvs: feature kinematics, the law vs the paper's form, limits, singularity,
+closed loop.
 
 The closed-loop tests fly a kinematic world (no JSBSim): a UAV on a straight line
 or a circle at 22 m/s, the harness's Gimbal integrating the commanded rates with

@@ -10,16 +10,10 @@ from controllers.config import AcquisitionConfig, DetectionGateConfig, SizeFitCo
 from controllers.messages import FusionReason, TargetState
 from controllers.navigation.camera_model import PinholeCamera
 from controllers.perception.perception import Perception
-from controllers.perception.target_model import (
-    ShapeHeading,
-    ShapeHeadingConfig,
-    ShipModel,
-    ShipModelConfig,
-    ShipOutline,
-    box_centre_offset_px,
-    predicted_box_px,
-    predicted_boxes_px,
-)
+from controllers.config import ShapeHeadingConfig, ShipModelConfig
+from controllers.perception.shape_heading import ShapeHeading
+from controllers.perception.ship_outline import ShipOutline, box_centre_offset_px, predicted_box_px, predicted_boxes_px
+from controllers.perception.target_model import ShipModel
 from controllers.estimation.ukf import UkfConfig, UnscentedCore
 from fwsim.camera import Camera, CameraConfig, Pose
 from fwsim.frames import dcm_enu_from_frd
@@ -598,7 +592,7 @@ def test_size_bias_range_must_be_ordered_and_keep_boxes_positive():
 def test_the_compiled_boxes_equal_the_numpy_ones(n):
     """Predicted boxes for a few courses come from a compiled function, for many from numpy: the same boxes to
     rounding, invalid rows (a point behind the camera, a box off the image) NaN in both."""
-    from controllers.perception.target_model import predicted_boxes_px_numpy
+    from controllers.perception.ship_outline import predicted_boxes_px_numpy
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
     for cp, Rc, _ in list(views(0.0))[::9]:
@@ -652,15 +646,15 @@ def test_a_late_detection_is_brought_to_the_camera_pose_of_now():
 def test_weighted_mean_of_rows_is_numpys_average_bit_for_bit():
     """The box-centre offset's weighted mean skips np.average's argument checks but keeps its reductions: the
     same numbers, bit for bit, for 1 to 80 headings (pairwise summation starts above 8)."""
-    from controllers.perception.target_model import _weighted_mean_rows
+    from controllers.perception.ship_outline import weighted_mean_rows
     rng = np.random.default_rng(3)
     for n in list(range(1, 81)) * 5:
         a, w = 50.0 * rng.normal(size=(n, 2)), rng.random(n)
         w /= w.sum()
-        assert np.array_equal(_weighted_mean_rows(a, w), np.average(a, axis=0, weights=w))
-        assert np.array_equal(_weighted_mean_rows(a, None), np.average(a, axis=0))  # equal headings
+        assert np.array_equal(weighted_mean_rows(a, w), np.average(a, axis=0, weights=w))
+        assert np.array_equal(weighted_mean_rows(a, None), np.average(a, axis=0))  # equal headings
     with pytest.raises(ZeroDivisionError):
-        _weighted_mean_rows(np.ones((3, 2)), np.zeros(3))
+        weighted_mean_rows(np.ones((3, 2)), np.zeros(3))
 
 
 @pytest.mark.parametrize("ship_type, dims", [("bridge_aft", (47.0, 20.0, 32.0)), ("ferry", (65.0, 27.0, 20.0))])
@@ -670,7 +664,7 @@ def test_the_size_fit_learns_a_ship_unlike_the_class_and_corrects_better(ship_ty
     outline land nearer the tracked point's image than with the class's, by more than half; a ferry (another
     layout, 20 % lower) comes out taller, not lower (its boxes are tall for its height), and its correction
     is about as good as with the class's outline."""
-    from controllers.perception.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     L, W, H = dims
     heading = 40.0
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading, length_m=L, width_m=W, height_m=H))
@@ -712,7 +706,7 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
     detector's box takes in the thin mast, which far boxes leave out: the fit predicts midway between the
     outline with and without it, the difference in the box's noise, and every scale ends within 13 % of 1,
     the height within 11 % (fitted against the outline without the mast alone: up to 1.22)."""
-    from controllers.perception.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -729,7 +723,7 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
 def test_the_size_fit_weighs_boxes_at_its_rate():
     """Consecutive frames carry nearly the same information: with times given, a box within 1 / rate_hz of the
     last one weighed is not looked at (without times, every box is)."""
-    from controllers.perception.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     cp, Rc, frame = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 700.0, 35.0, 30.0)
@@ -743,7 +737,7 @@ def test_the_size_fit_weighs_boxes_at_its_rate():
 def test_a_size_fit_gone_wrong_starts_again():
     """A fit sure of a wrong size turns every box away; after max_gated_in_a_row of them it starts again from
     the prior and (``class_after_restarts: 0``) learns the ship."""
-    from controllers.perception.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -764,7 +758,7 @@ def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_r
     """``class_after_restarts: 1`` (the default): the same fit gone wrong, once it starts again, takes no more
     boxes and the correction keeps the class's outline (``scale`` None) for good; with 2 it learns again after
     the first restart, as with 0."""
-    from controllers.perception.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -1124,7 +1118,7 @@ def _layout_fit_round(ship_type: str, course_known: bool = True, elevation_deg: 
     """A LayoutFit fed the ray-cast boxes of a still ship of ``ship_type`` seen from round a ring (700 m, a lap
     in 4 min at 1.5 boxes a second), the estimate on the ship, its course given (or None): the fit."""
     from controllers.config import LayoutFitConfig
-    from controllers.perception.target_model import LayoutFit
+    from controllers.perception.layout_fit import LayoutFit
     heading = 40.0
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
@@ -1223,7 +1217,7 @@ def _shapes_round(ship_type: str, elevation_deg: float = 40.0, heading: float = 
     """A ShapeHeading (the class's outline) fed the ray-cast boxes of a still ship of ``ship_type`` seen from round
     a ring (700 m, a lap in 4 min), its course given and followed: the posterior, and the course (ENU, rad)."""
     from controllers.config import ShapeHeadingConfig
-    from controllers.perception.target_model import ShapeHeading
+    from controllers.perception.shape_heading import ShapeHeading
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -1244,7 +1238,7 @@ def test_the_box_shapes_say_which_end_the_superstructure_stands_at(elevation_deg
     shapes tell the two ends apart no more (60 deg: -0.6 and -0.4; from 50 deg on): the centres' fit decides
     there. Off when bow and stern share their weight, and before the shapes are ready."""
     from controllers.config import ShapeHeadingConfig
-    from controllers.perception.target_model import ShapeHeading
+    from controllers.perception.shape_heading import ShapeHeading
     fwd, course = _shapes_round("bridge_forward", elevation_deg)
     aft, _ = _shapes_round("bridge_aft", elevation_deg)
     r_fwd, r_aft = fwd.reverse_log_ratio(course), aft.reverse_log_ratio(course)
@@ -1266,7 +1260,7 @@ def test_the_layout_fit_weighs_the_box_shapes_evidence_too():
     point floor far above their misfits) the probability is the prior's moved by the shapes alone, each way;
     with the weight 0 it is the prior's."""
     from controllers.config import LayoutFitConfig
-    from controllers.perception.target_model import LayoutFit
+    from controllers.perception.layout_fit import LayoutFit
     heading = 40.0
     ship = Ship(TargetConfig(type="bridge_aft", heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)

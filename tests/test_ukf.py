@@ -1,4 +1,5 @@
-"""The target UKF (controllers.estimation.ukf) and the feature kinematics / depth model (controllers.navigation.camera_model).
+"""The target UKF (controllers.estimation.ukf) and the feature kinematics / depth model
+(controllers.navigation.camera_model).
 
 Oracles: finite differences of the projection (feature kinematics), the
 paper's on-axis depth formula, a linear Kalman filter (filterpy) on a linear

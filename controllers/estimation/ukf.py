@@ -533,7 +533,8 @@ def _sqrt_spd2(a: float, b: float, c: float) -> tuple[float, float, float]:
 
 
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
-    """:func:`controllers.navigation.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the plane)."""
+    """:func:`controllers.navigation.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the
+    plane)."""
     R = R_enu_from_cam
     dz = float(R[2, 0]) * x1 + float(R[2, 1]) * x2 + float(R[2, 2])
     return -dz / math.sqrt(x1 * x1 + x2 * x2 + 1.0) >= _CAMERA_MIN_RAY_DOWN and cam_z_m - plane_z_m > 0.0

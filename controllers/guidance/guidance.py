@@ -186,9 +186,9 @@ class BpngTerminal:
     def ship_velocity(nav: Measurements, pos: np.ndarray, target: TargetState) -> tuple[np.ndarray, np.ndarray]:
         """(the velocity the law extrapolates the ship with, the ship's velocity at impact).
 
-        A ship that turns or changes speed (an estimator that estimates it, ``controllers.estimation.ct_ukf``, or a steady
-        turn or a zigzag's periodic course found in the estimate's course, ``controllers.estimation.course_turn``: the
-        turn rate now, held constant to the time to go) is
+        A ship that turns or changes speed (an estimator that estimates it, ``controllers.estimation.ct_ukf``, or a
+        steady turn or a zigzag's periodic course found in the estimate's course,
+        ``controllers.estimation.course_turn``: the turn rate now, held constant to the time to go) is
         predicted along its turn to the time to go (the law's ``t_go = |r| / |V_p|``), and the law is given
         the chord's velocity, ``(p(t_go) - p) / t_go``: its constant-velocity extrapolation then meets the ship
         where the turn takes it. Without a manoeuvre, the estimated velocity, for both."""

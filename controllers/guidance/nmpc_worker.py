@@ -148,7 +148,8 @@ class ProcessSolver:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
         try:
-            self._proc = subprocess.Popen([sys.executable, "-m", "controllers.guidance.nmpc_worker", str(theirs.fileno())],
+            self._proc = subprocess.Popen([sys.executable, "-m", "controllers.guidance.nmpc_worker",
+                                           str(theirs.fileno())],
                                           pass_fds=(theirs.fileno(),), env=env, stdin=subprocess.DEVNULL,
                                           start_new_session=False)
         finally:

@@ -25,7 +25,7 @@ so that the cut is the one where the camera sees the ship. The perception
 silhouette (:meth:`AirframeShadow.touches`), and its box-centre correction
 then subtracts the centre of the cut box, as it
 already does for a box cut by the image border
-(:func:`controllers.perception.target_model.predicted_box_px` clips to the image). A box
+(:func:`controllers.perception.ship_outline.predicted_box_px` clips to the image). A box
 no ray of which can meet the airframe is returned unchanged at the cost of a
 few dot products (:meth:`AirframeShadow.may_hide`): the airframe lies above
 the camera, so it hides only rays that climb in the body frame, and for the

@@ -78,7 +78,8 @@ import numpy as np
 from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
 from controllers.messages import DetectionFix, FusionReason, TargetState
 from controllers.navigation.camera_model import CameraMotion, PinholeCamera
-from controllers.perception.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px, projected_points_px
+from controllers.perception.ship_outline import box_centre_offset_px, predicted_boxes_px, projected_points_px
+from controllers.perception.target_model import ShipModel
 from fwsim import topics
 from fwsim.frames import R_frd_from_cam, dcm_enu_from_frd
 from fwsim.messages import Measurements
@@ -131,7 +132,7 @@ class Perception:
     def __init__(self, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship: ShipModel,
                  camera: PinholeCamera, recorder=None, airframe=None):
         self.cfg = gate
-        self.airframe = airframe  # controllers.perception.airframe.AirframeShadow, or None: boxes not cut by the airframe
+        self.airframe = airframe  # an airframe.AirframeShadow, or None: boxes not cut by the airframe
         self.lock = Lock(acquisition)
         self.ship = ship
         self.camera = camera
@@ -245,8 +246,8 @@ class Perception:
         heading explains the box's size (else ""), the offset's spread over the headings the ship may have
         (2 x 2, px^2; zeros when there is one, or no correction), and the centre's doubt ((u, v) px^2,
         :func:`_centre_doubt`; with ``size_mismatch_action: deweight``, else zeros). ``fit_size``: the box
-        may teach the ship's size (:meth:`~controllers.perception.target_model.ShipModel.learn_size`, when the heading is
-        sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
+        may teach the ship's size (:meth:`~controllers.perception.target_model.ShipModel.learn_size`, when the heading
+        is sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
         the camera's rotation in the body frame when the detected box touches the UAV's airframe in the image
         (else None); the predicted boxes are then cut as the
         airframe would cut them (:meth:`_cut_by_airframe`; a box clear of it was not cut, whatever the
@@ -346,7 +347,7 @@ class Perception:
         return scaled if self._no_heading_fits(det, scaled) else None
 
     def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False):
-        """:func:`~controllers.perception.target_model.box_centre_offset_px` over ``headings`` = (courses, weights, one
+        """:func:`~controllers.perception.ship_outline.box_centre_offset_px` over ``headings`` = (courses, weights, one
         course, their predicted boxes): the one course's offset, or the weighted mean over the courses."""
         courses, weights, single, boxes = headings
         return box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
