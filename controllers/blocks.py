@@ -37,7 +37,8 @@ its own log topics and events. A user estimator can wrap the built-in one::
 
 docs/guide/plugins.md shows whole ones. What a block returns is typed
 (``controllers.messages``). Built-in classes live beside their algorithms:
-``controllers.ukf``, ``controllers.ct_ukf``, ``controllers.imm``, ``controllers.guidance``, ``controllers.pointing``.
+``controllers.estimation.ukf``, ``controllers.estimation.ct_ukf``, ``controllers.estimation.imm``,
+``controllers.guidance.guidance``, ``controllers.pointing.pointing``.
 
 This module imports nothing heavy (no solver, filter or OpenCV): the scenario
 validation uses it.
@@ -65,7 +66,7 @@ __all__ = ["TargetEstimator", "LoiterGuidance", "TerminalGuidance", "PointingLaw
 @runtime_checkable
 class TargetEstimator(Protocol):
     """A target estimator (``controllers.estimator``). The flight software's estimation block
-    (``controllers.estimation``) decides when it starts and restarts; the estimator predicts, fuses
+    (``controllers.estimation.estimation``) decides when it starts and restarts; the estimator predicts, fuses
     and estimates. Members (``initialised``, ``tracked_height_m``: a property, a class attribute or an
     attribute set in ``__init__``):"""
 
@@ -135,7 +136,7 @@ class TerminalGuidance(Protocol):
 
 @runtime_checkable
 class PointingLaw(Protocol):
-    """The gimbal's tracking law (``controllers.pointing``), while the target is being detected."""
+    """The gimbal's tracking law (``controllers.pointing.pointing``), while the target is being detected."""
 
     def step(self, nav, camera, target):
         """``Measurements``, ``CameraMotion``, ``TargetState`` -> ``GimbalCommand`` (joint rates)."""
@@ -173,9 +174,9 @@ class BlockContext:
     """What a block may use: the flight software's configuration and its a-priori models."""
 
     config: Any  # controllers.config.Controllers: every block's settings
-    camera: Any  # controllers.camera_model.PinholeCamera: the camera's intrinsics
+    camera: Any  # controllers.navigation.camera_model.PinholeCamera: the camera's intrinsics
     mount_offset_frd_m: np.ndarray  # the gimbal's rotation centre relative to the CG, body FRD
-    ship: Any  # controllers.target_model.ShipModel: the ship class's outline and its learnt heading
+    ship: Any  # controllers.perception.target_model.ShipModel: the ship class's outline and its learnt heading
     recorder: Recorder = field(default_factory=Recorder)
     initial: Any = None  # the scenario's initial state (the initial path starts there)
 
@@ -204,37 +205,37 @@ class Slot:
 
 
 def _ukf(ctx: BlockContext):
-    from controllers.ukf import UkfTargetEstimator
+    from controllers.estimation.ukf import UkfTargetEstimator
     return UkfTargetEstimator(ctx.camera, ctx.config.ukf)
 
 
 def _ct_ukf(ctx: BlockContext):
-    from controllers.ct_ukf import CtUkfTargetEstimator
+    from controllers.estimation.ct_ukf import CtUkfTargetEstimator
     return CtUkfTargetEstimator(ctx.camera, ctx.config.ukf, ctx.config.ct_ukf)
 
 
 def _imm(ctx: BlockContext):
-    from controllers.imm import ImmTargetEstimator
+    from controllers.estimation.imm import ImmTargetEstimator
     return ImmTargetEstimator(ctx.camera, ctx.config.ukf, ctx.config.ct_ukf, ctx.config.imm)
 
 
 def _orbit(ctx: BlockContext):
-    from controllers.guidance import OrbitLoiter
+    from controllers.guidance.guidance import OrbitLoiter
     return OrbitLoiter(ctx.config.orbit, ctx.config.initial_path.max_bank_deg)
 
 
 def _nmpc(ctx: BlockContext):
-    from controllers.guidance import NmpcLoiter
+    from controllers.guidance.guidance import NmpcLoiter
     return NmpcLoiter(ctx.config.nmpc, ctx.recorder)
 
 
 def _bpng(ctx: BlockContext):
-    from controllers.guidance import BpngTerminal
+    from controllers.guidance.guidance import BpngTerminal
     return BpngTerminal(ctx.config.bpng, ctx.ship, ctx.recorder)
 
 
 def _ibvs(ctx: BlockContext):
-    from controllers.pointing import IbvsPointing
+    from controllers.pointing.pointing import IbvsPointing
     return IbvsPointing(ctx.config.ibvs, ctx.camera, ctx.mount_offset_frd_m, ctx.recorder)
 
 

@@ -4,7 +4,7 @@ A CasADi ``Function`` built once from symbolic (SX) expressions runs in CasADi's
 virtual machine, in C; :class:`Buffered` calls it on preallocated numpy arrays
 (``Function.buffer``), so one call costs a few microseconds of Python however
 large the expression. The NMPC's QP data and the UKF's sigma-point propagation
-are evaluated this way (``controllers.nmpc``, ``controllers.ukf``).
+are evaluated this way (``controllers.guidance.nmpc``, ``controllers.estimation.ukf``).
 
 Against numpy the results differ by rounding only (the same operations, in
 CasADi's order): ``tests/test_ukf.py`` checks the UKF's against its numpy form.

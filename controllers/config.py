@@ -5,7 +5,7 @@ description per field (PX4's ``module.yaml`` habit); unknown keys are errors.
 They live apart from the algorithms so that reading a scenario loads no
 solver, filter, OpenCV or ray-casting module: ``fwsim --help``, scenario
 validation and ``fwsim metrics`` stay fast. The algorithms import their
-settings from here (``controllers.ukf.UkfConfig`` is this module's).
+settings from here (``controllers.estimation.ukf.UkfConfig`` is this module's).
 
 Which block flies each part of the mission is chosen here too
 (:class:`BlockChoice`: a built-in name, or ``module.sub:ClassName`` of a
@@ -220,7 +220,7 @@ class ShapeHeadingConfig(StrictModel):
 
 
 class SizeFitConfig(StrictModel):
-    """The ship's own length, beam and height, learnt from its boxes (``controllers.target_model.ShipSize``)."""
+    """The ship's own length, beam and height, learnt from its boxes (``controllers.perception.size_fit.ShipSize``)."""
 
     enabled: bool = Field(True, description="fit the class outline's length, beam and height to the detected "
                                             "boxes' sizes and correct the box centres with the fitted outline")
@@ -259,7 +259,7 @@ class SizeFitConfig(StrictModel):
 
 class LayoutFitConfig(StrictModel):
     """Which end of the ship its superstructure stands at, learnt from where its box centres fall
-    (``controllers.target_model.LayoutFit``): the class's layout, or the same superstructure at the other end
+    (``controllers.perception.layout_fit.LayoutFit``): the class's layout, or the same superstructure at the other end
     (a ship with its bridge forward where the class has it aft)."""
 
     enabled: bool = Field(
@@ -383,7 +383,7 @@ class CtUkfConfig(StrictModel):
 
     Only the ship's motion model is set here; the measurement model and its noise, the innovation gate, the
     tracked point's height, the feature noise, the start and the sigma points are the UKF's
-    (``controllers.ukf``), so a scenario tuned for the UKF flies this filter with the same camera model."""
+    (``controllers.estimation.ukf``), so a scenario tuned for the UKF flies this filter with the same camera model."""
 
     turn_rate_std_deg_s: float = Field(
         1.5, gt=0, le=20,
@@ -425,8 +425,8 @@ class CtUkfConfig(StrictModel):
 
 class PeriodicCourseConfig(StrictModel):
     """A zigzagging ship seen through a constant-velocity estimator (``controllers.turn_from_course.periodic``,
-    ``controllers.course_turn``): the estimate's course history fitted with a line plus one sinusoid; when the
-    sinusoid stands out, the ship's course is that fit one filter lag ahead, and the state handed on follows
+    ``controllers.estimation.course_turn``): the estimate's course history fitted with a line plus one sinusoid;
+    when the sinusoid stands out, the ship's course is that fit one filter lag ahead, and the state handed on follows
     it (its velocity's direction, its position's lag, the turn rate the guidance predicts with)."""
 
     enabled: bool = Field(True, description="on: fit and use a periodic course; off: steady turns only")
@@ -459,12 +459,12 @@ class PeriodicCourseConfig(StrictModel):
 
 
 class TurnFromCourseConfig(StrictModel):
-    """A turning ship seen through a constant-velocity estimator (the paper's UKF; ``controllers.course_turn``):
-    the turn rate from the slope of the estimate's course, and the filter's steady lag in the turn (its
-    velocity a few degrees and its position about a metre behind, from its own covariance) taken out of the
-    state the perception, the pointing and the guidance read; the guidance then predicts the ship along the
-    turn. The logged estimate (``/fsw/estimate``) stays the filter's. An estimator that estimates the turn
-    itself (``ct_ukf``, ``imm``) is left alone."""
+    """A turning ship seen through a constant-velocity estimator (the paper's UKF;
+    ``controllers.estimation.course_turn``): the turn rate from the slope of the estimate's course, and the filter's
+    steady lag in the turn (its velocity a few degrees and its position about a metre behind, from its own covariance)
+    taken out of the state the perception, the pointing and the guidance read; the guidance then predicts the ship along
+    the turn. The logged estimate (``/fsw/estimate``) stays the filter's. An estimator that estimates the turn itself
+    (``ct_ukf``, ``imm``) is left alone."""
 
     enabled: bool = Field(True, description="on: find the turn and take the lag out; off: the estimate as it is")
     window_s: float = Field(
@@ -882,7 +882,7 @@ _Box6 = Annotated[list[float], Field(min_length=6, max_length=6), AfterValidator
 
 class AirframeConfig(StrictModel):
     """The UAV's own shape as the flight software knows it (a priori, as it knows the ship class): the parts
-    that can stand between its camera and the ship (``controllers.airframe``). Body FRD, metres, origin at
+    that can stand between its camera and the ship (``controllers.perception.airframe``). Body FRD, metres, origin at
     the CG; the camera sits at the gimbal's mount offset. The defaults are the fwuav's (fuselage 1.0 m x
     0.12 m, high wing of 2.4 m span and 0.146 m chord, tails 0.6 m aft)."""
 

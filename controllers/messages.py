@@ -76,10 +76,10 @@ class TargetState:
     vel_enu_m_s: np.ndarray  # (3,)
     vel_std_m_s: float  # horizontal velocity std, the larger axis (NaN unless from the estimator)
     tracked_height_m: float  # height of the tracked point above the ship's waterline, m
-    # the ship's manoeuvre, when the estimator estimates one (controllers.ct_ukf) or a steady turn or a zigzag's
-    # periodic course is found in a constant-velocity estimate's course (controllers.course_turn; the periodic
-    # course's rate now); 0 otherwise: the turn rate of its course (ENU, counter-clockwise positive) and its
-    # acceleration along its track
+    # the ship's manoeuvre, when the estimator estimates one (controllers.estimation.ct_ukf) or a steady turn or a
+    # zigzag's periodic course is found in a constant-velocity estimate's course (controllers.estimation.course_turn;
+    # the periodic course's rate now); 0 otherwise: the turn rate of its course (ENU, counter-clockwise positive) and
+    # its acceleration along its track
     turn_rate_rad_s: float = 0.0
     accel_along_m_s2: float = 0.0
 

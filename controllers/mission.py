@@ -1,18 +1,18 @@
 """The flight software: ``Measurements`` in, autopilot and gimbal commands out, as the paper's block diagram.
 
-    nav    = navigation.step(meas)              own position between GNSS fixes        (controllers.nav)
-    cam    = camera_motion(nav, mount)          camera pose from attitude + encoders   (controllers.camera_model)
-    prior  = estimation.predict(nav, cam)       the target estimate brought to now     (controllers.estimation)
-    fix    = perception.step(nav, cam, prior)   detection -> corrected fix + decision  (controllers.perception)
-    est    = estimation.update(nav, cam, fix)   fuse it (start, restart)               (controllers.estimation)
-    phase  = next_phase(phase, nav, est, ...)   pure decision, reason logged           (controllers.phases)
-    guide  = guidance[phase].step(nav, est)     path | loiter (orbit, NMPC) | BPNG     (controllers.guidance)
-    gimbal = pointing.step(nav, cam, est, fix)  search | track (IBVS) | reacquire      (controllers.pointing)
+    nav    = navigation.step(meas)              own position between GNSS fixes        (navigation.nav)
+    cam    = camera_motion(nav, mount)          camera pose from attitude + encoders   (navigation.camera_model)
+    prior  = estimation.predict(nav, cam)       the target estimate brought to now     (estimation.estimation)
+    fix    = perception.step(nav, cam, prior)   detection -> corrected fix + decision  (perception.perception)
+    est    = estimation.update(nav, cam, fix)   fuse it (start, restart)               (estimation.estimation)
+    phase  = next_phase(phase, nav, est, ...)   pure decision, reason logged           (phases.phases)
+    guide  = guidance[phase].step(nav, est)     path | loiter (orbit, NMPC) | BPNG     (guidance.guidance)
+    gimbal = pointing.step(nav, cam, est, fix)  search | track (IBVS) | reacquire      (pointing.pointing)
 
 Phases (paper, "Simulation"): 1 acquisition (the initial path while the gimbal
 searches; the lock starts the estimator and IBVS takes the gimbal), 2 loiter
 round the estimated ship (``after_lock``), 3 terminal guidance to the impact
-angles once the switch condition holds (``controllers.phases``). The
+angles once the switch condition holds (``controllers.phases.phases``). The
 estimator, the Phase 2 and Phase 3 guidance and the pointing law are each a
 built-in block or a user's class named in the scenario (``controllers.blocks``); a user's class is
 guarded at its boundary (``controllers.blocks.guarded``): an exception in it, or a return value of the
@@ -31,20 +31,20 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.airframe import AirframeShadow
 from controllers.blocks import NO_LOITER, BlockContext, Recorder, build_block
-from controllers.camera_model import PinholeCamera, camera_motion
 from controllers.config import Controllers
-from controllers.estimation import Estimation
-from controllers.guidance import PathGuidance
+from controllers.estimation.estimation import Estimation
+from controllers.guidance.guidance import PathGuidance
+from controllers.guidance.script import ScriptedCommands
 from controllers.messages import DetectionFix, Guidance, TargetState
-from controllers.nav import Navigation
-from controllers.perception import Perception
-from controllers.phases import PhaseState, Ring, entry_altitude_m, next_phase, radial_error_m, window_bearing_deg
-from controllers.pointing import Pointing
-from controllers.script import ScriptedCommands
-from controllers.search import GimbalSearch
-from controllers.target_model import ShipModel
+from controllers.navigation.camera_model import PinholeCamera, camera_motion
+from controllers.navigation.nav import Navigation
+from controllers.perception.airframe import AirframeShadow
+from controllers.perception.perception import Perception
+from controllers.perception.target_model import ShipModel
+from controllers.phases.phases import PhaseState, Ring, entry_altitude_m, next_phase, radial_error_m, window_bearing_deg
+from controllers.pointing.pointing import Pointing
+from controllers.pointing.search import GimbalSearch
 from fwsim.interface.messages import AutopilotCommand, FlightSoftwareStatus, GimbalCommand, Measurements
 
 __all__ = ["FlightSoftware", "FlightSoftwareOutput", "ScriptedFlightSoftware", "flight_software"]

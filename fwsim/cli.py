@@ -368,11 +368,7 @@ def cmd_batch(args) -> int:
         raise ScenarioError(f"--workers: expected the number of parallel runs, 1 or more (got {args.workers})")
     if args.seed is not None and args.seed < 0:
         raise ScenarioError(f"--seed: expected an integer >= 0 for the dispersions' draws (got {args.seed})")
-    bad = [h for h in args.hold if not h.strip() or any(not p for p in h.strip().split("."))]
-    if bad:
-        raise ScenarioError(f"--hold {bad[0]!r}: expected a dotted field path (e.g. world.wind_enu_m_s)")
-    only = _only_seeds(args.only)
-    changes = SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold), only)
+    changes = _spec_changes(args, SpecChanges)
     out = Path(args.out) if args.out else Path("runs") / Path(args.spec).stem
     failed = 0
     # the bar starts with the first run, not before: a spec refused before any run flies leaves its one-line
@@ -409,6 +405,20 @@ def cmd_batch(args) -> int:
             return exit_code(exc)
     finally:
         stop_bar()
+    return _batch_summary(result)
+
+
+def _spec_changes(args, SpecChanges):
+    """The command line's changes to a batch spec (--seed, --set, --hold, --only), checked."""
+    bad = [h for h in args.hold if not h.strip() or any(not p for p in h.strip().split("."))]
+    if bad:
+        raise ScenarioError(f"--hold {bad[0]!r}: expected a dotted field path (e.g. world.wind_enu_m_s)")
+    only = _only_seeds(args.only)
+    return SpecChanges(args.seed, parse_sets(args.set), tuple(h.strip() for h in args.hold), only)
+
+
+def _batch_summary(result) -> int:
+    """Print a finished batch's failed runs, its counts and its files; the command's exit code."""
     bad = result.failed
     if bad:
         table = Table(title=f"{len(bad)} of {len(result.rows)} runs did not complete")
@@ -646,7 +656,7 @@ def _add_compare_parser(sub) -> None:
 
 def _check_environment() -> None:
     """Environment variables fwsim reads, checked before anything flies (a bad one: exit code 2)."""
-    from controllers.nmpc_worker import ENV, worker_choice
+    from controllers.guidance.nmpc_worker import ENV, worker_choice
     try:
         worker_choice()
     except ValueError as exc:

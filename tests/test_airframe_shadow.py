@@ -1,14 +1,15 @@
-"""The flight software's model of its own airframe (controllers.airframe) against the harness's ray-cast
+"""The flight software's model of its own airframe (controllers.perception.airframe) against the harness's ray-cast
 camera: the pixels it hides, and the ship boxes it cuts."""
 import math
 
 import numpy as np
 import pytest
 
-from controllers.airframe import AirframeShadow
-from controllers.camera_model import PinholeCamera
 from controllers.config import AirframeConfig, Controllers
-from controllers.target_model import ShipModelConfig, ShipOutline, predicted_box_px, projected_points_px
+from controllers.navigation.camera_model import PinholeCamera
+from controllers.perception.airframe import AirframeShadow
+from controllers.config import ShipModelConfig
+from controllers.perception.ship_outline import ShipOutline, predicted_box_px, projected_points_px
 from fwsim.sensors.camera import Camera, CameraConfig, Pose
 from fwsim.interface.frames import R_frd_from_cam, dcm_enu_from_frd, pan_tilt_pointing_at
 from fwsim.world.geometry import uav_mesh
@@ -93,7 +94,7 @@ def _detection(cp, Rc, R_fc, box, h):
     """A detection of ``box`` from that camera pose, as the flight software gets it (the gimbal's angles from
     the camera's rotation in the body frame), the camera's motion, and the image of the tracked point ``h``
     above the ship's waterline centre (the origin)."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     from fwsim.interface.messages import Measurements
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
@@ -172,10 +173,10 @@ def test_the_perception_corrects_a_cut_box_by_the_cut():
     the airframe model puts the fix near the image of the tracked point; without it the fix is off by the
     half of the ship the airframe hid. Whole boxes get the same fix either way."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.estimation.ukf import UkfConfig
     from controllers.messages import TargetState
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
-    from controllers.ukf import UkfConfig
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -215,10 +216,10 @@ def test_a_whole_box_next_to_the_airframe_keeps_the_whole_prediction():
     (as when the estimate puts the ship a little into the silhouette and the ship is not there) is corrected
     with the whole ship's prediction; with the rule off it takes the cut one and the fix moves off."""
     from controllers.config import AcquisitionConfig, DetectionGateConfig
+    from controllers.estimation.ukf import UkfConfig
     from controllers.messages import TargetState
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
-    from controllers.ukf import UkfConfig
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
@@ -271,8 +272,8 @@ def test_the_cut_gives_the_share_of_the_ship_hidden():
 
 def _perception(airframe, fsw_cam):
     from controllers.config import AcquisitionConfig, DetectionGateConfig
-    from controllers.perception import Perception
-    from controllers.target_model import ShipModel
+    from controllers.perception.perception import Perception
+    from controllers.perception.target_model import ShipModel
 
     p = Perception(DetectionGateConfig(min_range_m=0.0, moving_min_range_m=0.0),
                    AcquisitionConfig(lock_detections=1), ShipModel(ShipModelConfig(), fsw_cam), fsw_cam,
@@ -286,8 +287,8 @@ def test_the_cut_is_made_where_the_detection_puts_the_ship():
     detection puts the ship in the image (``align_iterations``, while the course is unknown; here on the
     ship's own heading) fixes a cut box nearer the tracked point than the cut made where the estimate puts it,
     whose hidden part is not the one the camera saw; with the estimate on the ship the two agree."""
-    from controllers.target_model import box_centre_offset_px, predicted_boxes_px
-    from controllers.ukf import UkfConfig
+    from controllers.estimation.ukf import UkfConfig
+    from controllers.perception.ship_outline import box_centre_offset_px, predicted_boxes_px
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
@@ -326,8 +327,8 @@ def test_a_mostly_hidden_ship_of_unknown_course_is_skipped():
     """A detection of which the cut says the airframe hides more than ``max_hidden_share`` is skipped
     (``airframe_hidden``) while the ship's course is unknown (its heading from the box shapes alone: the cut
     rests on it), and used when the course is known."""
+    from controllers.estimation.ukf import UkfConfig
     from controllers.messages import FusionReason, TargetState
-    from controllers.ukf import UkfConfig
 
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from flight import Flight, flight_path_rad
 
-from controllers.script import perpendicular_axes
+from controllers.guidance.script import perpendicular_axes
 from fwsim.autopilot import Autopilot, bank_from_specific_force, load_autopilot_params
 from fwsim.interface.messages import AccelCommand, RateCommand
 

@@ -10,8 +10,8 @@ import pytest
 from pydantic import BaseModel, ConfigDict, Field
 
 from controllers.blocks import BlockContext, TargetEstimator
+from controllers.estimation.ukf import UkfTargetEstimator
 from controllers.messages import Guidance
-from controllers.ukf import UkfTargetEstimator
 from fwsim import SCENARIO_DIR
 from fwsim.cli import main
 from fwsim.sim.loop import run
@@ -124,7 +124,7 @@ def test_a_user_estimator_from_the_scenario_flies_and_is_called(tmp_path):
 
 
 def _ctx(scenario):
-    from controllers.camera_model import PinholeCamera
+    from controllers.navigation.camera_model import PinholeCamera
     return BlockContext(scenario.controllers, PinholeCamera.from_config(scenario.camera), np.zeros(3), None)
 
 

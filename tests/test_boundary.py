@@ -12,7 +12,7 @@ import controllers
 from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 from controllers.mission import FlightSoftware
-from controllers.phases import PhaseState, Ring, approach_bearing_deg, next_phase, window_bearing_deg
+from controllers.phases.phases import PhaseState, Ring, approach_bearing_deg, next_phase, window_bearing_deg
 from fwsim.interface.messages import Measurements, RateCommand
 from fwsim.scenario.model import parse_scenario
 
@@ -44,7 +44,6 @@ def test_controllers_import_nothing_from_the_truth_side():
                 assert mod == SHARED or mod.startswith(SHARED + "."), f"{f.name} imports {mod}"
 
 
-
 def test_the_shared_types_import_neither_side():
     """fwsim.interface (messages, frames, topics, the config base) is the one module both sides import: it imports
     nothing else of fwsim and nothing of the flight software, so no package-level cycle runs through it."""
@@ -56,6 +55,7 @@ def test_the_shared_types_import_neither_side():
             assert not mod.startswith("controllers"), f"{f.name} imports {mod}"
             if mod == "fwsim" or mod.startswith("fwsim."):
                 assert mod.startswith(SHARED), f"{f.name} imports {mod}"
+
 
 def test_flight_software_runs_on_measurements_alone():
     """A synthetic Measurements stream (no JSBSim, no harness) drives the flight software."""
@@ -275,3 +275,25 @@ def test_the_window_is_placed_by_the_closing_bearing_after_a_go_around():
     assert window_bearing_deg(later, default, bp, wind, ship) == closing
     assert window_bearing_deg(later, default, bp, wind, unknown) == 64.35
     assert window_bearing_deg(later, SwitchConfig(approach_from="impact_heading"), bp, wind, ship) == 64.35
+
+
+SHARED_CONTROLLERS = {"controllers", "controllers.config", "controllers.messages", "controllers.compiled",
+          "controllers.ship_motion", "controllers.navigation.camera_model"}
+
+
+def test_blocks_import_each_other_only_through_messages_config_and_shared_maths():
+    """A block's subpackage imports its own modules and the shared ones, not another block's (a type named only
+    for annotations, under TYPE_CHECKING, is allowed)."""
+    pkg = Path(controllers.__file__).parent
+    blocks = sorted(d.name for d in pkg.iterdir() if (d / "__init__.py").exists())
+    assert blocks == ["estimation", "guidance", "navigation", "perception", "phases", "pointing"]
+    for block in blocks:
+        for f in sorted((pkg / block).glob("*.py")):
+            tree = ast.parse(f.read_text())
+            typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                           and getattr(node.test, "id", None) == "TYPE_CHECKING" for n in ast.walk(node)}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.module and id(node) not in typing_only:
+                    mod = node.module
+                    if mod.startswith("controllers"):
+                        assert mod in SHARED_CONTROLLERS or mod.startswith(f"controllers.{block}."), f"{block}/{f.name}: {mod}"

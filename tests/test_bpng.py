@@ -1,4 +1,4 @@
-"""BPNG terminal guidance (controllers/bpng.py): geometry, sign, guards, kinematic closed loop."""
+"""BPNG terminal guidance (controllers/guidance/bpng.py): geometry, sign, guards, kinematic closed loop."""
 from __future__ import annotations
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from controllers.bpng import Bpng, BpngConfig, BpngStatus, body_rates_from_accel, bpng_accel, vf_enu
+from controllers.guidance.bpng import Bpng, BpngConfig, BpngStatus, body_rates_from_accel, bpng_accel, vf_enu
 from fwsim.interface.frames import dcm_enu_from_frd, enu_from_ned
 from fwsim.interface.messages import AccelCommand
 

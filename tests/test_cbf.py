@@ -1,11 +1,19 @@
-"""The self-occlusion CBF (controllers/cbf.py): geometry, signs, derivative, and the NMPC keeping h >= 0."""
+"""The self-occlusion CBF (controllers/guidance/cbf.py): geometry, signs, derivative, and the NMPC keeping h >= 0."""
 import math
 
 import numpy as np
 import pytest
 
-from controllers.cbf import CbfConfig, alpha_right, body_z_component, cbf_rows, h_sides, h_value, lateral_offset
-from controllers.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
+from controllers.guidance.cbf import (
+    CbfConfig,
+    alpha_right,
+    body_z_component,
+    cbf_rows,
+    h_sides,
+    h_value,
+    lateral_offset,
+)
+from controllers.guidance.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
 from fwsim.interface.frames import dcm_enu_from_frd, heading_ned_from_course_enu
 
 RNG = np.random.default_rng(7)

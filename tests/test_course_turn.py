@@ -1,4 +1,5 @@
-"""A turning ship through the paper's constant-velocity UKF (controllers.course_turn, controllers.turn_from_course).
+"""A turning ship through the paper's constant-velocity UKF (controllers.estimation.course_turn,
+controllers.turn_from_course).
 
 Oracles: the analytic circle of a ship turning at 1-1.5 deg/s seen from an
 orbiting camera (tests/test_manoeuvre_estimator.py's TurningShip), the UKF's own
@@ -15,11 +16,11 @@ import pytest
 from test_manoeuvre_estimator import TurningShip, orbit_measurements
 from test_ukf import CAM, MOUNT
 
-from controllers.camera_model import closing_time_s, held_while_closing
 from controllers.config import TurnFromCourseConfig
-from controllers.course_turn import CourseTurn, CourseTurnStatus, fit_periodic, lag_matrices
-from controllers.estimation import Estimation
-from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
+from controllers.estimation.course_turn import CourseTurn, CourseTurnStatus, fit_periodic, lag_matrices
+from controllers.estimation.estimation import Estimation
+from controllers.estimation.ukf import CameraMotion, UkfConfig, UkfTargetEstimator, fix_from_measurements
+from controllers.navigation.camera_model import closing_time_s, held_while_closing
 from fwsim import SCENARIO_DIR
 from fwsim.interface import topics
 from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from controllers.config import NmpcConfig, SwitchConfig
+from controllers.guidance.nmpc import Nmpc
 from controllers.messages import TargetState
-from controllers.nmpc import Nmpc
-from controllers.phases import PhaseState, Ring, entry_altitude_m, next_phase
+from controllers.phases.phases import PhaseState, Ring, entry_altitude_m, next_phase
 
 SHIP = TargetState(0.0, "estimator", np.zeros(3), np.zeros(3), 0.1, 0.0)
 

@@ -1,4 +1,5 @@
-"""Tests for controllers.ibvs: feature kinematics, the law vs the paper's form, limits, singularity, closed loop.
+"""Tests for controllers.pointing.ibvs: feature kinematics, the law vs the paper's form, limits, singularity,
+closed loop.
 
 The closed-loop tests fly a kinematic world (no JSBSim): a UAV on a straight line
 or a circle at 22 m/s, the harness's Gimbal integrating the commanded rates with
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from controllers import ibvs as I
+from controllers.pointing import ibvs as I
 from fwsim.interface import frames as F
 from fwsim.world.gimbal import Gimbal, GimbalConfig
 from fwsim.interface.messages import Measurements

@@ -1,4 +1,4 @@
-"""The interacting multiple model estimator (controllers.imm: the paper's UKF and the CT-UKF, mixed).
+"""The interacting multiple model estimator (controllers.estimation.imm: the paper's UKF and the CT-UKF, mixed).
 
 Oracles: the IMM's equations by hand on small cases (the Markov chain, the
 interaction, the model probabilities); the analytic circle and straight line of
@@ -16,8 +16,8 @@ from test_manoeuvre_estimator import CAM, MOUNT, TurningShip, ct_ukf, fly, rms
 
 from controllers.blocks import TargetEstimator, builtin_names
 from controllers.config import CtUkfConfig, ImmConfig
-from controllers.imm import ImmEstimate, ImmTargetEstimator, mix, transition, update_probabilities
-from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
+from controllers.estimation.imm import ImmEstimate, ImmTargetEstimator, mix, transition, update_probabilities
+from controllers.estimation.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
 from fwsim import SCENARIO_DIR
 from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
 

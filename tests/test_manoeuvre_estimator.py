@@ -1,4 +1,4 @@
-"""The manoeuvring-ship estimator (controllers.ct_ukf: the UKF with turn rate and along-track acceleration).
+"""The manoeuvring-ship estimator (controllers.estimation.ct_ukf: the UKF with turn rate and along-track acceleration).
 
 Oracles: the analytic circle of a ship turning at 1.5 deg/s (and the straight
 line of tests/test_ukf.py's constant-velocity ship), seen from a camera
@@ -18,9 +18,10 @@ from test_ukf import CAM, MOUNT, OrbitTruth
 
 from controllers.blocks import TargetEstimator, builtin_names
 from controllers.config import CtUkfConfig
-from controllers.ct_ukf import CtUkfTargetEstimator, ManoeuvreEstimate, fx_ct_batch, predict_ctra
+from controllers.estimation.ct_ukf import CtUkfTargetEstimator, ManoeuvreEstimate, fx_ct_batch
+from controllers.estimation.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
 from controllers.messages import TargetEstimate
-from controllers.ukf import CameraMotion, UkfConfig, UkfTargetEstimator
+from controllers.ship_motion import predict_ctra
 from fwsim import SCENARIO_DIR
 from fwsim.interface import frames as F
 from fwsim.scenario.model import ScenarioError, load_scenario, parse_scenario
@@ -210,7 +211,7 @@ def test_the_manoeuvre_is_held_while_the_camera_closes_in_and_released_after():
     assert est.manoeuvre_held and np.allclose(held_std, std_before, rtol=0.01)
     assert np.all(np.sqrt(np.diag(f.cov)[8:]) < 1e-2 * held_std)  # set aside: the detections cannot move them
     biased = dataclasses.replace(meas, det_u_px=meas.det_u_px + 8.0)
-    from controllers.ukf import fix_from_measurements
+    from controllers.estimation.ukf import fix_from_measurements
     assert f.update(fix_from_measurements(biased), diving).used
     assert f.turn_rate_rad_s == pytest.approx(w_before, abs=1e-4) and abs(f.accel_along_m_s2) < 1e-6
     receding = dataclasses.replace(motion, vel_enu_m_s=ship.ship_vel(t) - 20.0 * los / np.linalg.norm(los))

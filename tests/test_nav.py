@@ -1,10 +1,10 @@
-"""Navigation between GNSS fixes (controllers/nav.py)."""
+"""Navigation between GNSS fixes (controllers/navigation/nav.py)."""
 import math
 
 import numpy as np
 import pytest
 
-from controllers.nav import Navigation, NavigationConfig
+from controllers.navigation.nav import Navigation, NavigationConfig
 from fwsim.interface.messages import Measurements
 from fwsim.sensors.onboard import Sensors, SensorsConfig
 

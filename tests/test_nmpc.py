@@ -1,11 +1,11 @@
-"""The Phase 2 NMPC (controllers/nmpc.py): conventions, optimality against IPOPT, closed loop, fallbacks."""
+"""The Phase 2 NMPC (controllers/guidance/nmpc.py): conventions, optimality against IPOPT, closed loop, fallbacks."""
 import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from controllers.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
+from controllers.guidance.nmpc import Nmpc, NmpcConfig, continuous_dynamics, kinematic_closed_loop
 from fwsim.interface.messages import Measurements, RateCommand
 
 SHIP_V = np.array([0.0, 5.0, 0.0])  # the paper's ship: 5 m/s (here north)
@@ -236,9 +236,9 @@ def test_approach_term_is_nil_on_the_ring():
 def test_air_relative_loiter_predicts_the_target_in_the_air_mass(monkeypatch):
     """With ``air_relative`` (default) the loiter hands the NMPC the target's velocity minus the navigation's
     wind estimate; without it, or with no estimate, the velocity over the ground."""
-    from controllers.guidance import NmpcLoiter
+    from controllers.guidance.guidance import NmpcLoiter
+    from controllers.guidance.nmpc_worker import ENV
     from controllers.messages import TargetState
-    from controllers.nmpc_worker import ENV
 
     monkeypatch.setenv(ENV, "inline")  # the solve is wrapped in this process
 

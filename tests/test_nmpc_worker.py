@@ -1,4 +1,4 @@
-"""The NMPC solved ahead (``nmpc.solve_ahead_s``) and where it runs (``controllers.nmpc_worker``)."""
+"""The NMPC solved ahead (``nmpc.solve_ahead_s``) and where it runs (``controllers.guidance.nmpc_worker``)."""
 import dataclasses
 import math
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from controllers.config import NmpcConfig
-from controllers.guidance import NmpcLoiter
+from controllers.guidance.guidance import NmpcLoiter
+from controllers.guidance.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements
+from controllers.guidance.nmpc_worker import ENV, InlineSolver, ProcessSolver, WorkerError, make_solver
 from controllers.messages import TargetState
-from controllers.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements
-from controllers.nmpc_worker import ENV, InlineSolver, ProcessSolver, WorkerError, make_solver
 from fwsim.interface.messages import Measurements
 
 FSW_DT = 1.0 / 30.0
@@ -173,7 +173,7 @@ def test_the_worker_ends_with_its_flight_software_even_when_that_is_killed():
 
     code = ("import os, sys\n"
             "from controllers.config import NmpcConfig\n"
-            "from controllers.nmpc_worker import ProcessSolver\n"
+            "from controllers.guidance.nmpc_worker import ProcessSolver\n"
             "s = ProcessSolver(NmpcConfig.model_validate({}))\n"
             "s._recv()\n"  # ready: the NMPC is built
             "print(s._proc.pid, flush=True)\n"

@@ -47,7 +47,7 @@ def test_the_pure_pursuit_example_flies_the_dive_and_hits(in_examples):
 
 
 BAD = '''
-from controllers.ukf import UkfTargetEstimator
+from controllers.estimation.ukf import UkfTargetEstimator
 
 
 class Oops:

@@ -12,7 +12,7 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from controllers.ukf import TargetEstimate
+from controllers.estimation.ukf import TargetEstimate
 from fwsim import SCENARIO_DIR
 from fwsim.log import LogWriter, read_log
 from fwsim.log.rerun_export import TIMELINE, export_rrd

@@ -1,4 +1,4 @@
-"""The flight software's ship-class outline (controllers.target_model) against the harness's ray-cast camera,
+"""The flight software's ship-class outline (controllers.perception.target_model) against the harness's ray-cast camera,
 and the detection gates that keep cut-short boxes out of the UKF."""
 import dataclasses
 import math
@@ -6,21 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from controllers.camera_model import PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, SizeFitConfig
 from controllers.messages import FusionReason, TargetState
-from controllers.perception import Perception
-from controllers.target_model import (
-    ShapeHeading,
-    ShapeHeadingConfig,
-    ShipModel,
-    ShipModelConfig,
-    ShipOutline,
-    box_centre_offset_px,
-    predicted_box_px,
-    predicted_boxes_px,
-)
-from controllers.ukf import UkfConfig, UnscentedCore
+from controllers.navigation.camera_model import PinholeCamera
+from controllers.perception.perception import Perception
+from controllers.config import ShapeHeadingConfig, ShipModelConfig
+from controllers.perception.shape_heading import ShapeHeading
+from controllers.perception.ship_outline import ShipOutline, box_centre_offset_px, predicted_box_px, predicted_boxes_px
+from controllers.perception.target_model import ShipModel
+from controllers.estimation.ukf import UkfConfig, UnscentedCore
 from fwsim.sensors.camera import Camera, CameraConfig, Pose
 from fwsim.interface.frames import dcm_enu_from_frd
 from fwsim.world.geometry import uav_mesh
@@ -155,8 +149,8 @@ def test_the_gate_may_allow_for_the_box_centres_systematic_error():
     the prediction. Against noise alone the gate turns it away; allowing for the box centre's systematic
     error (4 % of the box's sides, 20 px across) it passes and is fused as before; 200 px off it is still
     turned away."""
+    from controllers.estimation.ukf import CameraMotion, UkfTargetEstimator
     from controllers.messages import DetectionFix
-    from controllers.ukf import CameraMotion, UkfTargetEstimator
     cam = PinholeCamera.from_config(CAM_CFG)
     cp = np.array([-400.0, 0.0, 300.0])
     p = np.array([0.0, 0.0, UkfConfig().target_plane_height_m]) - cp
@@ -527,7 +521,7 @@ def test_with_the_heading_from_shapes_a_cut_short_box_is_skipped_and_a_whole_one
     pixels; and the box-size gate works as with a known course."""
     import dataclasses
 
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     shaped = _perception(_ship_with_shape(0.0, (30.0, 45.0, 60.0)))  # (boxes at t = 0 add nothing to it)
     blind = _perception(ShipModel(ShipModelConfig(), PinholeCamera.from_config(CAM_CFG)))
     h = UkfConfig().target_plane_height_m
@@ -598,7 +592,7 @@ def test_size_bias_range_must_be_ordered_and_keep_boxes_positive():
 def test_the_compiled_boxes_equal_the_numpy_ones(n):
     """Predicted boxes for a few courses come from a compiled function, for many from numpy: the same boxes to
     rounding, invalid rows (a point behind the camera, a box off the image) NaN in both."""
-    from controllers.target_model import predicted_boxes_px_numpy
+    from controllers.perception.ship_outline import predicted_boxes_px_numpy
     fsw_cam = PinholeCamera.from_config(CAM_CFG)
     outline = ShipOutline(ShipModelConfig())
     for cp, Rc, _ in list(views(0.0))[::9]:
@@ -614,7 +608,7 @@ def test_a_late_detection_is_brought_to_the_camera_pose_of_now():
     """Detector latency 0.1 s while the gimbal slews at 40 deg/s and the UAV flies on at 22 m/s: the box centre
     of the exposure, used with the camera pose of now, is off by tens of pixels; brought to now through the
     exposure's pose it lands on the target's image within a pixel (a still ship on the tracked plane)."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     from fwsim.interface.frames import dcm_enu_from_frd
     cam_model = PinholeCamera.from_config(CAM_CFG)
     p = _perception(ShipModel(ShipModelConfig(), cam_model))
@@ -652,15 +646,15 @@ def test_a_late_detection_is_brought_to_the_camera_pose_of_now():
 def test_weighted_mean_of_rows_is_numpys_average_bit_for_bit():
     """The box-centre offset's weighted mean skips np.average's argument checks but keeps its reductions: the
     same numbers, bit for bit, for 1 to 80 headings (pairwise summation starts above 8)."""
-    from controllers.target_model import _weighted_mean_rows
+    from controllers.perception.ship_outline import weighted_mean_rows
     rng = np.random.default_rng(3)
     for n in list(range(1, 81)) * 5:
         a, w = 50.0 * rng.normal(size=(n, 2)), rng.random(n)
         w /= w.sum()
-        assert np.array_equal(_weighted_mean_rows(a, w), np.average(a, axis=0, weights=w))
-        assert np.array_equal(_weighted_mean_rows(a, None), np.average(a, axis=0))  # equal headings
+        assert np.array_equal(weighted_mean_rows(a, w), np.average(a, axis=0, weights=w))
+        assert np.array_equal(weighted_mean_rows(a, None), np.average(a, axis=0))  # equal headings
     with pytest.raises(ZeroDivisionError):
-        _weighted_mean_rows(np.ones((3, 2)), np.zeros(3))
+        weighted_mean_rows(np.ones((3, 2)), np.zeros(3))
 
 
 @pytest.mark.parametrize("ship_type, dims", [("bridge_aft", (47.0, 20.0, 32.0)), ("ferry", (65.0, 27.0, 20.0))])
@@ -670,7 +664,7 @@ def test_the_size_fit_learns_a_ship_unlike_the_class_and_corrects_better(ship_ty
     outline land nearer the tracked point's image than with the class's, by more than half; a ferry (another
     layout, 20 % lower) comes out taller, not lower (its boxes are tall for its height), and its correction
     is about as good as with the class's outline."""
-    from controllers.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     L, W, H = dims
     heading = 40.0
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading, length_m=L, width_m=W, height_m=H))
@@ -712,7 +706,7 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
     detector's box takes in the thin mast, which far boxes leave out: the fit predicts midway between the
     outline with and without it, the difference in the box's noise, and every scale ends within 13 % of 1,
     the height within 11 % (fitted against the outline without the mast alone: up to 1.22)."""
-    from controllers.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -729,7 +723,7 @@ def test_the_size_fit_stays_near_the_class_in_a_shallow_dive_where_the_mast_show
 def test_the_size_fit_weighs_boxes_at_its_rate():
     """Consecutive frames carry nearly the same information: with times given, a box within 1 / rate_hz of the
     last one weighed is not looked at (without times, every box is)."""
-    from controllers.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     cp, Rc, frame = _look_from(cam, Pose(*reversed(ship.pose(0.0))), 700.0, 35.0, 30.0)
@@ -743,7 +737,7 @@ def test_the_size_fit_weighs_boxes_at_its_rate():
 def test_a_size_fit_gone_wrong_starts_again():
     """A fit sure of a wrong size turns every box away; after max_gated_in_a_row of them it starts again from
     the prior and (``class_after_restarts: 0``) learns the ship."""
-    from controllers.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -764,7 +758,7 @@ def test_a_size_fit_that_started_again_gives_way_to_the_class_with_class_after_r
     """``class_after_restarts: 1`` (the default): the same fit gone wrong, once it starts again, takes no more
     boxes and the correction keeps the class's outline (``scale`` None) for good; with 2 it learns again after
     the first restart, as with 0."""
-    from controllers.target_model import ShipSize
+    from controllers.perception.size_fit import ShipSize
     ship = Ship(TargetConfig(heading_deg=40.0, length_m=47.0, width_m=20.0, height_m=32.0))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -822,7 +816,7 @@ def _nose_on(cam_pos_enu_m) -> np.ndarray:
 
 def _ring_detection(cam, pose, t_s: float, az_deg: float, rng_m: float = 600.0, elevation_deg: float = 35.0):
     """The ship's ray-cast box seen from the ring at ``t_s``: (Measurements, CameraMotion, cam_pos, R_enu_cam)."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     cp, Rc, frame = _look_from(cam, pose, rng_m, elevation_deg, az_deg)
     box = frame.bbox_px
     motion = CameraMotion(t_s, cp, np.zeros(3), Rc, np.zeros(3), float(cp[2]))
@@ -932,7 +926,7 @@ def test_a_box_no_heading_explains_is_deweighted_not_skipped_when_asked():
     """size_mismatch_action: deweight: the box cut short is used, its corrected centre as a whole box's
     would be corrected, with the doubt (half the size difference from the predicted box)^2 in each axis; the
     log names the gate passed over. The default (skip) skips it."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
     ship = _ship_with_shape(0.0, (30.0, 45.0, 60.0))
@@ -971,7 +965,7 @@ def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
     hidden) while the ship lies in the wing plane (nose on), which ``maybe_cut_action: skip`` skips, is used
     with the doubt ``deweight`` gives it, (half its size difference from the predicted box)^2; a whole box is
     corrected as before."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.zeros(3), 0.1, h)
     ship = _ship_with_shape(0.0, (30.0, 45.0, 60.0))
@@ -1004,8 +998,8 @@ def test_a_box_that_may_be_cut_is_used_with_its_doubt_when_asked():
 
 def test_the_ukf_weighs_a_doubtful_box_less():
     """A fix with centre_noise_px2 moves the estimate less than the same fix without it."""
+    from controllers.estimation.ukf import CameraMotion, UkfTargetEstimator
     from controllers.messages import DetectionFix
-    from controllers.ukf import CameraMotion, UkfTargetEstimator
     cfg = UkfConfig()
     cam = PinholeCamera.from_config(CAM_CFG)
     cp = np.array([-400.0, 0.0, 300.0])
@@ -1040,7 +1034,7 @@ def test_a_box_the_estimated_course_cannot_explain_is_corrected_over_its_own_hea
     the course's might be cut short, and is skipped; flown level, the ship lies 40 deg below the wing plane
     (airframe_clearance_deg), no part of it can be hidden, and those are corrected over their own headings
     too."""
-    from controllers.ukf import CameraMotion
+    from controllers.estimation.ukf import CameraMotion
     cam = PinholeCamera.from_config(CAM_CFG)
     h = UkfConfig().target_plane_height_m
     prior = TargetState(0.0, "estimator", np.array([0.0, 0.0, h]), np.array([5.0, 0.0, 0.0]), 0.1, h)
@@ -1124,7 +1118,7 @@ def _layout_fit_round(ship_type: str, course_known: bool = True, elevation_deg: 
     """A LayoutFit fed the ray-cast boxes of a still ship of ``ship_type`` seen from round a ring (700 m, a lap
     in 4 min at 1.5 boxes a second), the estimate on the ship, its course given (or None): the fit."""
     from controllers.config import LayoutFitConfig
-    from controllers.target_model import LayoutFit
+    from controllers.perception.layout_fit import LayoutFit
     heading = 40.0
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
@@ -1223,7 +1217,7 @@ def _shapes_round(ship_type: str, elevation_deg: float = 40.0, heading: float = 
     """A ShapeHeading (the class's outline) fed the ray-cast boxes of a still ship of ``ship_type`` seen from round
     a ring (700 m, a lap in 4 min), its course given and followed: the posterior, and the course (ENU, rad)."""
     from controllers.config import ShapeHeadingConfig
-    from controllers.target_model import ShapeHeading
+    from controllers.perception.shape_heading import ShapeHeading
     ship = Ship(TargetConfig(type=ship_type, heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)
     pose = Pose(*reversed(ship.pose(0.0)))
@@ -1244,7 +1238,7 @@ def test_the_box_shapes_say_which_end_the_superstructure_stands_at(elevation_deg
     shapes tell the two ends apart no more (60 deg: -0.6 and -0.4; from 50 deg on): the centres' fit decides
     there. Off when bow and stern share their weight, and before the shapes are ready."""
     from controllers.config import ShapeHeadingConfig
-    from controllers.target_model import ShapeHeading
+    from controllers.perception.shape_heading import ShapeHeading
     fwd, course = _shapes_round("bridge_forward", elevation_deg)
     aft, _ = _shapes_round("bridge_aft", elevation_deg)
     r_fwd, r_aft = fwd.reverse_log_ratio(course), aft.reverse_log_ratio(course)
@@ -1266,7 +1260,7 @@ def test_the_layout_fit_weighs_the_box_shapes_evidence_too():
     point floor far above their misfits) the probability is the prior's moved by the shapes alone, each way;
     with the weight 0 it is the prior's."""
     from controllers.config import LayoutFitConfig
-    from controllers.target_model import LayoutFit
+    from controllers.perception.layout_fit import LayoutFit
     heading = 40.0
     ship = Ship(TargetConfig(type="bridge_aft", heading_deg=heading))
     cam = Camera(CAM_CFG, uav_mesh("fwuav"), ship.mesh)

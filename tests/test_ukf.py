@@ -1,4 +1,5 @@
-"""The target UKF (controllers.ukf) and the feature kinematics / depth model (controllers.camera_model).
+"""The target UKF (controllers.estimation.ukf) and the feature kinematics / depth model
+(controllers.navigation.camera_model).
 
 Oracles: finite differences of the projection (feature kinematics), the
 paper's on-axis depth formula, a linear Kalman filter (filterpy) on a linear
@@ -16,8 +17,8 @@ from filterpy.kalman import KalmanFilter
 from pydantic import ValidationError
 
 from controllers.blocks import TargetEstimator, resolve_class
-from controllers.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
-from controllers.ukf import CameraMotion, TargetEstimate, UkfConfig, UkfTargetEstimator, UnscentedCore
+from controllers.estimation.ukf import CameraMotion, TargetEstimate, UkfConfig, UkfTargetEstimator, UnscentedCore
+from controllers.navigation.camera_model import PinholeCamera, depth_on_plane, feature_rates, interaction_matrix
 from fwsim.interface import frames as F
 from fwsim.interface.messages import Measurements
 
@@ -273,7 +274,7 @@ def test_ukf_tracks_a_constant_velocity_ship_from_an_orbit_and_survives_a_dropou
     ukf, r = run_orbit()
     t, pe, ve = r[:, 0], r[:, 1], r[:, 2]
     assert isinstance(ukf, TargetEstimator)  # the estimator Protocol a user's filter implements too
-    assert resolve_class("controllers.ukf:UkfTargetEstimator", "estimator") is UkfTargetEstimator
+    assert resolve_class("controllers.estimation.ukf:UkfTargetEstimator", "estimator") is UkfTargetEstimator
     before, gap = t < 45.0, (t >= 45.0) & (t < 48.0)
     # converged within 60 s: position < 8 m (the paper's bar), velocity < 1 m/s, and it stays there
     assert settle_time(t[before], pe[before], 8.0) < 60.0
@@ -342,7 +343,7 @@ def test_a_short_burst_of_biased_detections_barely_moves_the_velocity():
 def test_the_compiled_process_model_equals_the_numpy_one(dt, omega):
     """The filter integrates its sigma points with a CasADi function (controllers.compiled): the same RK4 of the
     same model as the numpy form to rounding, over one substep and several (dt > max_substep_s), rotating or not."""
-    from controllers.ukf import _fx_batch, _fx_compiled
+    from controllers.estimation.ukf import _fx_batch, _fx_compiled
     rng = np.random.default_rng(3)
     S = np.column_stack([rng.normal(0, 0.2, (17, 2)), rng.normal([100.0, 50.0, 3.75], 20, (17, 3)),
                          rng.normal(0, 3, (17, 3))])
@@ -358,7 +359,7 @@ def test_the_compiled_update_equals_the_numpy_one():
     covariance as UnscentedCore.update with the batched pinhole + flat-sea measurement model in numpy, to
     rounding, the determinant of the pixel rows' innovation covariance, and the gain's horizontal position rows
     for the pixel columns (the state's move per pixel of the detection)."""
-    from controllers.ukf import _CompiledUpdate, _hx_batch
+    from controllers.estimation.ukf import _CompiledUpdate, _hx_batch
     x = np.array([0.05, -0.02, 100.0, 40.0, 3.75, 2.0, 1.0, 0.0])
     # a covariance as the filter has them (the pixel and r_c rows of S are nearly dependent: S's condition
     # number is ~1e5 here, so both solves agree to ~1e-11 relative)
@@ -390,7 +391,7 @@ def test_the_compiled_update_equals_the_numpy_one():
 def test_ground_from_pixel_jacobian_against_finite_differences():
     """d(point on the plane)/d(u, v): the analytic form against central differences of the ray's meeting point
     with the plane, for oblique and steep views."""
-    from controllers.ukf import ground_from_pixel_jacobian
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     for euler, pan, tilt, px in (((0.1, -0.05, 0.4), -0.3, -0.6, (700.0, 300.0)),
                                  ((-0.5, 0.1, 2.0), 1.2, -1.2, (100.0, 650.0)),
                                  ((0.0, 0.0, 0.0), 0.0, -0.25, (640.0, 360.0))):
@@ -431,7 +432,7 @@ def test_the_box_centre_bias_widens_the_reported_std_only():
     """box_centre_bias_frac: the estimate's position std carries the systematic box-centre error through the
     latest view's geometry (J diag(s^2) J^T, s a fraction of the box's size); the state and the filter's own
     covariance are those of box_centre_bias_frac = 0."""
-    from controllers.ukf import ground_from_pixel_jacobian
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     runs = {k: _fly_with_an_80_by_30_box(UkfConfig(box_centre_bias_frac=k, box_centre_height_std_m=0.0), 90)
             for k in (0.0, 0.1)}
     (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[0.1]
@@ -448,7 +449,7 @@ def test_the_height_consider_term_is_the_planes_displacement_of_a_point_seen_hig
     """height_consider_cov against finite differences: a point dz above the plane, seen from the camera, is where
     its ray meets the plane displaced by g dz (|g| = 1 / tan of the elevation): the covariance is
     height_std^2 g g^T; nothing for a ray that does not come down."""
-    from controllers.ukf import height_consider_cov
+    from controllers.estimation.ukf import height_consider_cov
     cam_pos = np.array([-3800.0, 900.0, 1000.0])
     for target in (np.array([0.0, 0.0, 0.0]), np.array([-3400.0, 1100.0, 0.0]), np.array([-3700.0, 920.0, 0.0])):
         rel = target - cam_pos
@@ -473,7 +474,7 @@ def test_the_height_consider_term_is_the_planes_displacement_of_a_point_seen_hig
 def test_the_height_error_widens_the_reported_std_along_the_line_of_sight_only():
     """box_centre_height_std_m goes into the reported std (not the state, not the filter's covariance) as
     height_consider_cov of the latest detection's view, beside the box fraction."""
-    from controllers.ukf import height_consider_cov
+    from controllers.estimation.ukf import height_consider_cov
     runs = {sh: _fly_with_an_80_by_30_box(UkfConfig(box_centre_bias_frac=0.0, box_centre_height_std_m=sh), 60)
             for sh in (0.0, 2.2)}
     (e0, x0, P0, _, _), (e1, x1, P1, meas, motion) = runs[0.0], runs[2.2]
@@ -489,7 +490,8 @@ def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only
     into the reported position std through the view's geometry, beside box_centre_bias_frac:
     ``J (diag(s^2) + S) J^T``; the state and the filter's covariance are those without it, and
     ``consider_heading_spread: false`` reports the std without it."""
-    from controllers.ukf import fix_from_measurements, ground_from_pixel_jacobian
+    from controllers.estimation.ukf import fix_from_measurements
+    from controllers.navigation.camera_model import ground_from_pixel_jacobian
     truth = OrbitTruth()
     S = np.array([[9.0, 2.0], [2.0, 16.0]])  # px^2
     runs = {}
@@ -521,7 +523,7 @@ def test_the_heading_spread_of_the_shape_correction_widens_the_reported_std_only
 
 def test_the_symmetric_square_root_of_a_2x2_covariance():
     """_sqrt_spd2: the symmetric root squares back to the matrix, for full-rank, singular and zero ones."""
-    from controllers.ukf import _sqrt_spd2
+    from controllers.estimation.ukf import _sqrt_spd2
     for a, b, c in ((9.0, 2.0, 16.0), (64.0, 0.0, 9.0), (4.0, 6.0, 9.0), (1e-6, 0.0, 5e3), (0.0, 0.0, 0.0)):
         r00, r01, r11 = _sqrt_spd2(a, b, c)
         S = np.array([[r00, r01], [r01, r11]])

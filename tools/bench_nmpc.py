@@ -1,6 +1,6 @@
 """Speed and quality of the Phase 2 NMPC solvers, all in one run, against a converged IPOPT.
 
-Each solver flies the same kinematic closed loop (controllers.nmpc.kinematic_closed_loop: the NMPC's
+Each solver flies the same kinematic closed loop (controllers.guidance.nmpc.kinematic_closed_loop: the NMPC's
 own continuous model as the plant, RK4, 10 Hz, exact target state):
 
   * ``paper``: ship at the origin sailing north at 5 m/s, UAV 800 m west of it at 600 m, heading
@@ -11,7 +11,7 @@ own continuous model as the plant, RK4, 10 Hz, exact target state):
 
 For every step of a fast solver's loop, a shadow IPOPT (exact Hessian, tol 1e-8, warm-started from
 its own previous solution) solves the very same problem (same state, target and previous input);
-the cost gap compares the two plans' costs on the model (controllers.nmpc.Nmpc.plan_cost).
+the cost gap compares the two plans' costs on the model (controllers.guidance.nmpc.Nmpc.plan_cost).
 
     python tools/bench_nmpc.py                 # both scenarios, 150 s / 60 s
     python tools/bench_nmpc.py --quick         # 60 s / 30 s, shadow IPOPT every 5th step
@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import casadi  # noqa: E402
 
-from controllers.nmpc import Nmpc, NmpcConfig, kinematic_closed_loop  # noqa: E402
+from controllers.guidance.nmpc import Nmpc, NmpcConfig, kinematic_closed_loop  # noqa: E402
 
 SCENARIOS = {
     "paper": dict(cfg={}, x0=[-800.0, 0.0, 600.0, 0.0, 0.0, math.pi / 2], q0=[0.0, 0.0, 0.0],
@@ -115,7 +115,7 @@ def run_one(label, overrides, scen, duration_s, gap_every, no_budget=True):
 def euler_vs_rk4(scen) -> float:
     """Largest position gap (m) over the horizon between the Euler prediction and an RK4 (10 substeps) flight
     of the same converged plan, at a point of the approach where the UAV banks hard."""
-    from controllers.nmpc import _np_step  # the model's own numpy step
+    from controllers.guidance.nmpc import _np_step  # the model's own numpy step
 
     cfg = NmpcConfig.model_validate({**scen["cfg"], "solver": "ipopt", "max_solve_ms": 1e5})
     nmpc = Nmpc(cfg)

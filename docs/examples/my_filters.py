@@ -22,7 +22,7 @@ import math
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from controllers.camera_model import depth_on_plane
+from controllers.navigation.camera_model import depth_on_plane
 from controllers.messages import EstimatorStatus, FusionReason, FusionResult, TargetEstimate
 
 NAN2 = np.full(2, np.nan)

@@ -17,7 +17,7 @@ height, the truth is the waterline centre. Convergence is defined from the
 estimator's own reported uncertainty, not from truth: the first time after
 which the estimate's horizontal position standard deviation (as logged:
 for the UKFs the filter's covariance plus the box centre's systematic
-error, ``controllers.ukf``) stays below ``CONVERGED_STD_M``. So that std is
+error, ``controllers.estimation.ukf``) stays below ``CONVERGED_STD_M``. So that std is
 checked against the truth too: ``estimator_pos_err_within_2std_fraction`` is the
 share of estimates whose horizontal error is within twice that std. For an honest (consistent) filter it is about
 86 % or more (1 - exp(-2) for a round two-dimensional Gaussian error; more when

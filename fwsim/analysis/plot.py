@@ -378,6 +378,20 @@ def _pixel_errors(log: RunLog) -> Figure:
     return fig
 
 
+def _phase_lines(log: RunLog, top, bottom) -> None:
+    """A dotted line on both axes at each phase change, labelled on the top one."""
+    if not log.topics.get(topics.FSW_STATUS):
+        return
+    fsw = log.table(topics.FSW_STATUS)
+    if "phase" not in fsw:
+        return
+    ph = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
+    for k in np.flatnonzero(np.diff(ph)) + 1:
+        for ax in (top, bottom):
+            ax.axvline(fsw["t_s"][k], color="k", lw=0.6, ls=":")
+        top.text(fsw["t_s"][k], 101.0, f" phase {ph[k]}", fontsize=7, va="top")
+
+
 @figure("ship_visibility", needs=(topics.CAMERA_FRAME, topics.UAV_STATE, topics.TARGET_STATE),
         title="The ship in the camera: seen, hidden behind the airframe, out of view")
 def _ship_visibility(log: RunLog) -> Figure:
@@ -404,14 +418,7 @@ def _ship_visibility(log: RunLog) -> Figure:
     a1.set_ylabel("seen [% of pixels]")
     a1.set_ylim(-2.0, 102.0)
     lock_t = lock_time_s(log)
-    if log.topics.get(topics.FSW_STATUS):
-        fsw = log.table(topics.FSW_STATUS)
-        if "phase" in fsw:
-            ph = np.nan_to_num(fsw["phase"], nan=-1).astype(int)
-            for k in np.flatnonzero(np.diff(ph)) + 1:
-                for ax in (a1, a2):
-                    ax.axvline(fsw["t_s"][k], color="k", lw=0.6, ls=":")
-                a1.text(fsw["t_s"][k], 101.0, f" phase {ph[k]}", fontsize=7, va="top")
+    _phase_lines(log, a1, a2)
     locked = math.isfinite(lock_t)
     after = t >= (lock_t if locked else t[0])
     if after.any():

@@ -514,12 +514,12 @@ _IN_POOL_WORKER = False
 def _pool_worker_init(nmpc_worker: str = "inline") -> None:
     global _IN_POOL_WORKER
     _IN_POOL_WORKER = True
-    from controllers.nmpc_worker import ENV
+    from controllers.guidance.nmpc_worker import ENV
     os.environ.setdefault(ENV, nmpc_worker)  # a user's FWSIM_NMPC_WORKER stands
 
 
 def _nmpc_worker_for(workers: int) -> str:
-    """Where a pool worker's NMPC solves (``controllers.nmpc_worker``): in a process of its own when the
+    """Where a pool worker's NMPC solves (``controllers.guidance.nmpc_worker``): in a process of its own when the
     machine has a spare core for each worker's, else on the worker's thread (the same numbers either way)."""
     return "process" if (os.cpu_count() or 1) >= 2 * workers else "inline"
 
@@ -614,9 +614,9 @@ def _run_ray(jobs: list[RunJob], on_row: RowCallback, run_fn: Callable) -> None:
     system and fwsim installed on every node."""
     import ray
 
-    from controllers.nmpc_worker import ENV
+    from controllers.guidance.nmpc_worker import ENV
 
-    # one CPU a run: its NMPC solves on its own thread (controllers.nmpc_worker; the same numbers either way)
+    # one CPU a run: its NMPC solves on its own thread (controllers.guidance.nmpc_worker; the same numbers either way)
     remote = ray.remote(num_cpus=1, max_retries=1,
                         runtime_env={"env_vars": {ENV: os.environ.get(ENV, "inline")}})(run_fn)
     refs = {remote.remote(j): j for j in jobs}
@@ -663,6 +663,24 @@ def resumable(job: RunJob) -> bool:
     return log.scenario_text == job.scenario_text()
 
 
+def _resumed(jobs: list[RunJob], out_dir: Path) -> tuple[dict[str, dict[str, Any]], list[RunJob]]:
+    """(The rows of the runs a previous batch in ``out_dir`` finished, read from their logs; the jobs still to fly)."""
+    previous = _previous_rows(out_dir)
+    rows: dict[str, dict[str, Any]] = {}
+    todo = []
+    for job in jobs:
+        if resumable(job):
+            prev = previous.get(job.id, {})
+            wall = prev.get("wall_time_s")
+            row = row_from_log(job, float(wall) if isinstance(wall, (int, float)) else math.nan,
+                               prev.get("error") or "")
+            row["resumed"] = True
+            rows[job.id] = row
+        else:
+            todo.append(job)
+    return rows, todo
+
+
 def run_batch(spec_path: str | Path | dict, out_dir: str | Path, *, workers: int | None = None, resume: bool = False,
               ray_address: str | None = None, on_start: Callable[[int, int], None] | None = None,
               on_row: RowCallback | None = None, run_fn: Callable[[RunJob], dict] = run_one,
@@ -681,21 +699,7 @@ def run_batch(spec_path: str | Path | dict, out_dir: str | Path, *, workers: int
     except OSError as exc:
         raise BatchSpecError(f"{out_dir}: cannot write the batch's output there ({exc.strerror or exc})") from None
     workers = workers or os.cpu_count() or 1
-    rows: dict[str, dict[str, Any]] = {}
-    todo = jobs
-    if resume:
-        previous = _previous_rows(out_dir)
-        todo = []
-        for job in jobs:
-            if resumable(job):
-                prev = previous.get(job.id, {})
-                wall = prev.get("wall_time_s")
-                row = row_from_log(job, float(wall) if isinstance(wall, (int, float)) else math.nan,
-                                   prev.get("error") or "")
-                row["resumed"] = True
-                rows[job.id] = row
-            else:
-                todo.append(job)
+    rows, todo = _resumed(jobs, out_dir) if resume else ({}, jobs)
     if on_start is not None:
         on_start(len(jobs), len(rows))
 

@@ -31,11 +31,11 @@ FSW_GIMBAL_COMMAND = "/fsw/gimbal_command"  # GimbalCommand
 FSW_ESTIMATE = "/fsw/estimate"  # controllers.messages.TargetEstimate
 FSW_ESTIMATOR_STATUS = "/fsw/estimator_status"  # controllers.messages.EstimatorStatus, when a counter changes
 FSW_DETECTION_FUSION = "/fsw/detection_fusion"  # controllers.messages.DetectionFusion, one per detection
-FSW_SHIP_HEADING = "/fsw/ship_heading"  # controllers.target_model.ShipHeadingStatus
-FSW_COURSE_TURN = "/fsw/course_turn"  # controllers.course_turn.CourseTurnStatus (controllers.turn_from_course on)
-FSW_IBVS = "/fsw/ibvs"  # controllers.ibvs.IbvsStatus
-FSW_NMPC = "/fsw/nmpc"  # controllers.nmpc.NmpcStatus, one per solve
-FSW_BPNG = "/fsw/bpng"  # controllers.bpng.BpngStatus
+FSW_SHIP_HEADING = "/fsw/ship_heading"  # controllers.perception.target_model.ShipHeadingStatus
+FSW_COURSE_TURN = "/fsw/course_turn"  # estimation.course_turn.CourseTurnStatus (controllers.turn_from_course on)
+FSW_IBVS = "/fsw/ibvs"  # controllers.pointing.ibvs.IbvsStatus
+FSW_NMPC = "/fsw/nmpc"  # controllers.guidance.nmpc.NmpcStatus, one per solve
+FSW_BPNG = "/fsw/bpng"  # controllers.guidance.bpng.BpngStatus
 
 # -- frames of the transforms
 WORLD_FRAME = "world"

@@ -90,10 +90,10 @@ def detection_frame_ms(frames: int = 600) -> tuple[float, float]:
 def nmpc_vs_ipopt(duration_s: float = 60.0) -> dict[str, float]:
     """NMPC solve times at the paper's sizes (N = 50, CBF active), the fast solver and a fully
     converged IPOPT solve of the same problem in the same run, each flying the NMPC's own model
-    in closed loop from 800 m out at 600 m around a ship at 5 m/s (controllers.nmpc)."""
+    in closed loop from 800 m out at 600 m around a ship at 5 m/s (controllers.guidance.nmpc)."""
     import numpy as np
 
-    from controllers.nmpc import Nmpc, NmpcConfig, kinematic_closed_loop
+    from controllers.guidance.nmpc import Nmpc, NmpcConfig, kinematic_closed_loop
     x0 = [-800.0, 0.0, 600.0, 0.0, 0.0, math.pi / 2]
     out = {}
     for label, over in (("nmpc", {}), ("ipopt", {"solver": "ipopt"})):
@@ -181,10 +181,10 @@ def run_bench(quick: bool = False) -> dict[str, float | str | dict]:
     profiled, blocks = block_breakdown(paper, paper_text)
     state_us, msg_us = log_writer_us()
     nmpc = nmpc_vs_ipopt(30.0 if quick else 60.0)
-    from controllers.nmpc_worker import solver_kind
+    from controllers.guidance.nmpc_worker import solver_kind
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        # where the paper mission's NMPC solved (controllers.nmpc_worker; FWSIM_NMPC_WORKER)
+        # where the paper mission's NMPC solved (controllers.guidance.nmpc_worker; FWSIM_NMPC_WORKER)
         "nmpc_worker": solver_kind(paper.controllers.nmpc),
         "jsbsim_raw_steps_per_s": raw,
         "jsbsim_raw_real_time_factor": raw / 120.0,

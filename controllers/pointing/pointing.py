@@ -1,8 +1,8 @@
 """Pointing: what the pan-tilt gimbal does in each state of the track.
 
 * **search** (not locked yet, or no detection for ``reacquire.search_after_s``):
-  the raster of ``controllers.search``;
-* **track**: the pointing law (``controllers.pointing``: ``ibvs``, the paper's
+  the raster of ``controllers.pointing.search``;
+* **track**: the pointing law (``controllers.pointing.pointing``: ``ibvs``, the paper's
   IBVS, :class:`IbvsPointing`; or a user's class, ``controllers.blocks``);
 * **reacquire** (no detection for ``reacquire.after_s``): the joints driven
   toward the direction of the target estimate (predictive pointing), the
@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import math
 
-from controllers.camera_model import CameraMotion, PinholeCamera, depth_on_plane
 from controllers.config import IbvsConfig, ReacquireConfig
-from controllers.ibvs import Ibvs
 from controllers.messages import DetectionFix, TargetState
-from controllers.search import GimbalSearch
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera, depth_on_plane
+from controllers.pointing.ibvs import Ibvs
+from controllers.pointing.search import GimbalSearch
 from fwsim.interface import topics
 from fwsim.interface.frames import dcm_enu_from_frd, pan_tilt_pointing_at
 from fwsim.interface.messages import GimbalCommand, Measurements
@@ -28,7 +28,7 @@ __all__ = ["Pointing", "IbvsPointing"]
 
 class IbvsPointing:
     """The paper's IBVS as the tracking law (``controllers.pointing: ibvs``): the image feature held at the
-    image centre, with the feed-forward of the UAV's and the target's motion (``controllers.ibvs``)."""
+    image centre, with the feed-forward of the UAV's and the target's motion (``controllers.pointing.ibvs``)."""
 
     def __init__(self, cfg: IbvsConfig, camera: PinholeCamera, mount_offset_frd_m, recorder):
         self.ibvs = Ibvs(cfg, camera.fx, camera.fy, camera.cx, camera.cy)

@@ -7,7 +7,7 @@ State ``x = [x1, x2, r_q (3, world ENU, m), V_q (3, m/s)]``:
   * ``r_q``, ``V_q``: the target's position and velocity in the world.
 
 Process model (continuous, integrated with RK4 over each predict):
-  * ``x1_dot, x2_dot`` from :func:`controllers.camera_model.feature_rates`
+  * ``x1_dot, x2_dot`` from :func:`controllers.navigation.camera_model.feature_rates`
     (derived from the pinhole model; replaces the paper's eq. 6/8, which have
     typos), with ``Z`` = camera-frame depth of ``r_q`` (z-component of
     ``R_cam_from_enu (r_q - r_c)``), ``v = R_cam_from_enu (V_q - V_c)`` and the
@@ -21,7 +21,7 @@ Process model (continuous, integrated with RK4 over each predict):
 Measurement (paper eq. 9), on every new valid detection:
   ``z = [u, v, r_c]``, ``h(x) = [fx x1 + cx, fy x2 + cy, r_q - d_w Z]`` with
   ``d_w = R_enu_from_cam [x1, x2, 1]`` and ``Z`` from the flat-sea depth model
-  (:func:`controllers.camera_model.depth_on_plane`, the plane
+  (:func:`controllers.navigation.camera_model.depth_on_plane`, the plane
   ``z = target_plane_height_m``; camera height from the altimeter). The
   r_c rows carry GNSS noise plus the attitude and altimeter errors projected
   over the range.
@@ -35,7 +35,7 @@ within twice the std). It is not fused; the estimate's reported position std
 (``TargetEstimate.pos_std_m``, horizontal axes) adds ``J diag(s^2) J^T``, a
 consider covariance: ``s`` is ``box_centre_bias_frac`` of the latest box's
 width and height (px) and ``J`` the pixel-to-plane Jacobian of that view
-(:func:`ground_from_pixel_jacobian`). While the ship's heading is not known the
+(:func:`controllers.navigation.camera_model.ground_from_pixel_jacobian`). While the ship's heading is not known the
 shape correction is a weighted mean over the headings it may have, and the
 detection carries the spread of that mean (``DetectionFix.offset_spread_px2``,
 px^2): another error common to consecutive frames, added to ``diag(s^2)``
@@ -72,8 +72,9 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dpotrf as _dpotrf
 
-from controllers.camera_model import MIN_RAY_DOWN as _CAMERA_MIN_RAY_DOWN
-from controllers.camera_model import CameraMotion, PinholeCamera, depth_on_plane, feature_rates
+from controllers.navigation.camera_model import MIN_RAY_DOWN as _CAMERA_MIN_RAY_DOWN
+from controllers.navigation.camera_model import (CameraMotion, PinholeCamera, depth_on_plane, feature_rates,
+                                                 ground_jacobian_rows)
 from controllers.config import UkfConfig
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult, TargetEstimate
 from fwsim.interface.messages import Measurements
@@ -320,7 +321,7 @@ class _CompiledProcess:
 
     The state is ``[x1, x2, r_q, V_q, ...]``: the features' rates (the camera part, shared) come from
     :func:`_sx_feature_rates`; :meth:`_target_rates` gives the rates of the rest (here the constant-velocity
-    target). A subclass with another target model (``controllers.ct_ukf``) sets ``dim_x``, ``function_name``,
+    target). A subclass with another target model (``controllers.estimation.ct_ukf``) sets ``dim_x``, ``function_name``,
     its own ``_cache`` and overrides :meth:`_target_rates`; ``params`` are its model's constants (part of the
     cache key)."""
 
@@ -397,7 +398,7 @@ def _sx_exp_so3(w, tau):
 def _sx_feature_rates(Xs, tau, r, R, V, w, m: int):
     """``(x1_dot, x2_dot)`` (each SX (m, 1)) of the sigma points ``Xs`` (rows ``[x1, x2, r_q, V_q, ...]``) at
     ``tau`` into the interval, as :func:`_fx_batch` (feature rates as
-    :func:`controllers.camera_model.feature_rates`): camera at ``r + V tau``, ``R_enu_from_cam = R exp([w]x
+    :func:`controllers.navigation.camera_model.feature_rates`): camera at ``r + V tau``, ``R_enu_from_cam = R exp([w]x
     tau)``, depth floored at MIN_DEPTH_M. Every estimator with the UKF's feature states shares it."""
     import casadi as ca
     Rce = ca.mtimes(R, _sx_exp_so3(w, tau)).T
@@ -495,30 +496,6 @@ def _hx_batch(X: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_e
     return out
 
 
-def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float,
-                               fx: float, fy: float) -> np.ndarray:
-    """d(point on the plane)/d(u, v) (3 x 2, m per px) of the ray through the normalised pixel (x1, x2): the
-    point is ``r_c + Z d`` with ``d = R [x1, x2, 1]`` and ``Z = (cam_z - plane_z) / -d_z``, so
-    ``dG/dx_i = h (R[:, i] / -d_z + d R[2, i] / d_z^2)`` (h the camera's height above the plane); NaN where
-    the ray does not come down to the plane. Tested against finite differences."""
-    R = np.asarray(R_enu_from_cam, dtype=float)
-    d = R @ np.array([x1, x2, 1.0])
-    h = cam_z_m - plane_z_m
-    if not (d[2] < -1e-9 and h > 0.0):
-        return np.full((3, 2), np.nan)
-    return np.array(_ground_jacobian_rows(R.tolist(), d.tolist(), h, fx, fy, 3))
-
-
-def _ground_jacobian_rows(R: list, d: list, h: float, fx: float, fy: float, rows: int) -> list[list[float]]:
-    """The first ``rows`` rows of :func:`ground_from_pixel_jacobian` (``R`` and the ray ``d`` as nested lists,
-    the ray coming down, ``h > 0``): ``h (R[j, i] / -d_z + d_j R[2, i] / d_z^2) / f_i``, element by element
-    (Python floats: a 2 x 2 block costs less than one numpy call on it)."""
-    nd, dd = -d[2], d[2] * d[2]
-    r2x, r2y = R[2][0], R[2][1]
-    return [[h * (R[j][0] / nd + d[j] * r2x / dd) / fx, h * (R[j][1] / nd + d[j] * r2y / dd) / fy]
-            for j in range(rows)]
-
-
 def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
     """Horizontal covariance (2 x 2, m^2) on the target plane of an error ``height_std_m`` in the height of the
     point seen through the normalised pixel (x1, x2): along the ray ``d = R [x1, x2, 1]`` a point ``dz`` higher
@@ -556,7 +533,8 @@ def _sqrt_spd2(a: float, b: float, c: float) -> tuple[float, float, float]:
 
 
 def _ray_meets_plane(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float) -> bool:
-    """:func:`controllers.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the plane)."""
+    """:func:`controllers.navigation.camera_model.depth_on_plane` is finite (the ray through (x1, x2) meets the
+    plane)."""
     R = R_enu_from_cam
     dz = float(R[2, 0]) * x1 + float(R[2, 1]) * x2 + float(R[2, 2])
     return -dz / math.sqrt(x1 * x1 + x2 * x2 + 1.0) >= _CAMERA_MIN_RAY_DOWN and cam_z_m - plane_z_m > 0.0
@@ -608,7 +586,7 @@ class UkfTargetEstimator:
 
     name = "ukf"
     label = "UKF"  # its name in the flight software's events
-    dim_x = 8  # [x1, x2, r_q, V_q]; a subclass with more target states (controllers.ct_ukf) appends them
+    dim_x = 8  # [x1, x2, r_q, V_q]; a subclass with more target states (controllers.estimation.ct_ukf) appends them
 
     def __init__(self, camera: PinholeCamera, config: UkfConfig | None = None):
         self.cfg = config if config is not None else UkfConfig()
@@ -640,7 +618,7 @@ class UkfTargetEstimator:
     def last_log_likelihood(self) -> float:
         """The last detection's log-likelihood under the filter's prediction: the Gaussian density of its
         pixel innovation, whether the gate took it or not (NaN when the last update computed none). A
-        multiple-model filter (controllers.imm) weighs its models by it."""
+        multiple-model filter (controllers.estimation.imm) weighs its models by it."""
         nis, det = self._last_nis_det
         if not (det > 0.0 and math.isfinite(nis)):
             return math.nan
@@ -879,7 +857,7 @@ class UkfTargetEstimator:
         h = motion.height_m - cfg.target_plane_height_m
         if not (d[2] < -1e-9 and h > 0.0):  # the ray does not come down to the plane
             return _ZERO23, None
-        J = _ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
+        J = ground_jacobian_rows(R.tolist(), d, h, cam.fx, cam.fy, 2)
         (j00, j01), (j10, j11) = J
         if not (math.isfinite(j00) and math.isfinite(j01) and math.isfinite(j10) and math.isfinite(j11)):
             return _ZERO23, None

@@ -3,7 +3,7 @@
 The search is a raster in joint space: pan sweeps across ``pan_deg`` at each
 tilt of ``tilt_deg`` in turn, back and forth, at ``rate_deg_s`` (limited by the
 gimbal's own rate limit). The lock (``lock_detections`` consecutive frames
-with a detection) is the perception's (``controllers.perception.Lock``).
+with a detection) is the perception's (``controllers.perception.perception.Lock``).
 """
 from __future__ import annotations
 

@@ -10,17 +10,17 @@ Per tick (:meth:`Perception.step`):
    for a ship estimated to move at ``moving_speed_m_s`` or more, whose
    velocity the coast after the last box flies) and a box that spans the
    whole image (``overflowing_box``) are skipped.
-3. **The ship's heading and layout** (:class:`~controllers.target_model.ShipModel`):
+3. **The ship's heading and layout** (:class:`~controllers.perception.target_model.ShipModel`):
    each box (unless too close) feeds the heading-from-shapes posterior and,
    while the course is known, the layout fit (``target_model.layout_fit``:
    whether the superstructure stands at the other end from the class's; an
    event says when the correction takes the other end, or goes back).
-4. **Box-centre correction** (``controllers.target_model``): the box centre
+4. **Box-centre correction** (``controllers.perception.target_model``): the box centre
    moves over the ship with the view; the offset the ship model predicts for
    the estimated position and the plausible headings is removed, so that the
    fix is the image of the point the estimator tracks. The
    predicted boxes are those a detector would see: clipped to the image, and
-   (``controllers.airframe``, unless ``airframe.enabled`` is false), when the
+   (``controllers.perception.airframe``, unless ``airframe.enabled`` is false), when the
    detected box touches the UAV's own airframe in the image, less the part of
    the ship the airframe hides from the camera, so that a box the fuselage or
    wing cuts is corrected by the centre of the cut box (and sized against it),
@@ -75,10 +75,11 @@ from collections import deque
 
 import numpy as np
 
-from controllers.camera_model import CameraMotion, PinholeCamera
 from controllers.config import AcquisitionConfig, DetectionGateConfig, ShipModelConfig
 from controllers.messages import DetectionFix, FusionReason, TargetState
-from controllers.target_model import ShipModel, box_centre_offset_px, predicted_boxes_px, projected_points_px
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera
+from controllers.perception.ship_outline import box_centre_offset_px, predicted_boxes_px, projected_points_px
+from controllers.perception.target_model import ShipModel
 from fwsim.interface import topics
 from fwsim.interface.frames import R_frd_from_cam, dcm_enu_from_frd
 from fwsim.interface.messages import Measurements
@@ -131,7 +132,7 @@ class Perception:
     def __init__(self, gate: DetectionGateConfig, acquisition: AcquisitionConfig, ship: ShipModel,
                  camera: PinholeCamera, recorder=None, airframe=None):
         self.cfg = gate
-        self.airframe = airframe  # controllers.airframe.AirframeShadow, or None: boxes not cut by the airframe
+        self.airframe = airframe  # an airframe.AirframeShadow, or None: boxes not cut by the airframe
         self.lock = Lock(acquisition)
         self.ship = ship
         self.camera = camera
@@ -210,7 +211,7 @@ class Perception:
 
     def _touching_airframe(self, nav: Measurements) -> np.ndarray | None:
         """The camera's rotation in the body frame (``R_frd_from_cam``) when the detected box touches (within
-        ``edge_px``) the UAV's airframe in the image (:meth:`controllers.airframe.AirframeShadow.touches`),
+        ``edge_px``) the UAV's airframe in the image (:meth:`controllers.perception.airframe.AirframeShadow.touches`),
         else None (no airframe model, no gimbal angles, or clear of it)."""
         pan, tilt = float(nav.pan_rad), float(nav.tilt_rad)
         if self.airframe is None or not (math.isfinite(pan) and math.isfinite(tilt)):
@@ -245,8 +246,8 @@ class Perception:
         heading explains the box's size (else ""), the offset's spread over the headings the ship may have
         (2 x 2, px^2; zeros when there is one, or no correction), and the centre's doubt ((u, v) px^2,
         :func:`_centre_doubt`; with ``size_mismatch_action: deweight``, else zeros). ``fit_size``: the box
-        may teach the ship's size (:meth:`~controllers.target_model.ShipModel.learn_size`, when the heading is
-        sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
+        may teach the ship's size (:meth:`~controllers.perception.target_model.ShipModel.learn_size`, when the heading
+        is sure); the correction and the size gate use the fitted outline once it is in use. ``cut_by_airframe``:
         the camera's rotation in the body frame when the detected box touches the UAV's airframe in the image
         (else None); the predicted boxes are then cut as the
         airframe would cut them (:meth:`_cut_by_airframe`; a box clear of it was not cut, whatever the
@@ -290,7 +291,7 @@ class Perception:
 
     def _learn_size(self, nav: Measurements, cam: CameraMotion, ref: np.ndarray, courses, weights,
                     b: np.ndarray) -> None:
-        """Hand the box to the size fit (:meth:`~controllers.target_model.ShipModel.learn_size`); an event
+        """Hand the box to the size fit (:meth:`~controllers.perception.target_model.ShipModel.learn_size`); an event
         when the fit starts again."""
         restarts = self.ship.size.restarts
         self.ship.learn_size(cam.pos_enu_m, cam.R_enu_from_cam, ref, courses, weights, b, nav.t_s)
@@ -346,7 +347,7 @@ class Perception:
         return scaled if self._no_heading_fits(det, scaled) else None
 
     def _offset(self, cam: CameraMotion, ref: np.ndarray, prior: TargetState, headings, scale, spread=False):
-        """:func:`~controllers.target_model.box_centre_offset_px` over ``headings`` = (courses, weights, one
+        """:func:`~controllers.perception.ship_outline.box_centre_offset_px` over ``headings`` = (courses, weights, one
         course, their predicted boxes): the one course's offset, or the weighted mean over the courses."""
         courses, weights, single, boxes = headings
         return box_centre_offset_px(self.ship.outline, self.camera, cam.pos_enu_m, cam.R_enu_from_cam, ref,
@@ -366,7 +367,7 @@ class Perception:
     def _cut_by_airframe(self, nav: Measurements, cam: CameraMotion, R: np.ndarray, ref: np.ndarray, courses,
                          scale, boxes: np.ndarray, course_known: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(The predicted ``boxes`` (one per course) less the part of the ship the UAV's airframe hides from
-        the camera (:class:`controllers.airframe.AirframeShadow`): the boxes a detector would see; the share
+        the camera (:class:`controllers.perception.airframe.AirframeShadow`): the boxes a detector would see; the share
         of each course's ship hidden, 0 where its box is kept whole). A course whose whole ship the airframe
         would hide keeps its box (the detection says the ship is not where that predicts). ``R``: the
         camera's rotation in the body frame."""
@@ -399,10 +400,10 @@ class Perception:
 
     def _clear_of_airframe(self, nav: Measurements, cam: CameraMotion, prior: TargetState) -> bool:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
-        the self-occlusion model of :mod:`controllers.cbf`), seen from the camera: the airframe is not in the
+        the self-occlusion model of :mod:`controllers.guidance.cbf`), seen from the camera: the airframe is not in the
         way, so a box smaller than predicted is not one cut short (in the envelope's dives no box the airframe
         cut had its ship more than 1 deg below the plane; docs/ENVELOPE.md, "A box corrected over its own headings").
-        With the full attitude, not :func:`controllers.cbf.h_value`, which neglects the pitch (the loiter's
+        With the full attitude, not :func:`controllers.guidance.cbf.h_value`, which neglects the pitch (the loiter's
         assumption; in the dive the nose is 30-60 deg down)."""
         clearance = self.cfg.airframe_clearance_deg
         euler = np.asarray(nav.euler_ned_rad, dtype=float)

@@ -1,6 +1,6 @@
 """Pinhole camera and image-feature kinematics for the flight software (UKF, IBVS).
 
-A small, dependency-free module (numpy only) shared by ``controllers.ukf`` and
+A small, dependency-free module (numpy only) shared by ``controllers.estimation.ukf`` and
 the IBVS controller. The harness has its own camera (``fwsim.sensors.camera``), which
 flight software must not import; this one holds only what a mission computer
 knows: the intrinsics and the geometry.
@@ -258,3 +258,27 @@ def held_while_closing(held: bool, tgo_s: float, hold_tgo_s: float) -> bool:
     if not held:
         return tgo_s < hold_tgo_s
     return not tgo_s > 2.0 * hold_tgo_s
+
+
+def ground_from_pixel_jacobian(x1: float, x2: float, R_enu_from_cam, cam_z_m: float, plane_z_m: float,
+                               fx: float, fy: float) -> np.ndarray:
+    """d(point on the plane)/d(u, v) (3 x 2, m per px) of the ray through the normalised pixel (x1, x2): the
+    point is ``r_c + Z d`` with ``d = R [x1, x2, 1]`` and ``Z = (cam_z - plane_z) / -d_z``, so
+    ``dG/dx_i = h (R[:, i] / -d_z + d R[2, i] / d_z^2)`` (h the camera's height above the plane); NaN where
+    the ray does not come down to the plane. Tested against finite differences."""
+    R = np.asarray(R_enu_from_cam, dtype=float)
+    d = R @ np.array([x1, x2, 1.0])
+    h = cam_z_m - plane_z_m
+    if not (d[2] < -1e-9 and h > 0.0):
+        return np.full((3, 2), np.nan)
+    return np.array(ground_jacobian_rows(R.tolist(), d.tolist(), h, fx, fy, 3))
+
+
+def ground_jacobian_rows(R: list, d: list, h: float, fx: float, fy: float, rows: int) -> list[list[float]]:
+    """The first ``rows`` rows of :func:`ground_from_pixel_jacobian` (``R`` and the ray ``d`` as nested lists,
+    the ray coming down, ``h > 0``): ``h (R[j, i] / -d_z + d_j R[2, i] / d_z^2) / f_i``, element by element
+    (Python floats: a 2 x 2 block costs less than one numpy call on it)."""
+    nd, dd = -d[2], d[2] * d[2]
+    r2x, r2y = R[2][0], R[2][1]
+    return [[h * (R[j][0] / nd + d[j] * r2x / dd) / fx, h * (R[j][1] / nd + d[j] * r2y / dd) / fy]
+            for j in range(rows)]

@@ -1,6 +1,6 @@
 """Target estimation for manoeuvring ships: the paper's UKF with the ship's turn rate and along-track acceleration.
 
-The paper's UKF (:mod:`controllers.ukf`) models the ship at constant velocity. A
+The paper's UKF (:mod:`controllers.estimation.ukf`) models the ship at constant velocity. A
 ship that turns (up to ~1.5 deg/s), zigzags or changes speed (~0.5 m/s^2) is
 then followed with a lag: the velocity trails the turn by the filter's time
 constant, and the position by the velocity's error times that. This filter
@@ -16,7 +16,7 @@ State ``x = [x1, x2, r_q (3), V_q (3), omega (rad/s), a (m/s^2)]`` (10):
 
 Process model (continuous, RK4 over each predict, as the UKF's)::
 
-    x1_dot, x2_dot     = the UKF's feature kinematics (controllers.ukf._sx_feature_rates, shared)
+    x1_dot, x2_dot     = the UKF's feature kinematics (controllers.estimation.ukf._sx_feature_rates, shared)
     r_q_dot            = V_q
     V_q_dot            = omega e_z x V_q + a V_q / max(|V_q,h|, min_speed_m_s)     (horizontal)
     omega_dot          = -omega (1 / turn_rate_time_s + f / fade_time_s)   + white noise
@@ -33,7 +33,7 @@ UKF's CV model and the extra states cost little (tests: not worse than the
 UKF on a straight line). On ships unlike the class they cost more: the box
 centres' errors make the turn rate wander on a straight ship (envelope, seed
 1648: velocity error in the loiter 0.48 m/s at the median run against the
-UKF's 0.16), which :mod:`controllers.imm` (an IMM of the two) avoids.
+UKF's 0.16), which :mod:`controllers.estimation.imm` (an IMM of the two) avoids.
 Paper missions (seeds 21, 22; tuned on 11-13), UKF -> this: a 1.5 deg/s
 turn, miss 3.35/2.90 -> 0.75/2.19 m, estimate error at impact 6.4/5.2 ->
 0.8/2.9 m; speed steps at 0.5 m/s^2, loiter position error 2.6/2.7 ->
@@ -70,12 +70,12 @@ acceleration on r_q / V_q with ``target_accel_noise_m_s2`` horizontally) plus
 Gauss-Markov variance).
 
 Measurement: the UKF's, unchanged (``z = [u, v, r_c]``, pinhole + flat-sea
-depth, paper eq. 9; the compiled update :class:`controllers.ukf._CompiledUpdate`
+depth, paper eq. 9; the compiled update :class:`controllers.estimation.ukf._CompiledUpdate`
 works on any state that starts ``[x1, x2, r_q, ...]``).
 
 Output: a :class:`ManoeuvreEstimate` (a :class:`~controllers.messages.TargetEstimate`
 with the turn rate and acceleration and their stds; it is logged on
-``/fsw/estimate`` with those fields added), and :func:`predict_ctra`, the
+``/fsw/estimate`` with those fields added), and :func:`controllers.ship_motion.predict_ctra`, the
 ship's predicted position and velocity ahead along the turn, for a guidance
 law that wants the ship's future rather than its present velocity.
 
@@ -88,12 +88,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import PinholeCamera, closing_time_s, held_while_closing
 from controllers.config import CtUkfConfig, UkfConfig
+from controllers.estimation.ukf import UkfTargetEstimator, _CompiledProcess, _process_noise_of
 from controllers.messages import TargetEstimate
-from controllers.ukf import UkfTargetEstimator, _CompiledProcess, _process_noise_of
+from controllers.navigation.camera_model import PinholeCamera, closing_time_s, held_while_closing
+from controllers.ship_motion import predict_ctra
 
-__all__ = ["CtUkfConfig", "CtUkfTargetEstimator", "ManoeuvreEstimate", "predict_ctra"]
+__all__ = ["CtUkfConfig", "CtUkfTargetEstimator", "ManoeuvreEstimate"]
 
 #: the indices of the two states beyond the UKF's eight
 I_TURN, I_ACCEL = 8, 9
@@ -115,7 +116,7 @@ class ManoeuvreEstimate(TargetEstimate):
 
 class _CtProcess(_CompiledProcess):
     """The process model of :class:`CtUkfTargetEstimator`, compiled: the UKF's RK4 and feature rates
-    (:class:`controllers.ukf._CompiledProcess`) with the coordinated turn and along-track acceleration.
+    (:class:`controllers.estimation.ukf._CompiledProcess`) with the coordinated turn and along-track acceleration.
     ``params = (turn_rate_time_s, accel_time_s, min_speed_m_s)``."""
 
     dim_x = 10
@@ -164,40 +165,6 @@ def ct_process_noise(dt: float, ukf_cfg: UkfConfig, cfg: CtUkfConfig, held: tupl
 #: a held turn rate / acceleration keeps this fraction of its model std (not zero: the sigma points need a
 #: positive definite covariance), without correlation to the other states
 HELD_STD_FRACTION = 1e-3
-
-
-def predict_ctra(pos_enu_m, vel_enu_m_s, turn_rate_rad_s: float, accel_along_m_s2: float, dt_s: float,
-                 turn_rate_time_s: float = math.inf, accel_time_s: float = math.inf,
-                 min_speed_m_s: float = 0.5, fade_speed_m_s: float = 0.0, fade_time_s: float = math.inf,
-                 steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The ship's position and velocity ``dt_s`` ahead under the filter's process model without noise (the
-    turn rate and acceleration decaying with their correlation times; ``inf``: held), horizontally; the
-    vertical part moves at its velocity. RK4 in steps of at most 0.1 s (``steps`` to fix their number).
-
-    For a guidance law: where the ship will be at t_go (BPNG's aim point), and its velocity then."""
-    p = np.array(pos_enu_m, dtype=float)
-    v = np.array(vel_enu_m_s, dtype=float)
-    y = np.array([p[0], p[1], v[0], v[1], float(turn_rate_rad_s), float(accel_along_m_s2)])
-    kw = 0.0 if math.isinf(turn_rate_time_s) else 1.0 / turn_rate_time_s
-    ka = 0.0 if math.isinf(accel_time_s) else 1.0 / accel_time_s
-    fading = fade_speed_m_s > 0.0 and math.isfinite(fade_time_s)
-
-    def f(s: np.ndarray) -> np.ndarray:
-        speed = math.hypot(s[2], s[3])
-        k = s[5] / max(speed, min_speed_m_s)
-        fade = max(0.0, 1.0 - speed / fade_speed_m_s) / fade_time_s if fading else 0.0
-        return np.array([s[2], s[3], -s[4] * s[3] + k * s[2], s[4] * s[2] + k * s[3], -(kw + fade) * s[4],
-                         -(ka + fade) * s[5]])
-
-    n = steps if steps is not None else max(1, int(math.ceil(abs(dt_s) / 0.1)))
-    h = dt_s / n
-    for _ in range(n):
-        k1 = f(y)
-        k2 = f(y + 0.5 * h * k1)
-        k3 = f(y + 0.5 * h * k2)
-        k4 = f(y + h * k3)
-        y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    return (np.array([y[0], y[1], p[2] + v[2] * dt_s]), np.array([y[2], y[3], v[2]]))
 
 
 class CtUkfTargetEstimator(UkfTargetEstimator):

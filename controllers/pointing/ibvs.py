@@ -19,7 +19,7 @@ hence ``edot = L1 omega + T`` with::
     L1 = [[x1 x2, -(1 + x1^2),  x2],        T = [(v_x - x1 v_z) / Z,
           [1 + x2^2,   -x1 x2, -x1]]             (v_y - x2 v_z) / Z]
 
-(``controllers.camera_model``'s, the UKF's too; ``tests/test_ibvs.py`` checks
+(``controllers.navigation.camera_model``'s, the UKF's too; ``tests/test_ibvs.py`` checks
 them against finite differences of the projection).
 
 The law. Everything in ``edot`` that the joints do not cause is "known"
@@ -155,8 +155,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from controllers.config import IbvsConfig
+from controllers.navigation.camera_model import feature_rates, rotation_matrix, translation_rates  # noqa: F401
 from fwsim.interface.frames import R_frd_from_cam, cross3, dcm_enu_from_frd, finite3, wrap_pi
 from fwsim.interface.messages import GimbalCommand, Measurements
 
@@ -170,7 +170,7 @@ _SWING_DEADBAND_RAD = math.radians(5.0)  # an unwind needs the azimuth to go thi
 
 # --------------------------------------------------------------------------- feature kinematics
 
-#: The rotational (L1) and translational (T) parts of the feature kinematics: controllers.camera_model's,
+#: The rotational (L1) and translational (T) parts of the feature kinematics: controllers.navigation.camera_model's,
 #: the UKF's too (one implementation; ``tests/test_ibvs.py`` checks them against finite differences).
 l1_matrix = rotation_matrix
 translational_feature_rates = translation_rates

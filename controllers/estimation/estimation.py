@@ -13,7 +13,7 @@ estimates; this block decides when it starts and restarts:
   closer than ``detection_gate.min_range_m`` (the detections the gate
   distrusts would restart it); meanwhile that extrapolated estimate stands in.
 * with ``controllers.turn_from_course`` (on by default) a constant-velocity
-  filter's fused estimates feed :class:`controllers.course_turn.CourseTurn`;
+  filter's fused estimates feed :class:`controllers.estimation.course_turn.CourseTurn`;
   once it finds a steady turn (or, with ``periodic``, a zigzag's periodic
   course), the state handed on has the filter's lag in the turn taken out
   and the turn rate (carried along the turn or the fitted course between
@@ -35,9 +35,9 @@ import operator
 
 import numpy as np
 
-from controllers.camera_model import CameraMotion, closing_time_s
-from controllers.course_turn import CourseTurn
+from controllers.estimation.course_turn import CourseTurn
 from controllers.messages import DetectionFix, DetectionFusion, FusionReason, FusionResult, TargetEstimate, TargetState
+from controllers.navigation.camera_model import CameraMotion, closing_time_s
 from fwsim.interface import topics
 from fwsim.interface.messages import Measurements
 
@@ -59,7 +59,7 @@ class Estimation:
         self._running = False  # the filter ran at the start of this tick (it may reset itself in it)
         self._last: tuple[float, np.ndarray, np.ndarray] | None = None  # (t_s, pos, vel) of its last estimate
         self._status = None
-        # a turning ship through a constant-velocity filter (controllers.course_turn); None: off
+        # a turning ship through a constant-velocity filter (controllers.estimation.course_turn); None: off
         self._turn_cfg = turn_from_course if turn_from_course is not None and turn_from_course.enabled else None
         self.turn = CourseTurn(self._turn_cfg) if self._turn_cfg is not None else None
 

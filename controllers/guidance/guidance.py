@@ -6,12 +6,12 @@ target state (``TargetState``) in, the autopilot command and its set-points
 out. A loiter block also says where its ring is (``radius_m``, ``altitude_m``)
 for the phase switch. The built-ins:
 
-* Phase 1, :class:`PathGuidance`: the initial path (``controllers.path``);
+* Phase 1, :class:`PathGuidance`: the initial path (``controllers.guidance.path``);
 * Phase 2 (``controllers.after_lock``), :class:`OrbitLoiter` (a circle
   follower) and :class:`NmpcLoiter` (the paper's NMPC with the CBF,
-  ``controllers.nmpc``, solved at ``nmpc.step_s`` and held between solves);
+  ``controllers.guidance.nmpc``, solved at ``nmpc.step_s`` and held between solves);
 * Phase 3 (``controllers.terminal``), :class:`BpngTerminal`: the paper's
-  quaternion BPNG (``controllers.bpng``), steering to where the approach meets
+  quaternion BPNG (``controllers.guidance.bpng``), steering to where the approach meets
   the ship's outline.
 
 A user's class takes their place from the scenario (``controllers.blocks``).
@@ -23,15 +23,18 @@ Nothing here imports the truth side of the harness (DESIGN.md section 1).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controllers.bpng import Bpng
+from controllers.guidance.bpng import Bpng
+from controllers.guidance.path import OrbitFollower, PathFollower
 from controllers.messages import Guidance, TargetState
-from controllers.path import OrbitFollower, PathFollower
-from controllers.target_model import ShipModel
 from fwsim.interface import topics
 from fwsim.interface.messages import Measurements
+
+if TYPE_CHECKING:  # the perception's ship model, handed in by the mission
+    from controllers.perception.target_model import ShipModel
 
 __all__ = ["PathGuidance", "OrbitLoiter", "NmpcLoiter", "BpngTerminal"]
 
@@ -56,7 +59,7 @@ class OrbitLoiter:
         o = orbit_cfg
         self.follower = OrbitFollower(o.airspeed_m_s, o.radius_m, o.altitude_m, o.clockwise, max_bank_deg)
         self.radius_m, self.altitude_m = o.radius_m, o.altitude_m
-        self.altitude_offset_m = 0.0  # flown this far below H (the dive's entry ring: controllers.phases)
+        self.altitude_offset_m = 0.0  # flown this far below H (the dive's entry ring: controllers.phases.phases)
 
     def step(self, nav: Measurements, target: TargetState) -> Guidance:
         self.follower.altitude_m = self.altitude_m - self.altitude_offset_m
@@ -72,13 +75,13 @@ class NmpcLoiter:
     after a loiter's first starts that long before its time (at the first tick within it), from the state
     carried to that time by the model under the command held and the target carried by its estimated
     velocity, and is applied at that time: a mission computer's compute delay, in which the solve can run
-    in a process of its own while the loop goes on (``controllers.nmpc_worker``; where it runs never
+    in a process of its own while the loop goes on (``controllers.guidance.nmpc_worker``; where it runs never
     changes its numbers).
     """
 
     def __init__(self, nmpc_cfg, recorder):
-        from controllers.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements  # CasADi: loaded
-        from controllers.nmpc_worker import make_solver  # only when the NMPC flies
+        from controllers.guidance.nmpc import Nmpc, NmpcStatus, predict_state, state_from_measurements  # CasADi: loaded
+        from controllers.guidance.nmpc_worker import make_solver  # only when the NMPC flies
 
         self._status = NmpcStatus.from_result
         self._from_meas, self._predict = state_from_measurements, predict_state
@@ -92,7 +95,7 @@ class NmpcLoiter:
         self._psi = None  # the last state's psi (its unwrapping)
         self._ahead = float(nmpc_cfg.solve_ahead_s)
         self._pending = None  # the time of a solve submitted ahead
-        # flown this far below H (the dive's entry ring: controllers.phases): the solver is given the UAV and
+        # flown this far below H (the dive's entry ring: controllers.phases.phases): the solver is given the UAV and
         # the target both raised by it, so that it holds its ring at H with every relative quantity (the
         # radius, the barrier's geometry) as flown; the model knows no absolute height but H
         self.altitude_offset_m = 0.0
@@ -183,16 +186,16 @@ class BpngTerminal:
     def ship_velocity(nav: Measurements, pos: np.ndarray, target: TargetState) -> tuple[np.ndarray, np.ndarray]:
         """(the velocity the law extrapolates the ship with, the ship's velocity at impact).
 
-        A ship that turns or changes speed (an estimator that estimates it, ``controllers.ct_ukf``, or a steady
-        turn or a zigzag's periodic course found in the estimate's course, ``controllers.course_turn``: the
-        turn rate now, held constant to the time to go) is
+        A ship that turns or changes speed (an estimator that estimates it, ``controllers.estimation.ct_ukf``, or a
+        steady turn or a zigzag's periodic course found in the estimate's course,
+        ``controllers.estimation.course_turn``: the turn rate now, held constant to the time to go) is
         predicted along its turn to the time to go (the law's ``t_go = |r| / |V_p|``), and the law is given
         the chord's velocity, ``(p(t_go) - p) / t_go``: its constant-velocity extrapolation then meets the ship
         where the turn takes it. Without a manoeuvre, the estimated velocity, for both."""
         vel = np.asarray(target.vel_enu_m_s, dtype=float)
         if target.turn_rate_rad_s == 0.0 and target.accel_along_m_s2 == 0.0:
             return vel, vel
-        from controllers.ct_ukf import predict_ctra
+        from controllers.ship_motion import predict_ctra
         t_go = max(float(np.linalg.norm(pos - nav.pos_enu_m)) / max(float(np.linalg.norm(nav.vel_enu_m_s)), 1.0),
                    0.1)
         p_f, v_f = predict_ctra(pos, vel, target.turn_rate_rad_s, target.accel_along_m_s2, t_go)

@@ -1,6 +1,6 @@
 """Where the NMPC's solves run: on the flight software's own thread, or in a worker process of its own.
 
-The loiter (``controllers.guidance.NmpcLoiter``) hands each solve to a solver with ``submit`` and takes
+The loiter (``controllers.guidance.guidance.NmpcLoiter``) hands each solve to a solver with ``submit`` and takes
 the result with ``result``; with ``nmpc.solve_ahead_s`` it submits that long before the result is
 due, so a worker process has that time to solve in while the loop goes on (a mission computer
 with the NMPC on a core of its own). Both solvers run the same ``Nmpc`` on the same inputs in the same
@@ -9,7 +9,7 @@ flight.
 
 * :class:`InlineSolver` solves at ``submit`` on the caller's thread.
 * :class:`ProcessSolver` solves in a process of its own (a fresh interpreter, ``python -m
-  controllers.nmpc_worker``, on a socket pair), one request at a time. The process ignores the terminal's
+  controllers.guidance.nmpc_worker``, on a socket pair), one request at a time. The process ignores the terminal's
   and a scheduler's signals (the loop decides when a run stops) and ends when its socket closes, so it
   never outlives its flight software.
 
@@ -65,7 +65,7 @@ class InlineSolver:
     kind = "inline"
 
     def __init__(self, cfg):
-        from controllers.nmpc import Nmpc  # CasADi: loaded only when the NMPC flies
+        from controllers.guidance.nmpc import Nmpc  # CasADi: loaded only when the NMPC flies
 
         self.nmpc = Nmpc(cfg)
         self._out = None
@@ -92,7 +92,7 @@ def _serve(conn, cfg_json: str) -> None:
     quietly when the flight software has gone (its socket closed: a run that ended before the NMPC was built,
     or while a solve was under way)."""
     from controllers.config import NmpcConfig
-    from controllers.nmpc import Nmpc
+    from controllers.guidance.nmpc import Nmpc
 
     try:
         nmpc = Nmpc(NmpcConfig.model_validate_json(cfg_json))
@@ -126,7 +126,7 @@ def _send(conn, msg) -> bool:
 
 
 def _main(argv: list[str]) -> int:
-    """``python -m controllers.nmpc_worker FD``: serve on the socket FD; the configuration comes first."""
+    """``python -m controllers.guidance.nmpc_worker FD``: serve on the socket FD; the configuration comes first."""
     from multiprocessing.connection import Connection
 
     for sig in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)):
@@ -144,7 +144,7 @@ def _main(argv: list[str]) -> int:
 class ProcessSolver:
     """Solves in a worker process (see the module text); ``result`` waits for the last submission.
 
-    The process is a fresh interpreter (``python -m controllers.nmpc_worker``) on a socket pair: it
+    The process is a fresh interpreter (``python -m controllers.guidance.nmpc_worker``) on a socket pair: it
     imports nothing of the caller's script, and finds this package where the caller found it."""
 
     kind = "process"
@@ -161,7 +161,8 @@ class ProcessSolver:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
         try:
-            self._proc = subprocess.Popen([sys.executable, "-m", "controllers.nmpc_worker", str(theirs.fileno())],
+            self._proc = subprocess.Popen([sys.executable, "-m", "controllers.guidance.nmpc_worker",
+                                           str(theirs.fileno())],
                                           pass_fds=(theirs.fileno(),), env=env, stdin=subprocess.DEVNULL,
                                           start_new_session=False)
         finally:

@@ -44,7 +44,7 @@ bank round a point near the ring, the ship passing behind the UAV each loop (the
 dynamics and stage-separable, which the structured solvers need. The input regularisation makes V_U
 (which only enters through the kinematics) and the rates strictly convex in the QP (its weights are
 1e-4 of the tracking terms' scale). The CBF slack
-(controllers/cbf.py) is a 4th control per stage, penalised linearly and quadratically. Weights
+(controllers/guidance/cbf.py) is a 4th control per stage, penalised linearly and quadratically. Weights
 are per stage; the defaults put the cost at O(100) for the paper's start (300 m, 100 m off).
 
 Bounds (eq. limits): |phi| <= phi_max, |theta| <= theta_max on X_1..X_N; V_U, u_p, u_q boxes.
@@ -86,9 +86,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.cbf import G, cbf_rows, cbf_terms
 from controllers.compiled import Buffered
 from controllers.config import NmpcConfig
+from controllers.guidance.cbf import G, cbf_rows, cbf_terms
 from fwsim.interface.frames import wrap_pi
 from fwsim.interface.messages import Measurements, RateCommand
 
@@ -114,7 +114,7 @@ class NmpcResult:
     cost: float  # cost of the returned plan (nan on a fallback)
     predicted: np.ndarray  # (N+1, 6) predicted states (psi continuous with the x0 given)
     cbf_active: bool  # a CBF row is (nearly) binding somewhere on the horizon
-    min_h: float  # min over the predicted states of controllers.cbf.h_value (rad)
+    min_h: float  # min over the predicted states of controllers.guidance.cbf.h_value (rad)
     inputs: np.ndarray  # (N, 3) the plan's inputs [V_U, u_p, u_q] (on a late solve: the new, unapplied plan)
 
 
@@ -730,7 +730,7 @@ class KinematicRun:
     inputs: np.ndarray  # (K, 3) applied inputs
     radius_err_m: np.ndarray  # (K,) planar distance to the target minus R
     altitude_err_m: np.ndarray  # (K,) z - H
-    h: np.ndarray  # (K,) realised CBF h (controllers.cbf.h_value) of the plant state
+    h: np.ndarray  # (K,) realised CBF h (controllers.guidance.cbf.h_value) of the plant state
     min_h_pred: np.ndarray  # (K,) min h over each predicted horizon
     solve_ms: np.ndarray  # (K,) wall time of each solve (NmpcResult.solve_ms)
     cpu_ms: np.ndarray  # (K,) process CPU time of each solve call
@@ -754,7 +754,7 @@ def kinematic_closed_loop(nmpc: Nmpc, x0, target_pos0, target_vel, duration_s: f
     solve (``u_prev``: the [u_p, u_q] applied before, None at the first step). For tuning, tests and
     tools/bench_nmpc.py; the JSBSim closed loop lives in the harness.
     """
-    from controllers.cbf import h_value  # local: keeps the module's import surface small
+    from controllers.guidance.cbf import h_value  # local: keeps the module's import surface small
 
     dt = nmpc.cfg.step_s
     K = int(round(duration_s / dt))

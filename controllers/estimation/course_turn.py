@@ -31,7 +31,7 @@ straight ship keeps the filter's estimate untouched.
 While the camera closes on the ship within ``hold_tgo_s`` (a dive) the turn
 rate found before is held, not fitted: the dive's fast-changing view brings
 box-centre errors that turn the estimate's course (as
-``controllers.ct_ukf``'s hold, for the same reason). The lag is still taken
+``controllers.estimation.ct_ukf``'s hold, for the same reason). The lag is still taken
 from the filter's covariance of the moment.
 
 A zigzag's course swings to and fro: its rate never holds for ``steady_s``,
@@ -54,7 +54,7 @@ With a turn found, :meth:`CourseTurn.state` gives the estimate with the lag
 taken out, carried along the turn from the last fused detection (the coast of
 the last seconds follows the turn, not the trailing straight line), and the
 turn rate, for the guidance's prediction of where the ship will be
-(``controllers.guidance``) and the perception's heading of the ship.
+(``controllers.guidance.guidance``) and the perception's heading of the ship.
 
 Nothing here reads the truth (DESIGN.md section 1).
 """
@@ -66,7 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import held_while_closing
+from controllers.navigation.camera_model import held_while_closing
 
 __all__ = ["CourseTurn", "CourseTurnStatus", "PeriodicCourse", "fit_periodic", "lag_matrices"]
 

@@ -1,8 +1,8 @@
 """Target estimation by an interacting multiple model (IMM): the paper's UKF and the manoeuvring-ship UKF, mixed.
 
-The paper's UKF (:mod:`controllers.ukf`, constant velocity: "CV") holds a
+The paper's UKF (:mod:`controllers.estimation.ukf`, constant velocity: "CV") holds a
 steady ship's velocity stiffly, but trails a turning one. The manoeuvring-ship
-UKF (:mod:`controllers.ct_ukf`, a turn rate and an along-track acceleration:
+UKF (:mod:`controllers.estimation.ct_ukf`, a turn rate and an along-track acceleration:
 "CT") follows turns and zigzags, but on a steady ship its turn rate wanders
 with the box centres' errors (envelope, seed 1648, straight ships over 2 m/s
 in the loiter: turn rate 0.3-1.2 deg/s RMS, the course 1.4-7 deg off; the
@@ -31,7 +31,7 @@ Kirubarajan, "Estimation with Applications to Tracking and Navigation":
 * **Model probabilities** (each detection). ``mu_j ~ c_j L_j``, ``L_j`` the
   detection's likelihood under model j's prediction (the Gaussian density of
   its pixel innovation, whether its gate took the detection or not:
-  :attr:`controllers.ukf.UkfTargetEstimator.last_log_likelihood`), each kept at
+  :attr:`controllers.estimation.ukf.UkfTargetEstimator.last_log_likelihood`), each kept at
   least ``min_probability``.
 * **Output.** The moment-matched combination: position, velocity, the turn rate
   and acceleration (the CV model's being zero), their stds with the models'
@@ -58,11 +58,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.camera_model import CameraMotion, PinholeCamera
 from controllers.config import CtUkfConfig, ImmConfig, UkfConfig
-from controllers.ct_ukf import I_ACCEL, I_TURN, CtUkfTargetEstimator, ManoeuvreEstimate
+from controllers.estimation.ct_ukf import I_ACCEL, I_TURN, CtUkfTargetEstimator, ManoeuvreEstimate
+from controllers.estimation.ukf import UkfTargetEstimator, step_on_measurements
 from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, FusionResult
-from controllers.ukf import UkfTargetEstimator, step_on_measurements
+from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 
 __all__ = ["ImmEstimate", "ImmTargetEstimator", "mix", "transition", "update_probabilities"]
 
@@ -225,7 +225,7 @@ class ImmTargetEstimator:
                                self.cv.numerical_resets + self.ct.numerical_resets, self.initialisations)
 
     def step(self, meas, motion: CameraMotion) -> ImmEstimate | None:
-        """One tick on raw measurements, as :meth:`controllers.ukf.UkfTargetEstimator.step`."""
+        """One tick on raw measurements, as :meth:`controllers.estimation.ukf.UkfTargetEstimator.step`."""
         return step_on_measurements(self, meas, motion)
 
     @property

@@ -21,11 +21,11 @@ the airframe leaves (and the share of the ship it hides): the box a detector
 would report had the ship been where the estimate puts it.
 :meth:`AirframeShadow.aligned_cut` first moves the ship onto the detected box,
 so that the cut is the one where the camera sees the ship. The perception
-(``controllers.perception``) does this when the detected box touches the
+(``controllers.perception.perception``) does this when the detected box touches the
 silhouette (:meth:`AirframeShadow.touches`), and its box-centre correction
 then subtracts the centre of the cut box, as it
 already does for a box cut by the image border
-(:func:`controllers.target_model.predicted_box_px` clips to the image). A box
+(:func:`controllers.perception.ship_outline.predicted_box_px` clips to the image). A box
 no ray of which can meet the airframe is returned unchanged at the cost of a
 few dot products (:meth:`AirframeShadow.may_hide`): the airframe lies above
 the camera, so it hides only rays that climb in the body frame, and for the
@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
-from controllers.camera_model import PinholeCamera
 from controllers.config import AirframeConfig
+from controllers.navigation.camera_model import PinholeCamera
 
 __all__ = ["AirframeShadow"]
 

@@ -3,7 +3,7 @@
 Geometry (DESIGN.md section 5): the ship stays visible while it lies on the belly side of
 the wing plane, i.e. the body-z (down) component of ``r_q/p = r_q - r_p`` is >= 0.
 
-Conventions (the same as controllers/nmpc.py): world ENU; the NMPC state is
+Conventions (the same as controllers/guidance/nmpc.py): world ENU; the NMPC state is
 ``x = [r_p (3, ENU m), phi, theta, psi]`` with phi, theta the aerospace roll and pitch and
 **psi the ENU yaw, counter-clockwise from East** (``psi = pi/2 - psi_ned``). The paper's CBF
 section writes psi clockwise from North; in our psi the same quantities read

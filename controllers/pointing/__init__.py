@@ -1,0 +1,1 @@
+"""Pointing: the gimbal's search raster, tracking law (IBVS) and reacquisition."""
