@@ -11,7 +11,7 @@ Which block flies each part of the mission is chosen here too
 (:class:`BlockChoice`: a built-in name, or ``module.sub:ClassName`` of a
 user's class implementing the block's Protocol, ``controllers.blocks``).
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 
@@ -553,7 +553,7 @@ class CbfConfig(StrictModel):
     """The self-occlusion CBF of the NMPC."""
 
 
-    enabled: bool = Field(True, description="impose the CBF input constraints (eq. cbfright/cbfleft)")
+    enabled: bool = Field(True, description="impose the CBF input constraints (eqs. (23)-(24))")
     beta: float = Field(1.0, gt=0.0, le=50.0, description="CBF class-K gain beta in h_dot >= -beta h, 1/s")
     sides: Literal["both", "solve_time"] = Field(
         "both", description="both: right and left rows at every stage (smooth); solve_time: the side of "

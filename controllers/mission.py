@@ -21,7 +21,7 @@ Every block writes what it decided to the log through the tick's recorder;
 ``FlightSoftwareOutput`` carries it to the harness. A scripted command list can
 stand in for the mission (``kind: script``).
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

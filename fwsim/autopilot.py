@@ -3,9 +3,9 @@
 Two command modes, both used by the paper:
 
 (a) ``RateCommand`` (what the NMPC sends, paper eq. NMPCinput): airspeed and the
-    body rates u_p, u_q with the yaw rate neglected (eq. add_tran). The paper's
+    body rates u_p, u_q with the yaw rate neglected (eq. (16)). The paper's
     model turns the aircraft through ``psi_dot = (g / V) tan(phi) cos(theta)``
-    (eq. dynamics, the turn of a coordinated bank), so the autopilot does what
+    (eq. (17), the turn of a coordinated bank), so the autopilot does what
     PX4's rate controller does: it takes the Euler rates of the paper's model,
 
         phi_dot   = u_p + u_q sin(phi) tan(theta)
@@ -192,7 +192,7 @@ class Autopilot:
         phi, theta, _ = st.euler_ned_rad.tolist()  # Python floats: the same values, cheaper scalar maths
         sphi, cphi = math.sin(phi), math.cos(phi)
         sth, cth = math.sin(theta), math.cos(theta)
-        # Euler rates of the paper's model (eq. add_tran, eq. dynamics)
+        # Euler rates of the paper's model (eq. (16), eq. (17))
         phi_dot = cmd.roll_rate_rad_s + cmd.pitch_rate_rad_s * sphi * math.tan(theta)
         theta_dot = cmd.pitch_rate_rad_s * cphi
         psi_dot = G_M_S2 / V * math.tan(_clip(phi, -1.4, 1.4)) * cth

@@ -89,7 +89,7 @@ def test_pn_term_crossing_geometry_by_hand():
 
 
 def test_bias_term_turns_velocity_away_from_vf_as_printed_in_the_paper():
-    """The sign of eq. final_IAC's bias term (module docstring): V_p x n turns V AWAY from V_f.
+    """The sign of eq. (26)'s bias term (module docstring): V_p x n turns V AWAY from V_f.
 
     Finite difference: a short constant-speed step under the bias acceleration
     changes theta = angle(V, V_f) at d theta/dt = +N_f theta / t_go; the PN term
@@ -114,7 +114,7 @@ def test_bias_term_turns_velocity_away_from_vf_as_printed_in_the_paper():
 
 
 def test_planar_small_angles_equal_the_energy_optimal_impact_angle_law():
-    """Eq. final_IAC with N = 6, N_f = 2 is the linear optimal law a = -(6y + 4 y' T + 2 V gamma_f T) / T^2."""
+    """Eq. (26) with N = 6, N_f = 2 is the linear optimal law a = -(6y + 4 y' T + 2 V gamma_f T) / T^2."""
     V, R = 25.0, 1000.0
     T = R / V
     for y0, gam, gam_f in [(3.0, 2e-3, -4e-3), (-2.0, -1e-3, 3e-3), (1.0, 4e-3, 1e-3), (0.0, 0.0, 5e-3)]:
@@ -334,7 +334,7 @@ def test_closed_loop_sweep_hits_with_the_impact_angle(ship, guard):
 
 
 def test_flipped_bias_sign_misses_the_impact_angle():
-    """The 'toward V_f' variant of the bias term (a proposed correction of eq. final_IAC) fails the paper case."""
+    """The 'toward V_f' variant of the bias term (a proposed correction of eq. (26)) fails the paper case."""
     th, ps = -30.0, 30.0
     chi = math.radians(ps)
     d = np.array([[math.sin(chi), math.cos(chi), 0.0]])

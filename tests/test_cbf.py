@@ -69,7 +69,7 @@ def test_body_z_sign_is_the_sign_of_h_at_zero_pitch():
 
 
 def test_h_is_the_papers_h_on_the_targets_side():
-    """Paper eq. hCBF: h = atan(-z_q/p / R_p) - phi for R_p > 0; for R_p < 0 its h is -h_L (eq. cbfleft)."""
+    """Paper eq. (21): h = atan(-z_q/p / R_p) - phi for R_p > 0; for R_p < 0 its h is -h_L (eq. (24))."""
     for _ in range(500):
         x = np.array([*RNG.uniform(-500, 500, 2), RNG.uniform(50, 800), RNG.uniform(-0.6, 0.6), 0.0,
                       RNG.uniform(-math.pi, math.pi)])
@@ -81,7 +81,7 @@ def test_h_is_the_papers_h_on_the_targets_side():
 
 
 def _flight(x, u, q, v, dt):
-    """UAV (eq. dynamics, RK4) and constant-velocity target moved by dt (negative: backwards)."""
+    """UAV (eq. (17), RK4) and constant-velocity target moved by dt (negative: backwards)."""
     f = lambda s: np.asarray(continuous_dynamics(s, u), dtype=float).ravel()  # noqa: E731
     k1 = f(x)
     k2 = f(x + 0.5 * dt * k1)

@@ -1,4 +1,4 @@
-"""Tests for fwsim.world.gimbal: PT camera kinematics (paper eq. omegac / sigular), rate and joint limits."""
+"""Tests for fwsim.world.gimbal: PT camera kinematics (paper eqs. (13)-(14)), rate and joint limits."""
 from __future__ import annotations
 
 import math
@@ -28,7 +28,7 @@ def vee(S):
 
 
 def rel_part(tilt, pan_rate, tilt_rate):
-    """Paper eq. omegac, written as in the paper: P @ Ry_passive(tilt) @ [0,0,pan_dot] + P @ [0,tilt_dot,0]."""
+    """Paper eq. (13), written as in the paper: P @ Ry_passive(tilt) @ [0,0,pan_dot] + P @ [0,tilt_dot,0]."""
     P = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
     return P @ F.rot_y(tilt) @ np.array([0.0, 0.0, pan_rate]) + P @ np.array([0.0, tilt_rate, 0.0])
 
@@ -109,7 +109,7 @@ def test_relative_omega_matches_finite_difference(pan, tilt, pan_rate, tilt_rate
     w_fd = vee(R.T @ (Rp - Rm) / (2 * h))
     w = G.camera_angular_velocity(pan, tilt, pan_rate, tilt_rate, np.zeros(3))
     assert np.allclose(w, w_fd, atol=1e-6)
-    assert np.allclose(w, rel_part(tilt, pan_rate, tilt_rate), atol=1e-12)  # paper's eq. omegac literally
+    assert np.allclose(w, rel_part(tilt, pan_rate, tilt_rate), atol=1e-12)  # paper's eq. (13) literally
 
 
 @SETTINGS

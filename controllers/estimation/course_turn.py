@@ -56,7 +56,7 @@ the last seconds follows the turn, not the trailing straight line), and the
 turn rate, for the guidance's prediction of where the ship will be
 (``controllers.guidance.guidance``) and the perception's heading of the ship.
 
-Nothing here reads the truth (DESIGN.md section 1).
+Nothing here reads the truth (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -79,7 +79,7 @@ with the turn rate and acceleration and their stds; it is logged on
 ship's predicted position and velocity ahead along the turn, for a guidance
 law that wants the ship's future rather than its present velocity.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ logic, the guidance and the pointing read. It writes ``/fsw/estimate``, one
 ``/fsw/detection_fusion`` per detection received (the perception's decision and
 the filter's answer) and ``/fsw/estimator_status`` when a counter changes.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -39,7 +39,7 @@ Kirubarajan, "Estimation with Applications to Tracking and Navigation":
   as the UKF does. :class:`ImmEstimate` adds the manoeuvring model's
   probability, logged on ``/fsw/estimate`` (``manoeuvre_probability``).
 
-Over the envelope (docs/ENVELOPE.md, "A fresh seed, 1649; an interacting multiple
+Over the envelope (docs/results/envelope.md, "A fresh seed, 1649; an interacting multiple
 model") its loiter is the better of the two models' or close to it for each
 motion, but it lands no more runs within 3 m / 3 deg than the UKF: the last
 150 m are set by the box centres' errors up close, not by the ship's motion.
@@ -49,7 +49,7 @@ A detection is used when either model used it; its innovation in the log is
 the more probable model's. Either model resetting itself (the target left the
 camera's front half-space) resets both: the estimation block restarts them.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -63,7 +63,7 @@ Timing: the detection is used at the tick it arrives, with the camera pose of
 that tick (``det_exposure_t_s`` is not used: correct for zero detector
 latency, the scenario default).
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

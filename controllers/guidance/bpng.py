@@ -1,7 +1,7 @@
 """Terminal guidance: quaternion-based biased PN with an impact-angle constraint.
 
 Paper section "Phase 3: Biased proportional navigation for terminal guidance",
-eq. final_IAC (after Kim, Park, Park & Ryoo, "Quaternion based three-dimensional
+eq. (26) (after Kim, Park, Park & Ryoo, "Quaternion based three-dimensional
 impact angle control guidance law", IEEE TAES 57, 2021)::
 
     u = N_sigma (Omega x V_p)  -  (N_f theta / t_go) (n x V_p)          (1)
@@ -26,7 +26,7 @@ The sign of the bias term: derived, and the paper's print is RIGHT
 --------------------------------------------------------------------
 It is tempting to "correct" the bias term to ``+(N_f theta/t_go) (n x V_p)``
 ("turn V toward V_f"; this was proposed during development). That flip is
-wrong for the paper's gains; eq. final_IAC is correct as printed:
+wrong for the paper's gains; eq. (26) is correct as printed:
 
 1. *Both terms are rotations of the velocity.* At constant speed a
    perpendicular acceleration ``a`` turns V about ``omega = V x a / |V|^2``:
@@ -41,7 +41,7 @@ wrong for the paper's gains; eq. final_IAC is correct as printed:
    is ``-|V|^2 V_f_perp``. The paper's ``(N_f V_p / t_go) x n theta`` is
    ``V_p x n``: it turns V AWAY from V_f at the rate ``N_f theta / t_go``.
 
-2. *That is what the optimal law does.* Eq. final_IAC is the 3-D form of the
+2. *That is what the optimal law does.* Eq. (26) is the 3-D form of the
    energy-optimal impact-angle law (Ryoo's group, gains 6 and 2). Planar, small
    angles, target at the origin, UAV lateral offset y, ``y_ddot = a``, final
    conditions ``y(t_f) = 0`` and ``y_dot(t_f) = V gamma_f``, minimum
@@ -82,7 +82,7 @@ writes ``R_x(phi) R_y(theta) R_z(psi)``: that is R_frd_from_NED; with the
 world in ENU it is ``R_frd_from_ned @ R_NED_FROM_ENU``. These rates are kept
 for the log and the documentation only. A fixed wing cannot yaw directly, so
 fwsim does not send them: ``Bpng.step`` returns an ``AccelCommand`` (autopilot
-mode (b), DESIGN.md section 5) and the autopilot realises ``u`` by bank-to-turn:
+mode (b), docs/design/algorithms.md) and the autopilot realises ``u`` by bank-to-turn:
 it banks so that lift points along ``u - g_perp`` (gravity compensated), so the
 paper's yaw rate ``u_r = u_y/V`` becomes a bank toward ``+y`` body, and
 ``u_q = -u_z/V`` becomes the pitch rate (plus the load-factor loop); the
@@ -111,7 +111,7 @@ Guards
 
 Capture region (what the law cannot do)
 ---------------------------------------
-Eq. final_IAC is the *linearised* optimal law: it assumes the UAV is not far
+Eq. (26) is the *linearised* optimal law: it assumes the UAV is not far
 from a collision course whose direction is close to V_f. When phase 3 starts
 with the UAV's approach direction far from the impact heading, the PN term
 cannot hold a collision course against the bias, the bias turns V_p all the
@@ -184,7 +184,7 @@ def vf_enu(theta_f_deg: float, psi_f_deg: float) -> np.ndarray:
     """Unit terminal velocity direction V_f in ENU from the impact flight-path and heading angles.
 
     ``theta_f_deg``: flight-path angle, negative when diving; ``psi_f_deg``:
-    heading clockwise from North (DESIGN.md section 4). The paper's
+    heading clockwise from North (docs/design/architecture.md, "Frames and conventions"). The paper's
     ``[cos th cos psi, cos th sin psi, -sin th]`` is the same vector in NED; in
     ENU it is ``[cos th sin psi, cos th cos psi, sin th]``.
     """

@@ -1,6 +1,6 @@
-"""Self-occlusion control barrier function (paper "To prevent self-occlusion", eq. constraint..cbfleft).
+"""Self-occlusion control barrier function (paper "To prevent self-occlusion", eqs. (20)-(24)).
 
-Geometry (DESIGN.md section 5): the ship stays visible while it lies on the belly side of
+Geometry (docs/design/algorithms.md): the ship stays visible while it lies on the belly side of
 the wing plane, i.e. the body-z (down) component of ``r_q/p = r_q - r_p`` is >= 0.
 
 Conventions (the same as controllers/guidance/nmpc.py): world ENU; the NMPC state is
@@ -19,17 +19,17 @@ Neglecting pitch (the paper's assumption for Phase 2), the body-z component is
 depression angle of the target seen from the right wing ``a_R = atan2(D, R_p)`` (= the paper's
 ``atan(-z_q/p / R_p)`` for R_p > 0). Hence, for D > 0 and |phi| < pi/2:
 
-    h_R = atan2(D,  R_p) - phi      (paper eq. hCBF, target on the right)
+    h_R = atan2(D,  R_p) - phi      (paper eq. (21), target on the right)
     h_L = atan2(D, -R_p) + phi      (mirrored, target on the left; h_R + h_L = pi)
     z_b >= 0   <=>   h_R >= 0 and h_L >= 0,       z_b = rho sin(h_R) = rho sin(h_L).
 
 ``h_value = min(h_R, h_L)`` is the angle of the target below the wing plane, measured in the
 body y-z plane. The atan2 form is smooth across R_p = 0 (the paper's atan(-z/R_p) jumps there).
 
-CBF condition ``h_dot >= -beta h`` with ``phi_dot = u_p + u_q sin(phi) tan(theta)`` (eq. add_tran):
+CBF condition ``h_dot >= -beta h`` with ``phi_dot = u_p + u_q sin(phi) tan(theta)`` (eq. (16)):
 
-    right:   u_p <= beta h_R + alpha_R - u_q sin(phi) tan(theta)          (eq. cbfright)
-    left:    u_p >= -beta h_L - alpha_L - u_q sin(phi) tan(theta)         (eq. cbfleft)
+    right:   u_p <= beta h_R + alpha_R - u_q sin(phi) tan(theta)          (eq. (23))
+    left:    u_p >= -beta h_L - alpha_L - u_q sin(phi) tan(theta)         (eq. (24))
 
 where alpha_R = d/dt atan2(D, R_p) along the predicted motion (UAV kinematics of eq.
 dynamics and a constant-velocity target) and alpha_L = -alpha_R. With
@@ -100,7 +100,7 @@ def cbf_terms(x, u, target_pos, target_vel):
 
 
 def cbf_rows(x, u, target_pos, target_vel, beta: float, slack=0.0):
-    """The two CBF rows, each ``<= 0`` when satisfied: [right (eq. cbfright), left (eq. cbfleft)].
+    """The two CBF rows, each ``<= 0`` when satisfied: [right (eq. (23)), left (eq. (24))].
 
     right: ``phi_dot - beta h_R - alpha_R - slack``; left: ``-phi_dot - beta h_L + alpha_R - slack``
     (alpha_L = -alpha_R), with ``phi_dot = u_p + u_q sin(phi) tan(theta)``.
@@ -133,7 +133,7 @@ def h_value(x, target_pos) -> float:
 
 
 def alpha_right(x, u, target_pos, target_vel) -> float:
-    """alpha_R = d/dt atan2(D, R_p) (rad/s) along the kinematics of eq. (dynamics) and a constant-velocity target."""
+    """alpha_R = d/dt atan2(D, R_p) (rad/s) along the kinematics of eq. (17) and a constant-velocity target."""
     return float(cbf_terms(np.asarray(x, float), np.asarray(u, float), np.asarray(target_pos, float),
                            np.asarray(target_vel, float))[2])
 

@@ -18,7 +18,7 @@ A user's class takes their place from the scenario (``controllers.blocks``).
 Each block writes its own log (``/fsw/nmpc``, ``/fsw/bpng``) through the
 recorder it is given.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -1,11 +1,11 @@
 """Phase 2: the NMPC loiter around the ship (paper "Phase 2: NMPC for the tracking phase"), with the CBF.
 
-Model (paper eq. NMPCstate, NMPCinput, add_tran, dynamics). State and input::
+Model (the paper's NMPC state and input, eqs. (15)-(17)). State and input::
 
     X = [x, y, z (ENU, m), phi, theta, psi]      U = [V_U (m/s), u_p, u_q (rad/s)]
 
 phi, theta are the aerospace roll and pitch; **psi is the ENU yaw, counter-clockwise from
-East** (``psi = pi/2 - psi_ned``), the convention of the paper's eq. (dynamics). With it,
+East** (``psi = pi/2 - psi_ned``), the convention of the paper's eq. (17). With it,
 positive roll (right wing down) turns right, i.e. decreases psi::
 
     r_dot     = V_U [cos psi cos theta, sin psi cos theta, sin theta]
@@ -75,7 +75,7 @@ A failed or (``budget: wall_clock`` only) late (``solve_ms > max_solve_ms``) sol
 previous successful plan's input for this time (the shifted plan's first input), ``fallback``
 is true and ``status`` says why; ``Nmpc.fallback_count`` counts them.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 
@@ -142,7 +142,7 @@ class NmpcStatus:
 
 
 def continuous_dynamics(x, u):
-    """Xdot of the paper's eq. (dynamics) (psi ENU, counter-clockwise from East); casadi or numbers."""
+    """Xdot of the paper's eq. (17) (psi ENU, counter-clockwise from East); casadi or numbers."""
     phi, theta, psi = x[3], x[4], x[5]
     V, up, uq = u[0], u[1], u[2]
     ct = ca.cos(theta)

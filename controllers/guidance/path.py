@@ -3,7 +3,7 @@
 Both end in the same two loops (``rates_from_course_and_altitude``):
 bank_c = -k_chi (chi_c - chi) then u_p = k_phi (bank_c - phi); flight-path set-point
 gamma_c = k_h (h_c - h) (limited) then u_q = k_gamma (gamma_c - gamma) / cos(phi)
-(eq. add_tran: theta_dot = u_q cos phi). The outputs are the NMPC-style rate
+(eq. (16): theta_dot = u_q cos phi). The outputs are the NMPC-style rate
 commands of autopilot mode (a). Courses are ENU (counter-clockwise from East).
 
 Lines: Beard & McLain (Small Unmanned Aircraft, 2012, sec. 10.1):

@@ -5,7 +5,7 @@ the IBVS controller. The harness has its own camera (``fwsim.sensors.camera``), 
 flight software must not import; this one holds only what a mission computer
 knows: the intrinsics and the geometry.
 
-Conventions (DESIGN.md section 4):
+Conventions (docs/design/architecture.md, "Frames and conventions"):
   * camera frame C: z along the optical axis, x right, y down;
   * pinhole (OpenCV): ``u = fx X/Z + cx``, ``v = fy Y/Z + cy``;
   * normalised features ``x1 = X/Z``, ``x2 = Y/Z`` where ``P = [X, Y, Z]`` is

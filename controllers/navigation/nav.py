@@ -35,7 +35,7 @@ velocity that turns with the airframe, so in wind ``v_hat - wind`` turns; the
 wind is estimated from the fixes in near-level flight (fix velocity minus the
 airspeed along the nose, horizontal, blended with ``wind_gain``).
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

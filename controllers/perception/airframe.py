@@ -4,7 +4,7 @@ A belly camera looking at a ship above its wing plane sees part of the ship
 through the fuselage, wing or tail: the detector's box is then the box of the
 ship's pixels the airframe leaves, not of the whole ship, and its centre moves
 off the ship's by up to half the part hidden. The dive is where this happens
-(BPNG turns the lift toward a ship abeam; docs/ENVELOPE.md, "The ship seen, not only in
+(BPNG turns the lift toward a ship abeam; docs/results/envelope.md, "The ship seen, not only in
 the field of view"), at the ranges that decide the miss.
 
 :class:`AirframeShadow` predicts the same cut. It knows the airframe a priori,
@@ -31,7 +31,7 @@ few dot products (:meth:`AirframeShadow.may_hide`): the airframe lies above
 the camera, so it hides only rays that climb in the body frame, and for the
 fwuav none that climbs less than 3.5 deg.
 
-Nothing here reads the simulated airframe (DESIGN.md section 1).
+Nothing here reads the simulated airframe (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -66,7 +66,7 @@ What the estimator then does with the fix (fused, innovation gate, ...) is
 decided there; the flight software logs the two together as one
 ``/fsw/detection_fusion`` message per detection.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 
@@ -402,7 +402,7 @@ class Perception:
         """The estimated ship lies ``airframe_clearance_deg`` or more below the wing plane (the body x-y plane;
         the self-occlusion model of :mod:`controllers.guidance.cbf`), seen from the camera: the airframe is not in the
         way, so a box smaller than predicted is not one cut short (in the envelope's dives no box the airframe
-        cut had its ship more than 1 deg below the plane; docs/ENVELOPE.md, "A box corrected over its own headings").
+        cut had its ship more than 1 deg below the plane; docs/results/envelope.md).
         With the full attitude, not :func:`controllers.guidance.cbf.h_value`, which neglects the pitch (the loiter's
         assumption; in the dive the nose is 30-60 deg down)."""
         clearance = self.cfg.airframe_clearance_deg

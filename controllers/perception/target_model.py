@@ -46,7 +46,7 @@ class's layout).
 
 The outline is a priori knowledge of the target class (the paper's ship is a
 known 55 x 25 x 25 m vessel), configured with the flight software; nothing
-here reads the simulated ship (DESIGN.md section 1).
+here reads the simulated ship (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

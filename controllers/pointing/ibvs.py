@@ -4,7 +4,7 @@ Goal: keep the target's image feature ``s = [x1, x2] = [X/Z, Y/Z]`` (camera fram
 z = optical axis, x right, y down; ``x1 = (u - cx)/fx``, ``x2 = (v - cy)/fy``) at
 ``s* = 0`` (the image centre), i.e. make ``e = s - s*`` obey ``edot = -lambda e``.
 
-Feature kinematics (derived from the pinhole model, DESIGN.md section 5; the
+Feature kinematics (derived from the pinhole model, docs/design/algorithms.md; the
 paper's eq. 6/8 have typos). The target P = [X, Y, Z] in the camera frame moves as
 ``Pdot = v - omega x P`` with
 
@@ -12,7 +12,7 @@ paper's eq. 6/8 have typos). The target P = [X, Y, Z] in the camera frame moves 
     ``V_c = V_p + R_enu_from_frd (omega_p x r_c/p)`` (camera velocity, world ENU);
   * ``omega = omega_rel + R_cam_from_frd omega_p``: camera angular velocity
     w.r.t. the world in the camera frame, ``omega_rel = M(tilt) [tilt_dot, pan_dot]``
-    with ``M(t) = [[1, 0], [0, cos t], [0, -sin t]]`` (paper eq. omegac),
+    with ``M(t) = [[1, 0], [0, cos t], [0, -sin t]]`` (paper eq. (13)),
 
 hence ``edot = L1 omega + T`` with::
 
@@ -32,12 +32,12 @@ The law. Everything in ``edot`` that the joints do not cause is "known"
 
 and ``q = J^+ (-lambda e - k)`` gives ``edot = -lambda e``.
 
-Relation to the paper. Eq. IBVSsss computes ``[w_cx, w_cy] = L1hat^-1 (-k - lambda e)``
-with ``L1hat`` the first two columns of L1, then eq. sigular converts
+Relation to the paper. Eq. (12) computes ``[w_cx, w_cy] = L1hat^-1 (-k - lambda e)``
+with ``L1hat`` the first two columns of L1, then eq. (14) converts
 ``tilt_dot = w_cx``, ``pan_dot = w_cy / cos(tilt)``. Substituting, the paper
 solves ``[L1[:, 0], cos t L1[:, 1]] q = -k - lambda e``: the same law as above
 with the third-column term ``-sin t L1[:, 2] pan_dot`` dropped (the image
-rotation ``w_cz = -sin t pan_dot`` that panning brings along, eq. omegac). The two
+rotation ``w_cz = -sin t pan_dot`` that panning brings along, eq. (13)). The two
 coincide when ``tilt = 0`` or at the goal ``x = 0`` (where ``L1[:, 2] = [x2, -x1]
 = 0``); off-centre at large tilt the paper's law does not realise
 ``edot = -lambda e`` exactly, this one does. ``camera_rates_paper`` gives the
@@ -232,9 +232,9 @@ def joint_rates_direct(x1: float, x2: float, tilt_rad: float, lambda_1_s: float,
 
 
 def camera_rates_paper(x1: float, x2: float, lambda_1_s: float, known_rate=(0.0, 0.0)) -> np.ndarray:
-    """The paper's eq. IBVSsss: ``[w_cx, w_cy] = -L1hat^-1 known_rate - lambda L1hat^-1 e`` (camera frame,
+    """The paper's eq. (12): ``[w_cx, w_cy] = -L1hat^-1 known_rate - lambda L1hat^-1 e`` (camera frame,
     relative to the body). ``L1hat`` = first two columns of L1 (det = 1 + x1^2 + x2^2 > 0, always invertible);
-    ``known_rate`` is the paper's ``L2 [V_p - V_q; omega_p]``. Convert with eq. sigular
+    ``known_rate`` is the paper's ``L2 [V_p - V_q; omega_p]``. Convert with eq. (14)
     (``fwsim.interface.frames.joint_rates_from_camera_rates``) for the joint rates.
     """
     a, c = x1 * x2, -(1.0 + x1 * x1)

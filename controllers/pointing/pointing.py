@@ -8,7 +8,7 @@
   toward the direction of the target estimate (predictive pointing), the
   first time with an event.
 
-Nothing here imports the truth side of the harness (DESIGN.md section 1).
+Nothing here imports the truth side of the harness (docs/design/architecture.md, "Two rules").
 """
 from __future__ import annotations
 

@@ -410,7 +410,7 @@ def camera_angular_velocity(pan_rad: float, tilt_rad: float, pan_rate: float, ti
                             body_rates_frd_rad_s) -> np.ndarray:
     """Total camera angular velocity (rad/s) relative to the world, expressed in the camera frame.
 
-    ``omega_c = [tilt_rate, cos(tilt)*pan_rate, -sin(tilt)*pan_rate]`` (paper eq. omegac,
+    ``omega_c = [tilt_rate, cos(tilt)*pan_rate, -sin(tilt)*pan_rate]`` (paper eq. (13),
     the joints' part) ``+ R_cam_from_frd @ body_rates_frd`` (the airframe's part).
     Pass zero body rates for the part relative to the body.
     """
@@ -429,7 +429,7 @@ def joint_rates_from_camera_rates(tilt_rad: float, omega_cx: float, omega_cy: fl
                                   cos_min: float = 0.05) -> tuple[float, float]:
     """(pan_rate, tilt_rate) realising the camera-frame rates (omega_cx, omega_cy) relative to the body.
 
-    Paper eq. (sigular): ``tilt_rate = omega_cx``, ``pan_rate = omega_cy / cos(tilt)``.
+    Paper eq. (14): ``tilt_rate = omega_cx``, ``pan_rate = omega_cy / cos(tilt)``.
     Singularity at tilt = +-90 deg (optical axis along body z: pan only spins the
     image about the optical axis, it can no longer move it sideways). Handling:
     ``|cos(tilt)|`` is floored at ``cos_min`` keeping its sign, so the result is

@@ -44,7 +44,7 @@ class RateCommand:
     """Autopilot mode (a): what the NMPC sends (paper eq. NMPCinput).
 
     ``roll_rate_rad_s`` and ``pitch_rate_rad_s`` are the paper's u_p and u_q:
-    body rates with the yaw rate neglected (eq. add_tran). The autopilot adds
+    body rates with the yaw rate neglected (eq. (16)). The autopilot adds
     the yaw-rate part of a coordinated turn itself (see fwsim.autopilot).
     """
 

@@ -6,7 +6,7 @@ rejected; every problem is reported as one line naming the field path:
 
     scenarios/x.yaml: initial.airspeed_m_s: Input should be greater than 0 (got -5)
 
-User-facing angles are degrees in aviation convention (DESIGN.md section 4):
+User-facing angles are degrees in aviation convention (docs/design/architecture.md, "Frames and conventions"):
 heading clockwise from North, flight-path angle positive climbing.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The simulation loop: ``run(scenario) -> RunResult``.
 
 One fixed-rate loop (JSBSim + autopilot at ``rates.sim_hz``), other blocks at
-their own rates, one line per block in signal order (DESIGN.md section 1):
+their own rates, one line per block in signal order (docs/design/architecture.md, "Two rules"):
 
     meas  = sensors.sample(truth)         # harness: what the UAV can know
     out   = flight_software.step(meas)    # controllers/: the paper's algorithms

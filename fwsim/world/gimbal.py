@@ -19,8 +19,8 @@ Conventions (docs/design/architecture.md, "Frames and conventions", paper "PT Ca
 
     so the optical axis in the body is ``[cp*ct, sp*ct, -st]``;
   * camera angular velocity relative to the body, in the camera frame
-    (paper eq. omegac): ``[tilt_dot, cos(tilt)*pan_dot, -sin(tilt)*pan_dot]``;
-    inverse (eq. sigular): ``tilt_dot = w_cx``, ``pan_dot = w_cy / cos(tilt)``,
+    (paper eq. (13)): ``[tilt_dot, cos(tilt)*pan_dot, -sin(tilt)*pan_dot]``;
+    inverse (eq. (14)): ``tilt_dot = w_cx``, ``pan_dot = w_cy / cos(tilt)``,
     singular at tilt = +-90 deg (see ``joint_rates_from_camera_rates``).
 
 The pure functions below run at 30-120 Hz inside a Python loop: they use
