@@ -200,17 +200,18 @@ def _fly(args, scenario, text: str, log_path: Path, live) -> int:
     console.print(f"sim time {result.sim_time_s:.1f} s, wall time {result.wall_time_s:.2f} s, "
                   f"real-time factor {result.real_time_factor:.1f}x")
     console.print(f"log: {result.log_path}")
-    console.print(f"result: {_result(result.log_path)}")
+    console.print(f"result: {_result(result.result_log or result.log_path)}")
     if result.blocks is not None:
         _print_blocks(f"where the time went: {scenario.name}", result.blocks, result.wall_time_s, result.sim_time_s)
     return 0 if result.status == "completed" else 1
 
 
-def _result(log_path: Path) -> str:
-    """The one-line result of a flown run (``fwsim.analysis.metrics.result_line``), from its log."""
+def _result(log) -> str:
+    """The one-line result of a flown run (``fwsim.analysis.metrics.result_line``), from its log (a path or the
+    run's ``result_log``)."""
     from fwsim.analysis.metrics import result_line, terminal_metrics
     try:
-        return result_line(terminal_metrics(log_path))
+        return result_line(terminal_metrics(log))
     except Exception as exc:  # noqa: BLE001 - a log that cannot be scored: say so, the run itself is done
         return f"not scored ({type(exc).__name__}: {short(exc, 120)})"
 

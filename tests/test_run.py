@@ -286,6 +286,20 @@ def test_flying_into_the_ship_ends_the_run_as_a_hit(tmp_path):
     assert m["impact_time_s"] == pytest.approx(result.sim_time_s, abs=1e-6)
 
 
+def test_the_result_kept_in_memory_scores_as_the_file_does(tmp_path):
+    """``RunResult.result_log`` (what ``fwsim run``'s result line is scored from, without reading the file back)
+    gives the same terminal metrics as the file, on a hit and on a run cut short before any impact."""
+    from fwsim.analysis.metrics import terminal_metrics
+    over = {"initial.pos_enu_m": [-150.0, 0.0, 16.0], "initial.flight_path_deg": -4.0, "target.speed_m_s": 0.0,
+            "controllers.script": [{"t_s": 0, "rates": {"airspeed_m_s": 22}}]}
+    for extra in ({}, {"duration_s": 3}):
+        result = fly(CHECKOUT, tmp_path, **over, **extra)
+        kept = terminal_metrics(result.result_log)
+        assert kept == terminal_metrics(result.log_path)
+        assert set(result.result_log.topics) <= set(read_log(result.log_path).topics)
+    assert kept["terminal_note"] and kept["status"] == "completed"
+
+
 def test_impact_metrics_left_out_of_another_version_s_log_say_so(tmp_path):
     """A log whose scenario this version cannot read (a key it does not know) still gets its other metrics;
     the impact metrics (miss, hit, angles) are left out, and an ``impact_metrics`` entry says why."""

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 import zstandard
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
@@ -127,7 +128,7 @@ class RunLog:
         out = []
         declared: dict[int, dict] = {}
         for _, data, cid in self._messages[topic]:
-            d = json.loads(data)
+            d = _loads(data)
             if cid not in declared:
                 declared[cid] = self._declared(cid)
             for k, (typ, width) in declared[cid].items():
@@ -157,7 +158,7 @@ class RunLog:
         if self.encoding(topic) != "json":
             raise ValueError(f"{topic} is not a JSON topic; see events()/poses()/raw()")
         msgs = self._messages[topic]
-        rows = json.loads(b"[" + b",".join(m[1] for m in msgs) + b"]")
+        rows = _loads(b"[" + b",".join(m[1] for m in msgs) + b"]")
         keys: dict[str, None] = {}
         for r in rows:  # a field left out of some messages (NaN there) is still a column
             keys.update(r)
@@ -200,6 +201,14 @@ class RunLog:
             pos[i] = (p.x, p.y, p.z)
             quat[i] = (q.w, q.x, q.y, q.z)
         return t, pos, quat
+
+
+def _loads(data: bytes) -> Any:
+    """JSON text to Python: orjson (fast), the standard library for what it refuses (a bare NaN)."""
+    try:
+        return orjson.loads(data)
+    except orjson.JSONDecodeError:
+        return json.loads(data)
 
 
 def _to_array(values: list) -> np.ndarray:
@@ -384,6 +393,26 @@ def read_log(path: str | os.PathLike) -> RunLog:
             log.truncation_error = f"corrupted at byte {f.tell()}: {type(e).__name__}: {e}"
             log.corrupted = True
     log.truncated = not footer_seen
+    _finish(log)
+    return log
+
+
+def log_from_records(path, messages: dict[str, list[tuple[int, bytes, int]]], channels: dict[int, Channel],
+                     schemas: dict[int, Schema], metadata: dict[str, dict[str, str]],
+                     attachments: dict[str, bytes], complete: bool) -> RunLog:
+    """A :class:`RunLog` of records held in memory (:meth:`fwsim.log.LogWriter.kept_log`): messages as
+    ``(log time ns, data, channel id)`` by topic, as :func:`read_log` collects them from the file."""
+    log = RunLog(Path(path))
+    log._channels.update(channels)
+    log._schemas.update(schemas)
+    for ch in channels.values():
+        log.topics.setdefault(ch.topic, 0)
+    for topic, msgs in messages.items():
+        if msgs:
+            log._messages[topic] = list(msgs)
+    log.metadata.update({k: dict(v) for k, v in metadata.items()})
+    log.attachments.update(attachments)
+    log.truncated = not complete
     _finish(log)
     return log
 

@@ -21,7 +21,7 @@ from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import MessageIndex
+from mcap.records import Channel, MessageIndex, Schema
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
@@ -263,8 +263,17 @@ class LogWriter:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         listeners: Iterable[Listener] = (),
         epoch_ns: int = 0,
+        keep: Iterable[str] = (),
     ):
         self.path = Path(path)
+        # topics also kept in memory, with the metadata and attachments: kept_log() reads them back without
+        # reading the file (what a run's one-line result needs)
+        self._keep = frozenset(keep)
+        self._kept: dict[str, list[tuple[int, bytes, int]]] = {t: [] for t in self._keep}
+        self._kept_channels: dict[int, Any] = {}
+        self._kept_schemas: dict[int, Any] = {}
+        self._kept_metadata: dict[str, dict[str, str]] = {}
+        self._kept_attachments: dict[str, bytes] = {}
         self._t0 = int(epoch_ns)  # log times and stamps = epoch + sim time (Foxglove shows a real date)
         metadata = {**metadata, EPOCH_KEY: str(self._t0), "log_time_epoch_utc": _utc_text(self._t0)}
         self._listeners: list[Listener] = list(listeners)
@@ -281,6 +290,8 @@ class LogWriter:
             self._add_message = self._mcap.add_message  # (channel id, log time, data, publish time, sequence)
             self._mcap.start(profile="", library=f"fwsim/{__version__}")
             self._mcap.add_metadata(METADATA_NAME, {str(k): str(v) for k, v in metadata.items()})
+            self._kept_metadata[METADATA_NAME] = {str(k): str(v) for k, v in metadata.items()}
+            self._kept_attachments[SCENARIO_ATTACHMENT] = scenario_text.encode("utf-8")
             self._mcap.add_attachment(
                 create_time=time.time_ns(),
                 log_time=self._t0,
@@ -318,6 +329,11 @@ class LogWriter:
         channel_id = self._mcap.register_channel(
             topic=topic, message_encoding="json", schema_id=schema_id
         )
+        if topic in self._keep:
+            self._kept_channels[channel_id] = Channel(id=channel_id, topic=topic, message_encoding="json",
+                                                      schema_id=schema_id, metadata={})
+            self._kept_schemas[schema_id] = Schema(id=schema_id, name=spec.schema_name, encoding="jsonschema",
+                                                   data=spec.schema_json_for(first))
         entry = [channel_id, spec, 0]
         self._json_channels[(topic, cls)] = entry
         return entry
@@ -381,7 +397,10 @@ class LogWriter:
             self.last_t_s = t_s
         ns = int(t_s * 1e9)  # _ns(t_s), inline: every message passes here
         ns = self._t0 + (ns if ns > 0 else 0)
-        self._add_message(entry[0], ns, entry[1].encode(msg), ns, entry[2])
+        data = entry[1].encode(msg)
+        self._add_message(entry[0], ns, data, ns, entry[2])
+        if topic in self._keep:
+            self._kept[topic].append((ns, data, entry[0]))
         if self._listeners:
             self._notify(topic, t_s, msg)
 
@@ -418,6 +437,7 @@ class LogWriter:
         """Attach a file (e.g. the effective scenario) to the log."""
         if self._closed:
             raise ValueError(f"LogWriter for {self.path} is closed")
+        self._kept_attachments[name] = bytes(data)
         self._mcap.add_attachment(create_time=time.time_ns(), log_time=self._t0, name=name, media_type=media_type,
                                   data=data)
 
@@ -544,6 +564,13 @@ class LogWriter:
         log.name = name
         self._write_proto(topics.EVENTS, log, ns)
 
+    def kept_log(self):
+        """The topics given as ``keep``, with the metadata and attachments, as a :class:`fwsim.log.RunLog` read
+        from memory: what :func:`fwsim.log.read_log` would give of those topics, without reading the file."""
+        from fwsim.log.reader import log_from_records
+        return log_from_records(self.path, self._kept, self._kept_channels, self._kept_schemas,
+                                self._kept_metadata, self._kept_attachments, complete=self._closed)
+
     # -- closing ----------------------------------------------------------
     @property
     def closed(self) -> bool:
@@ -572,6 +599,7 @@ class LogWriter:
                 text = f"run {status}" + (f": {reason}" if reason else "")
                 self._event(None, text, level, "fwsim")
             finally:
+                self._kept_metadata[STATUS_METADATA_NAME] = {"status": str(status), "reason": str(reason)}
                 self._mcap.add_metadata(
                     STATUS_METADATA_NAME, {"status": str(status), "reason": str(reason)}
                 )

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 import yaml
@@ -57,6 +57,9 @@ class RunResult:
     sim_time_s: float
     wall_time_s: float
     blocks: list | None = None  # fwsim.sim.profiling.BlockTime per block, with run(..., profile=BlockTimer())
+    #: the log's RESULT_TOPICS as a RunLog held in memory (fwsim.analysis.metrics.terminal_metrics scores it
+    #: without reading the file back)
+    result_log: Any = None
 
     @property
     def real_time_factor(self) -> float:
@@ -193,6 +196,11 @@ def _log_truth(log: LogWriter, truth, origin, trails: _Trails) -> None:
     log.write_transform(t, topics.SHIP_FRAME_ID, truth.target.pos_enu_m, (math.cos(half), 0.0, 0.0, math.sin(half)))
 
 
+#: What the one-line result of a run reads (fwsim.analysis.metrics.terminal_metrics), kept in memory as the run
+#: writes them.
+RESULT_TOPICS = (topics.UAV_STATE, topics.TARGET_STATE, topics.FSW_STATUS)
+
+
 def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress: Callable[[float, float], None] | None = None,
         listeners: Iterable[Listener] = (), profile: BlockTimer | None = None) -> RunResult:
@@ -214,7 +222,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     status, reason = "completed", "duration reached"
     epoch_ns = start_epoch_ns(scenario.start_time) if scenario.start_time else time.time_ns() // 1_000_000 * 1_000_000
     with _StopOnSigint() as sigint, LogWriter(log_path, metadata=run_metadata(scenario), epoch_ns=epoch_ns,
-                                              scenario_text=scenario_text, listeners=listeners) as log:
+                                              scenario_text=scenario_text, listeners=listeners,
+                                              keep=RESULT_TOPICS) as log:
         fsw = None
         effective = yaml.dump(scenario.model_dump(mode="json"), Dumper=FAST_SAFE_DUMPER, sort_keys=False)
         log.add_attachment("scenario_effective.yaml", effective.encode(), "application/yaml")
@@ -238,7 +247,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress(sim_t, scenario.duration_s)
     wall = time.perf_counter() - wall0
     blocks = profile.report(wall, sim_t) if profile is not None else None
-    return RunResult(log_path, status, reason, sim_t, wall, blocks)
+    return RunResult(log_path, status, reason, sim_t, wall, blocks, log.kept_log())
 
 
 def failure_text(exc: BaseException) -> str:
