@@ -128,20 +128,28 @@ class AirframeShadow:
             return False
         c = self.camera
         u0, v0, u1, v1 = (float(x) for x in box_px)
-        R = np.asarray(R_frd_from_cam, dtype=float).tolist()
-
-        def ray(u: float, v: float) -> tuple[float, float, float]:  # the unit ray through (u, v), body FRD
-            x, y = (u - c.cx) / c.fx, (v - c.cy) / c.fy
-            d = [R[k][0] * x + R[k][1] * y + R[k][2] for k in range(3)]
-            n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-            return d[0] / n, d[1] / n, d[2] / n
-
-        m = ray(0.5 * (u0 + u1), 0.5 * (v0 + v1))
-        cos_far = min(sum(a * b for a, b in zip(m, ray(u, v))) for u in (u0, u1) for v in (v0, v1))
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(R_frd_from_cam, dtype=float).tolist()
+        cx, cy, fx, fy = c.cx, c.cy, c.fx, c.fy
+        # the unit ray through a pixel, body FRD: (R @ [(u - cx) / fx, (v - cy) / fy, 1]) / its norm; the centre's
+        # (m), then the cosine of its angle to each corner's (written out: this runs on every detection)
+        x, y = (0.5 * (u0 + u1) - cx) / fx, (0.5 * (v0 + v1) - cy) / fy
+        d0, d1, d2 = r00 * x + r01 * y + r02, r10 * x + r11 * y + r12, r20 * x + r21 * y + r22
+        n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        m0, m1, m2 = d0 / n, d1 / n, d2 / n
+        cos_far = math.inf
+        for u in (u0, u1):
+            x = (u - cx) / fx
+            for v in (v0, v1):
+                y = (v - cy) / fy
+                d0, d1, d2 = r00 * x + r01 * y + r02, r10 * x + r11 * y + r12, r20 * x + r21 * y + r22
+                n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                cos = m0 * (d0 / n) + m1 * (d1 / n) + m2 * (d2 / n)
+                if cos < cos_far:
+                    cos_far = cos
         if cos_far <= 0.0:  # (a box 90 deg or more across: no bound)
             return True
         spread = math.acos(min(1.0, cos_far))
-        return math.asin(max(-1.0, min(1.0, -m[2]))) + spread >= self._min_elevation
+        return math.asin(max(-1.0, min(1.0, -m2))) + spread >= self._min_elevation
 
     def touches(self, R_frd_from_cam: np.ndarray, box_px, margin_px: float = 0.0) -> bool:
         """Whether the airframe's silhouette overlaps the box (u0, v0, u1, v1) grown by ``margin_px``: a

@@ -81,7 +81,7 @@ from controllers.navigation.camera_model import CameraMotion, PinholeCamera
 from controllers.perception.ship_outline import box_centre_offset_px, predicted_boxes_px, projected_points_px
 from controllers.perception.target_model import ShipModel
 from fwsim.interface import topics
-from fwsim.interface.frames import R_frd_from_cam, dcm_enu_from_frd
+from fwsim.interface.frames import R_frd_from_cam, dcm_ned_from_frd_rows
 from fwsim.interface.messages import Measurements
 
 __all__ = ["Perception", "Lock"]
@@ -409,8 +409,13 @@ class Perception:
         euler = np.asarray(nav.euler_ned_rad, dtype=float)
         if clearance >= 90.0 or not np.isfinite(euler).all():
             return False
-        r = dcm_enu_from_frd(euler).T @ (np.asarray(prior.pos_enu_m, dtype=float) - cam.pos_enu_m)  # body FRD
-        return bool(math.atan2(r[2], math.hypot(r[0], r[1])) >= math.radians(clearance))
+        # the line of sight in the body frame: R_enu_from_frd.T @ (ship - camera), with R_enu_from_frd's rows
+        # (east, north, up) = (R_ned_from_frd's second, first, minus its third), written out
+        n, e, d = dcm_ned_from_frd_rows(euler)
+        p, c = prior.pos_enu_m, cam.pos_enu_m
+        r0, r1, r2 = float(p[0]) - float(c[0]), float(p[1]) - float(c[1]), float(p[2]) - float(c[2])
+        fwd, right, down = (e[k] * r0 + n[k] * r1 - d[k] * r2 for k in range(3))
+        return math.atan2(down, math.hypot(fwd, right)) >= math.radians(clearance)
 
     def _own_headings(self, cam: CameraMotion, ref: np.ndarray, det: np.ndarray, scale, size_factor: np.ndarray):
         """(courses, weights, predicted boxes) of the headings all round (every 360 / _OWN_HEADINGS deg) whose

@@ -131,6 +131,10 @@ def _dcm_ned_from_frd_rows(euler_ned_rad):
     )
 
 
+#: the rows of R_ned_from_frd as three lists of floats (for a hot path that multiplies them out itself)
+dcm_ned_from_frd_rows = _dcm_ned_from_frd_rows
+
+
 def dcm_ned_from_frd(euler_ned_rad) -> np.ndarray:
     """R_ned_from_frd from 3-2-1 Euler angles; its transpose is rot_x(phi) @ rot_y(theta) @ rot_z(psi)."""
     return np.array(_dcm_ned_from_frd_rows(euler_ned_rad))

@@ -173,6 +173,98 @@ class FlightSoftwareStatus:
     loiter_altitude_m: float = math.nan  # Phase 2 and 3: the loiter ring's altitude H
 
 
+# --------------------------------------------------------------------------- navigation: raw sensors in, estimate out
+# What the onboard sensors deliver to the navigation filter (fwsim.sensors.errors makes them from the truth,
+# controllers.navigation.ins fuses them), and what the filter gives everything onboard.
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    """One IMU interval, as PX4's EKF2 takes it: the integrated rate and specific force over ``dt_s``
+    (body FRD), ending at ``t_s``."""
+
+    t_s: float
+    dt_s: float
+    delta_angle_frd_rad: np.ndarray  # (3,) integral of the body rates over the interval
+    delta_velocity_frd_m_s: np.ndarray  # (3,) integral of the specific force over the interval
+
+
+@dataclass(frozen=True, slots=True)
+class GnssFix:
+    """A GNSS fix as it arrives (``t_s``), valid at ``time_of_fix_s`` (``t_s`` less the receiver's latency),
+    with the receiver's own accuracy figures (1 sigma)."""
+
+    t_s: float
+    time_of_fix_s: float
+    pos_enu_m: np.ndarray  # (3,)
+    vel_enu_m_s: np.ndarray  # (3,)
+    h_acc_m: float  # horizontal position accuracy
+    v_acc_m: float  # vertical position accuracy
+    s_acc_m_s: float  # speed accuracy, per axis
+
+
+@dataclass(frozen=True, slots=True)
+class BaroSample:
+    """Barometric height above the sea surface (m), as the altimeter reads it."""
+
+    t_s: float
+    height_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class MagSample:
+    """The magnetometer's field in the body frame (gauss)."""
+
+    t_s: float
+    field_frd_gauss: np.ndarray  # (3,)
+
+
+@dataclass(frozen=True, slots=True)
+class AirspeedSample:
+    """The pitot's true airspeed (m/s)."""
+
+    t_s: float
+    airspeed_m_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class NavEstimate:
+    """The navigation filter's estimate: the only "self" the autopilot and the flight software know.
+    Standard deviations are 1 sigma per axis; attitude std is (roll, pitch, yaw)."""
+
+    t_s: float
+    pos_enu_m: np.ndarray  # (3,)
+    vel_enu_m_s: np.ndarray  # (3,)
+    euler_ned_rad: np.ndarray  # (3,) roll, pitch, yaw (yaw clockwise from North)
+    body_rates_frd_rad_s: np.ndarray  # (3,) the gyro less its estimated bias
+    specific_force_frd_m_s2: np.ndarray  # (3,) the accelerometer less its estimated bias
+    gyro_bias_frd_rad_s: np.ndarray  # (3,)
+    accel_bias_frd_m_s2: np.ndarray  # (3,)
+    wind_enu_m_s: np.ndarray  # (3,) NaN when the filter has no wind state
+    pos_std_m: np.ndarray  # (3,)
+    vel_std_m_s: np.ndarray  # (3,)
+    att_std_rad: np.ndarray  # (3,) roll, pitch, yaw
+    mode: str  # "initialising" | "aided" | "dead_reckoning"
+    gnss_age_s: float  # time since the last GNSS fix was fused (inf before the first)
+
+
+@dataclass(frozen=True, slots=True)
+class AidSourceStatus:
+    """One aid source's latest fusion attempt, in PX4's ``estimator_aid_src_*`` form (per component of the
+    observation; a scalar source has one)."""
+
+    t_s: float
+    source: str  # "gnss_pos" | "gnss_vel" | "baro" | "mag" | "airspeed"
+    time_of_observation_s: float
+    observation: np.ndarray
+    observation_variance: np.ndarray
+    innovation: np.ndarray
+    innovation_variance: np.ndarray
+    test_ratio: np.ndarray  # innovation^2 / (gate^2 * innovation variance): above 1 is rejected
+    fused: bool
+    rejected: bool
+
+
 def as_dict(msg) -> dict:
     """A message as a plain dict (arrays become lists), for JSON logs."""
     out = {}

@@ -17,11 +17,13 @@ PX4's own estimator would give it; the flight software only sees
 """
 from __future__ import annotations
 
+import gc
 import math
 import platform
 import signal
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -232,7 +234,8 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             # while the harness is built
             fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
             flight = _Flight(scenario, log, fsw, profile)
-            status, reason = flight.fly(sigint, progress)
+            with _fewer_collections():
+                status, reason = flight.fly(sigint, progress)
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too
@@ -248,6 +251,22 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     wall = time.perf_counter() - wall0
     blocks = profile.report(wall, sim_t) if profile is not None else None
     return RunResult(log_path, status, reason, sim_t, wall, blocks, log.kept_log())
+
+
+@contextmanager
+def _fewer_collections():
+    """Python's cyclic garbage collector run less often while flying (its thresholds raised, then put back):
+    a tick makes thousands of small objects and few cycles, and the default thresholds had it run every
+    few hundred allocations."""
+    was = gc.get_threshold()
+    gc.set_threshold(*_FLIGHT_GC_THRESHOLD)
+    try:
+        yield
+    finally:
+        gc.set_threshold(*was)
+
+
+_FLIGHT_GC_THRESHOLD = (50_000, 50, 50)
 
 
 def failure_text(exc: BaseException) -> str:
