@@ -501,7 +501,8 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     note = _phases(log, m)
     ended = not note
     try:
-        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+        scenario = log.scenario if log.scenario is not None else \
+            parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
     except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
         why = short(exc, 160) or type(exc).__name__
         m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
@@ -585,7 +586,8 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     else:  # a log from before the ring was logged: from its scenario
         from fwsim.scenario.model import parse_scenario
         try:
-            sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False).controllers
+            sc = (log.scenario if log.scenario is not None else
+                  parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)).controllers
         except Exception:
             return
         loiter = sc.nmpc if sc.after_lock.use == "nmpc" else sc.orbit

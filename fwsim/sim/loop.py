@@ -250,7 +250,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress(sim_t, scenario.duration_s)
     wall = time.perf_counter() - wall0
     blocks = profile.report(wall, sim_t) if profile is not None else None
-    return RunResult(log_path, status, reason, sim_t, wall, blocks, log.kept_log())
+    kept = log.kept_log()
+    kept.scenario = scenario  # (what its effective_scenario_text parses back to)
+    return RunResult(log_path, status, reason, sim_t, wall, blocks, kept)
 
 
 @contextmanager
