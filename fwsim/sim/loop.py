@@ -355,7 +355,11 @@ class _Flight:
         if tick % self.fsw_every == 0:
             self._flight_software(t_now)
         out = self.out
-        act = self.autopilot.actuate(out.command, self.truth.uav)
+        ap = self.autopilot
+        underspeed = ap.underspeed
+        act = ap.actuate(out.command, self.truth.uav)
+        if ap.underspeed != underspeed:
+            self._underspeed_event(t_now, ap.underspeed)
         gimbal_cmd = out.gimbal
         if events is not None and events.gimbal_stuck:
             gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
@@ -371,6 +375,16 @@ class _Flight:
                 log.write(topics.WORLD_AIR, self.world.air())
         if self.render_every and (tick + 1) % self.render_every == 0:
             _log_render(log, self.world, self.sim_t, self.frame, self.last_det)
+
+    def _underspeed_event(self, t_s: float, engaged: bool) -> None:
+        """An event where the autopilot's underspeed protection engages or lets go (fwsim.autopilot)."""
+        uav = self.truth.uav
+        if engaged:
+            self.log.write_event(t_s, f"autopilot: underspeed at {uav.airspeed_m_s:.1f} m/s: the commanded path "
+                                      "gives way to the airspeed (bent down until it recovers)", "WARNING")
+        else:
+            self.log.write_event(t_s, f"autopilot: airspeed back at {uav.airspeed_m_s:.1f} m/s: the commanded "
+                                      "path is held again")
 
     def _flight_software(self, t_now: float) -> None:
         """The sensors sampled and the flight software stepped; its commands, status and topics logged."""
