@@ -17,13 +17,11 @@ PX4's own estimator would give it; the flight software only sees
 """
 from __future__ import annotations
 
-import gc
 import math
 import platform
 import signal
 import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -234,8 +232,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             # while the harness is built
             fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
             flight = _Flight(scenario, log, fsw, profile)
-            with _fewer_collections():
-                status, reason = flight.fly(sigint, progress)
+            status, reason = flight.fly(sigint, progress)
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too
@@ -253,22 +250,6 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
     kept = log.kept_log()
     kept.scenario = scenario  # (what its effective_scenario_text parses back to)
     return RunResult(log_path, status, reason, sim_t, wall, blocks, kept)
-
-
-@contextmanager
-def _fewer_collections():
-    """Python's cyclic garbage collector run less often while flying (its thresholds raised, then put back):
-    a tick makes thousands of small objects and few cycles, and the default thresholds had it run every
-    few hundred allocations."""
-    was = gc.get_threshold()
-    gc.set_threshold(*_FLIGHT_GC_THRESHOLD)
-    try:
-        yield
-    finally:
-        gc.set_threshold(*was)
-
-
-_FLIGHT_GC_THRESHOLD = (50_000, 50, 50)
 
 
 def failure_text(exc: BaseException) -> str:
