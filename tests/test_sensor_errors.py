@@ -321,15 +321,16 @@ def test_ideal_profile_gives_the_truth():
 
 def test_gnss_outage_gives_no_fixes_until_it_ends():
     def faults(t, model):
-        if t == 5.0:
+        if abs(t - 5.05) < 1e-9:  # the fix of 5.0 s is on its way (due at 5.12 s)
             model.outage(True)
-        if t == 10.0:
+        if abs(t - 10.0) < 1e-9:
             model.outage(False)
     fixes = run_gnss(GnssModel(typical().gnss, 3), 15.0, on_step=faults)
-    assert not [f for t, f in fixes if 5.0 <= t < 10.0]  # not even those in flight when it began
+    assert not [f for t, f in fixes if 5.05 <= t < 10.0]  # not even the one in flight when it began
     after = [f for t, f in fixes if t >= 10.0]
     assert after and min(f.time_of_fix_s for f in after) >= 10.0 - 1e-9
-    assert len([f for t, f in fixes if t < 5.0]) == 25  # 5 Hz: taken at 0 ... 4.8 s, 0.12 s late
+    assert len([f for t, f in fixes if t < 5.05]) == 25  # 5 Hz: taken at 0 ... 4.8 s, 0.12 s late
+    assert len(after) == 25  # taken at 10.0 ... 14.8 s
 
 
 def test_gnss_jump_shifts_the_error_by_the_offset_from_then_on():
