@@ -1,5 +1,6 @@
 """Sensor error models (fwsim.sensors.errors): the statistics of each term, timing, determinism, faults."""
 import math
+from dataclasses import fields
 
 import annotated_types as at
 import numpy as np
@@ -53,8 +54,9 @@ def pooled_adev(rates, taus):
 
 
 def test_allan_deviation_at_one_second_is_the_noise_density():
-    """In-run and turn-on biases off: the Allan deviation at tau = 1 s is the configured noise density."""
-    cfg = resolve("typical", {"imu.gyro.bias_random_walk_rad_s2_sqrt_hz": 0.0, "imu.accel.bias_random_walk_m_s3_sqrt_hz": 0.0})
+    """In-run biases off (a constant turn-on bias does not show): the Allan deviation at 1 s is the noise density."""
+    cfg = resolve("typical", {"imu.gyro.bias_random_walk_rad_s2_sqrt_hz": 0.0,
+                              "imu.accel.bias_random_walk_m_s3_sqrt_hz": 0.0})
     gyro, accel = stationary_imu(cfg.imu)
     _, g = pooled_adev(gyro, [1.0])
     _, a = pooled_adev(accel, [1.0])
@@ -155,8 +157,9 @@ def test_turn_on_bias_scale_factor_and_misalignment_are_drawn_at_their_sigmas():
     assert off.std() == pytest.approx(cfg.accel.misalignment_sigma_rad, rel=0.1)
     imu = models[0]  # and the matrix is what a constant rate meets
     w = np.array([0.5, -0.2, 0.1])
-    only_matrix = ImuModel(resolve("ideal", {"imu.gyro.scale_factor_sigma_frac": cfg.gyro.scale_factor_sigma_frac,
-                                             "imu.gyro.misalignment_sigma_rad": cfg.gyro.misalignment_sigma_rad}).imu, 0)
+    matrix_only = resolve("ideal", {"imu.gyro.scale_factor_sigma_frac": cfg.gyro.scale_factor_sigma_frac,
+                                    "imu.gyro.misalignment_sigma_rad": cfg.gyro.misalignment_sigma_rad})
+    only_matrix = ImuModel(matrix_only.imu, 0)
     dth, _ = only_matrix.integrate(0.01, np.tile(w, (3, 1)), np.zeros((3, 3)))
     assert np.allclose(dth, only_matrix.gyro.matrix @ w * 0.01, rtol=0, atol=1e-15)
     assert np.array_equal(only_matrix.gyro.matrix, imu.gyro.matrix)  # its own generators: same draws
@@ -195,7 +198,8 @@ def run_gnss(model, t_end, hz=120.0, truth_at=moving_truth, on_step=None):
 
 def test_gnss_position_error_is_gauss_markov_with_its_tau_and_sigma():
     """Lag-tau autocorrelation exp(-1), std sigma (short tau so that the run spans a thousand of them)."""
-    cfg = resolve("typical", {"gnss": {"rate_hz": 10.0, "latency_s": 0.0, "pos_horizontal_tau_s": 2.0, "pos_vertical_tau_s": 2.0,
+    cfg = resolve("typical", {"gnss": {"rate_hz": 10.0, "latency_s": 0.0,
+                                       "pos_horizontal_tau_s": 2.0, "pos_vertical_tau_s": 2.0,
                                        "pos_horizontal_sigma_m": 2.0, "pos_vertical_sigma_m": 3.0}}).gnss
     fixes = run_gnss(GnssModel(cfg, 21), 2000.0, hz=10.0, truth_at=truth)  # a still truth at (0, 0, 100)
     err = np.array([f.pos_enu_m for _, f in fixes]) - [0.0, 0.0, 100.0]
@@ -244,13 +248,13 @@ def record(models: SensorErrorModels, t_end=2.0):
         for name, sample in (("baro", models.baro.step(s)), ("mag", models.mag.step(s)),
                              ("pitot", models.pitot.step(s)), ("encoders", models.encoders.step(s.t_s, 0.3, -0.4))):
             if sample is not None:
-                out[name].append(np.array([v for v in vars_of(sample)], dtype=float))
+                out[name].append(values_of(sample))
     return {k: np.array(v) for k, v in out.items()}
 
 
-def vars_of(sample):
-    vals = [getattr(sample, name) for name in sample.__slots__ if name != "t_s"]
-    return np.concatenate([np.atleast_1d(v) for v in vals])
+def values_of(sample):
+    """Every field of a sample but its time, as one float array."""
+    return np.concatenate([np.atleast_1d(getattr(sample, f.name)) for f in fields(sample) if f.name != "t_s"])
 
 
 def test_same_seed_same_draws_other_seed_other_draws():
@@ -277,7 +281,8 @@ def test_one_sensor_or_term_never_moves_another_ones_draws():
                            for s in map(alone.step, (moving_truth(k * SIM_DT) for k in range(241))) if s is not None],
                           base["imu"])
     # switching the gyro turn-on bias off leaves its other terms' draws: the deltas differ by that bias times dt
-    full, no_turn_on = ImuModel(typical().imu, 3), ImuModel(resolve("typical", {"imu.gyro.turn_on_bias_sigma_rad_s": 0.0}).imu, 3)
+    full = ImuModel(typical().imu, 3)
+    no_turn_on = ImuModel(resolve("typical", {"imu.gyro.turn_on_bias_sigma_rad_s": 0.0}).imu, 3)
     w = np.zeros((11, 3))
     diff = full.integrate(0.01, w, w)[0] - no_turn_on.integrate(0.01, w, w)[0]
     assert np.allclose(diff, full.gyro.turn_on * 0.01, rtol=0, atol=1e-15)
