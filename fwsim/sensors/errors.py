@@ -420,6 +420,7 @@ class BaroModel:
         self._fault_rate_m_s = float(rate_m_s)
 
     def step(self, truth: AirframeState) -> BaroSample | None:
+        """A height sample when one is due (call at every simulation step), else None."""
         t = float(truth.t_s)
         self._now = t
         if not self._clock.due(t):
@@ -453,6 +454,7 @@ class MagModel:
         self._interference = _axes(offset_frd_gauss, 3)
 
     def step(self, truth: AirframeState) -> MagSample | None:
+        """A body-frame field sample when one is due (call at every simulation step), else None."""
         t = float(truth.t_s)
         if not self._clock.due(t):
             return None
@@ -470,6 +472,7 @@ class PitotModel:
         self._clock = _Clock(cfg.rate_hz)
 
     def step(self, truth: AirframeState) -> AirspeedSample | None:
+        """An airspeed sample when one is due (call at every simulation step), else None."""
         t = float(truth.t_s)
         if not self._clock.due(t):
             return None
@@ -497,6 +500,7 @@ class EncoderModel:
         self._clock = _Clock(cfg.rate_hz)
 
     def step(self, t_s: float, pan_rad: float, tilt_rad: float) -> EncoderSample | None:
+        """Pan and tilt readings of the true joint angles when due, else None."""
         if not self._clock.due(float(t_s)):
             return None
         e = self.bias_rad + self._noise.draw()
@@ -555,6 +559,7 @@ class SensorErrorModels:
 
     @classmethod
     def build(cls, cfg: SensorErrorsConfig, seed: int) -> SensorErrorModels:
+        """Each model under its default name, all from one seed."""
         return cls(ImuModel(cfg.imu, seed), GnssModel(cfg.gnss, seed), BaroModel(cfg.baro, seed),
                    MagModel(cfg.mag, seed), PitotModel(cfg.pitot, seed), EncoderModel(cfg.encoders, seed),
                    CameraMountError.draw(cfg.camera_mount, seed))
