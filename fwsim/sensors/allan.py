@@ -1,12 +1,5 @@
-"""Overlapping Allan deviation and the analytic Allan variance of the IMU error terms.
-
-For rate samples y_k (each the mean rate over dt, e.g. an IMU's delta angle / dt) the
-"phase" is x_0 = 0, x_j = dt * (y_0 + ... + y_{j-1}), and for an averaging time tau = m dt
-
-    AVAR(tau) = sum_i (x_{i+2m} - 2 x_{i+m} + x_i)^2 / (2 tau^2 (L - 2m)),
-
-over all L - 2m overlapping starting points of the L = N + 1 phase points: half the mean
-squared difference of consecutive tau-averages (IEEE Std 952's overlapping estimator).
+"""The analytic Allan variance of the IMU error terms (the sensor-model tests measure the simulated IMU's
+Allan deviation with allantools' overlapping estimator and hold it against these).
 
 Analytic curves (each term adds its variance):
 
@@ -23,27 +16,7 @@ import math
 
 import numpy as np
 
-__all__ = ["overlapping_adev", "avar_white", "avar_random_walk", "avar_gauss_markov"]
-
-
-def overlapping_adev(rates: np.ndarray, dt_s: float, taus_s) -> tuple[np.ndarray, np.ndarray]:
-    """Overlapping Allan deviation of rate samples ``rates`` ((N,) or (N, k): k series at once).
-
-    Returns ``(taus, adev)``: the averaging times actually used (each a whole number m >= 1 of
-    samples, at most N // 2; duplicates dropped) and the deviation at each, shape (len(taus),)
-    or (len(taus), k).
-    """
-    y = np.asarray(rates, dtype=float)
-    n = y.shape[0]
-    ms = sorted({int(round(t / dt_s)) for t in np.atleast_1d(taus_s)} & set(range(1, n // 2 + 1)))
-    if not ms:
-        raise ValueError(f"no averaging time fits {n} samples of {dt_s} s")
-    x = np.concatenate([np.zeros((1,) + y.shape[1:]), np.cumsum(y, axis=0) * dt_s])
-    out = []
-    for m in ms:
-        d = x[2 * m:] - 2.0 * x[m:-m] + x[:-2 * m]
-        out.append(np.sqrt(np.mean(d * d, axis=0) / (2.0 * (m * dt_s) ** 2)))
-    return np.array(ms, dtype=float) * dt_s, np.array(out)
+__all__ = ["avar_white", "avar_random_walk", "avar_gauss_markov"]
 
 
 def avar_white(density: float, tau_s):
