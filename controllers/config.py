@@ -52,6 +52,74 @@ class NavigationConfig(StrictModel):
                              description="a fix older than this when the next arrives: restart from the fix")
 
 
+class InsConfig(StrictModel):
+    """Tuning of the onboard INS/GNSS error-state EKF (``controllers.navigation.ins``); noises are 1 sigma.
+
+    Defaults are for a PX4-class small UAV (MEMS IMU at ~120 Hz, GNSS at 5 Hz with ~0.12 s latency); the gates
+    and the reset timeout are PX4 EKF2's."""
+
+    # process noise
+    gyro_noise_rad_s_rt_hz: float = Field(3.4e-4, gt=0, le=1, description="gyro white-noise density (angle random "
+                                          "walk), rad/s/sqrt(Hz)")
+    accel_noise_m_s2_rt_hz: float = Field(4.0e-3, gt=0, le=10, description="accelerometer white-noise density "
+                                          "(velocity random walk), m/s^2/sqrt(Hz)")
+    gyro_bias_rw_rad_s2_rt_hz: float = Field(3.9e-5, gt=0, le=1,
+                                             description="gyro bias random walk, rad/s^2/sqrt(Hz)")
+    accel_bias_rw_m_s3_rt_hz: float = Field(6.0e-3, gt=0, le=10,
+                                            description="accelerometer bias random walk, m/s^3/sqrt(Hz)")
+    wind_rw_m_s2_rt_hz: float = Field(0.05, gt=0, le=10, description="horizontal wind random walk, m/s^2/sqrt(Hz)")
+    baro_bias_rw_m_s_rt_hz: float = Field(0.05, gt=0, le=10,
+                                          description="barometer height bias random walk (drift), m/s/sqrt(Hz)")
+    # measurement noise (floors on what the sensor reports) and gates
+    gnss_pos_noise_min_m: float = Field(0.5, gt=0, le=100, description="floor on the fix's h_acc / v_acc, m")
+    gnss_vel_noise_min_m_s: float = Field(0.3, gt=0, le=100, description="floor on the fix's speed accuracy, m/s")
+    baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
+    mag_heading_noise_rad: float = Field(0.05, gt=0, le=3, description="magnetic heading noise, rad")
+    airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
+    sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
+    gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")
+    gnss_vel_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS velocity innovation gate, SD")
+    baro_gate_sd: float = Field(5.0, gt=0, le=100, description="barometric height innovation gate, SD")
+    mag_gate_sd: float = Field(2.6, gt=0, le=100, description="magnetic heading innovation gate, SD")
+    airspeed_gate_sd: float = Field(3.0, gt=0, le=100, description="airspeed innovation gate, SD")
+    sideslip_gate_sd: float = Field(5.0, gt=0, le=100, description="synthetic sideslip innovation gate, SD")
+    fuse_sideslip: bool = Field(True, description="fuse zero sideslip with each airspeed sample (fixed wing: wind "
+                                                  "observable in straight flight)")
+    airspeed_min_m_s: float = Field(5.0, ge=0, le=100, description="airspeed below this is not fused, m/s")
+    # the earth's magnetic field at the mission site (a priori)
+    mag_declination_deg: float = Field(0.0, ge=-180, le=180, description="magnetic declination, east positive, deg")
+    mag_inclination_deg: float = Field(60.0, ge=-90, le=90, description="magnetic inclination, down positive, deg")
+    mag_strength_gauss: float = Field(0.5, gt=0, le=2, description="earth field strength, gauss")
+    mag_strength_tol_gauss: float = Field(0.15, gt=0, le=2, description="a sample whose strength is further than this "
+                                          "from mag_strength_gauss is rejected, gauss")
+    mag_inclination_tol_deg: float = Field(20.0, gt=0, le=180, description="a sample whose inclination (on the "
+                                           "estimated tilt) is further than this from mag_inclination_deg is rejected")
+    # fusion timing and faults
+    fusion_horizon_s: float = Field(0.25, ge=0, le=2, description="the EKF runs this far behind the newest IMU "
+                                    "sample; a measurement up to this old is fused at its own time of validity, s")
+    gnss_delay_s: float = Field(0.12, ge=0, le=2, description="receiver latency assumed for a fix without a time "
+                                "of fix (NaN), s")
+    sample_average_s: float = Field(0.1, ge=0, le=2, description="baro, magnetometer and airspeed samples are "
+                                    "averaged over this long and fused once per window (0: each sample), s")
+    dead_reckoning_after_s: float = Field(1.0, gt=0, le=60, description="no GNSS position or velocity fused for "
+                                          "this long: mode dead_reckoning, s")
+    gnss_reset_after_s: float = Field(7.0, gt=0, le=600, description="GNSS position (or velocity) rejected this "
+                                      "long in a row: reset it to the fix, s")
+    output_tau_s: float = Field(0.25, gt=0, le=10, description="time constant of the output predictor's velocity "
+                                "and position tracking of the delayed EKF, s")
+    # initialisation
+    init_alignment_s: float = Field(1.0, gt=0, le=30, description="in-motion alignment: IMU and GNSS over this "
+                                    "long give the first attitude, s")
+    init_tilt_std_deg: float = Field(3.0, gt=0, le=90, description="initial roll and pitch std, deg")
+    init_yaw_std_deg: float = Field(10.0, gt=0, le=180, description="initial yaw std with a magnetometer, deg")
+    init_yaw_std_course_deg: float = Field(30.0, gt=0, le=180, description="initial yaw std from the GNSS course "
+                                           "(no usable magnetometer), deg")
+    init_gyro_bias_std_rad_s: float = Field(0.02, gt=0, le=1, description="initial gyro bias std, rad/s")
+    init_accel_bias_std_m_s2: float = Field(0.2, gt=0, le=10, description="initial accelerometer bias std, m/s^2")
+    init_wind_std_m_s: float = Field(5.0, gt=0, le=50, description="initial wind std when no airspeed sample is there "
+                                     "to initialise it from, m/s")
+
+
 class AcquisitionConfig(StrictModel):
     pan_deg: list[float] = Field(default_factory=lambda: [-90.0, 90.0], min_length=2, max_length=2,
                                  description="pan sector swept during the search")
