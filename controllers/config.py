@@ -74,7 +74,8 @@ class InsConfig(StrictModel):
     gnss_pos_noise_min_m: float = Field(0.5, gt=0, le=100, description="floor on the fix's h_acc / v_acc, m")
     gnss_vel_noise_min_m_s: float = Field(0.3, gt=0, le=100, description="floor on the fix's speed accuracy, m/s")
     baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
-    mag_heading_noise_rad: float = Field(0.05, gt=0, le=3, description="magnetic heading noise, rad")
+    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise, rad (EKF2_HEAD_NOISE: "
+                                         "the compass's error is mostly a bias, which fusing does not average away)")
     airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
     sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
     gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")
@@ -996,6 +997,8 @@ class Controllers(StrictModel):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
     navigation: NavigationConfig = Field(default_factory=NavigationConfig,
         description="how GNSS fixes become the flight software's position")
+    ins: InsConfig = Field(default_factory=InsConfig,
+        description="the onboard INS/GNSS filter (with sensors.profile typical or degraded)")
     script: list[ScriptStep] = Field(default_factory=list,
         description="kind script: the timed commands flown in order")
     initial_path: InitialPath = Field(default_factory=InitialPath,

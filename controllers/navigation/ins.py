@@ -414,6 +414,10 @@ class Ins:
         ss = max(fix.s_acc_m_s, c.gnss_vel_noise_min_m_s)
         fused_p = self._fuse_direct("gnss_pos", tv, zp, np.array([sh * sh, sh * sh, sv * sv]), _POS,
                                     c.gnss_pos_gate_sd)
+        if fused_p:  # a receiver's error drifts slowly: its fixes do not average it away
+            floor = np.array([fix.h_acc_m, fix.h_acc_m, fix.v_acc_m], dtype=float) ** 2
+            d = self._Pdiag[_POS:_POS + 3]
+            d += np.maximum(floor - d, 0.0)
         fused_v = self._fuse_direct("gnss_vel", tv, np.asarray(fix.vel_enu_m_s, float), np.full(3, ss * ss), _VEL,
                                     c.gnss_vel_gate_sd)
         if fused_p or fused_v:

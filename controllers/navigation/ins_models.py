@@ -13,6 +13,10 @@ from fwsim.interface.frames import cross3
 __all__ = ["mag_heading", "airspeed", "sideslip"]
 
 
+_YAW_ONLY = np.array([0.0, 0.0, 1.0])
+_YAW_ONLY.setflags(write=False)
+
+
 def mag_heading(R_enu_from_frd: np.ndarray, field_frd) -> tuple[float, np.ndarray, np.ndarray] | None:
     """The heading (rad, clockwise from North) of the measured field turned into the world frame with the
     estimated attitude, its Jacobian over ``dtheta`` (3,), and that world-frame field; None if the field is
@@ -20,13 +24,15 @@ def mag_heading(R_enu_from_frd: np.ndarray, field_frd) -> tuple[float, np.ndarra
 
     With an attitude error the field reads ``m_w = Exp(-dtheta) m_earth``, so ``dm_w = m_w x dtheta``; the heading
     ``atan2(m_E, m_N)`` then moves by ``(|m_H|^2 dtheta_U - m_U (m_E dtheta_E + m_N dtheta_N)) / |m_H|^2``: the
-    yaw error whole, and the tilt error through the vertical field."""
+    yaw error whole, and the tilt error through the vertical field. The Jacobian given is the yaw's alone
+    (``[0, 0, 1]``), as EKF2's heading fusion: a magnetometer's error (the hard iron left after calibration,
+    interference) then cannot tilt the attitude, which the accelerometers and GNSS hold."""
     mw = R_enu_from_frd @ np.asarray(field_frd, float)
     e, n, u = float(mw[0]), float(mw[1]), float(mw[2])
     mh2 = e * e + n * n
     if not mh2 > 1e-6:
         return None
-    return math.atan2(e, n), np.array([-u * e / mh2, -u * n / mh2, 1.0]), mw
+    return math.atan2(e, n), _YAW_ONLY, mw
 
 
 def airspeed(v_enu, wind_en) -> tuple[float, np.ndarray]:

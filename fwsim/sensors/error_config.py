@@ -126,7 +126,8 @@ class MagErrorsConfig(StrictModel):
     declination_deg: float = Field(0.0, ge=-180, le=180, description="field east of true north")
     noise_sigma_gauss: float = Field(0.005, ge=0, le=1, description="white noise per sample, per axis")
     hard_iron_sigma_gauss: float = Field(
-        0.05, ge=0, le=2, description="body-fixed offset drawn once (uncompensated hard iron), sigma per axis")
+        0.01, ge=0, le=2, description="body-fixed offset drawn once (the hard iron left after calibration), sigma per "
+                                      "axis")
 
 
 class PitotErrorsConfig(StrictModel):
@@ -209,7 +210,7 @@ def degraded() -> SensorErrorsConfig:
                  "pos_horizontal_tau_s": 60.0, "pos_vertical_tau_s": 60.0,
                  "vel_horizontal_sigma_m_s": 0.25, "vel_vertical_sigma_m_s": 0.5},
         "baro": {"noise_sigma_m": 0.9, "drift_sigma_m": 3.0},
-        "mag": {"noise_sigma_gauss": 0.015, "hard_iron_sigma_gauss": 0.15},
+        "mag": {"noise_sigma_gauss": 0.015, "hard_iron_sigma_gauss": 0.04},
         "pitot": {"noise_sigma_m_s": 0.9, "bias_sigma_m_s": 0.9},
         "encoders": {"noise_sigma_rad": 0.0015, "bias_sigma_rad": 0.006},
         "camera_mount": {"boresight_sigma_rad": 0.75 * _DEG, "focal_scale_sigma_frac": 0.015},
