@@ -43,7 +43,8 @@ sideslip        (R^T (v - w))_y / (R^T (v - w))_x = 0       5 SD (synthetic, wit
 
 The magnetic heading is fused with the earth field configured a priori (declination, inclination, strength):
 the measured field turned into the world frame with the estimated attitude should point at the declination;
-its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` carries the tilt's share through the vertical field.
+its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` (of the configured field) carries the tilt's share
+through the vertical field.
 
 Fusion horizon (PX4 EKF2's scheme, not rewind-and-replay). The IMU samples are buffered and the EKF runs
 ``fusion_horizon_s`` behind the newest one; a GNSS fix, valid ``time_of_fix_s`` (its arrival less the
@@ -470,7 +471,7 @@ class Ins:
         """Magnetic heading: the field turned into the world frame should point at the declination; the field's
         strength and inclination are checked against the configured earth field first."""
         c = self.cfg
-        model = mag_heading(dcm_from_quat(self._q), m.field_frd_gauss)
+        model = mag_heading(dcm_from_quat(self._q), m.field_frd_gauss, self._earth_field_enu)
         if model is None:
             return
         z, h, mw = model
