@@ -232,6 +232,7 @@ class Ins:
         self._statuses: deque[AidSourceStatus] = deque(maxlen=4096)
         self._latest: dict[str, AidSourceStatus] = {}
         self._events: list[str] = []
+        self._estimate: NavEstimate | None = None  # estimate() of the newest IMU sample, once asked for
 
     # ----------------------------------------------------------------------------------------------- inputs
 
@@ -240,6 +241,7 @@ class Ins:
         before it (fusing what has become due on the way)."""
         k = self._n_imu
         self._n_imu += 1
+        self._estimate = None
         self._t_now = imu.t_s
         self._last_imu = imu
         self._imu_buf.append((k, imu))
@@ -319,25 +321,29 @@ class Ins:
                             self._ba.copy(), self._w.copy(), float(self._x[18]), self._P.copy())
 
     def estimate(self) -> NavEstimate:
-        """The estimate at the newest IMU sample (the output predictor), with the EKF's standard deviations."""
+        """The estimate at the newest IMU sample (the output predictor), with the EKF's standard deviations
+        (the same object until the next :meth:`predict`: treat its arrays as read-only)."""
+        if self._estimate is not None:
+            return self._estimate
         imu = self._last_imu
         t = imu.t_s if imu is not None else math.nan
         if not self._initialised:
             nan3 = np.full(3, np.nan)
             return NavEstimate(t, nan3, nan3.copy(), nan3.copy(), nan3.copy(), nan3.copy(), nan3.copy(), nan3.copy(),
                                nan3.copy(), nan3.copy(), nan3.copy(), nan3.copy(), "initialising", math.inf)
-        o, P = self._out, self._P
+        o = self._out
         R = dcm_from_quat(o.q)
         euler = euler_ned_from_dcm_enu_from_frd(R)
         J = euler_jacobian(euler, R)
-        att_var = np.einsum("ij,jk,ik->i", J, P[0:3, 0:3], J)
+        att_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, self._P[0:3, 0:3], J), 0.0))
+        std = np.sqrt(self._Pdiag)
         inv_dt = 1.0 / imu.dt_s
-        return NavEstimate(
-            t, np.array(o.p), np.array(o.v), euler,
-            imu.delta_angle_frd_rad * inv_dt - self._bg, imu.delta_velocity_frd_m_s * inv_dt - self._ba,
-            self._bg.copy(), self._ba.copy(), np.array([self._w[0], self._w[1], 0.0]),
-            np.sqrt(self._Pdiag[_POS:_POS + 3]), np.sqrt(self._Pdiag[_VEL:_VEL + 3]), np.sqrt(np.maximum(att_var, 0.0)),
-            self._mode, t - self._last_gnss_fix_t)
+        bg, ba = self._bg.copy(), self._ba.copy()
+        self._estimate = NavEstimate(
+            t, np.array(o.p), np.array(o.v), euler, imu.delta_angle_frd_rad * inv_dt - bg,
+            imu.delta_velocity_frd_m_s * inv_dt - ba, bg, ba, np.array([self._w[0], self._w[1], 0.0]),
+            std[_POS:_POS + 3], std[_VEL:_VEL + 3], att_std, self._mode, t - self._last_gnss_fix_t)
+        return self._estimate
 
     # ----------------------------------------------------------------------------------------------- the delayed EKF
 
