@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controllers.navigation.ins import GRAVITY_M_S2, Ins
-from controllers.navigation.ins_math import euler_ned_from_dcm_enu_from_frd
+from controllers.navigation.ins_math import dcm_from_quat, euler_ned_from_dcm_enu_from_frd
 from fwsim.interface.frames import R_ENU_FROM_NED, rot_y, wrap_pi
 from fwsim.interface.messages import AirspeedSample, BaroSample, GnssFix, ImuSample, MagSample
 
@@ -289,7 +289,6 @@ def _record_horizon(ins: Ins, truth: Truth, bg, ba, rec) -> None:
     """NEES of the horizon state's attitude and position errors (3 dof each), and its bias errors."""
     h = ins.horizon_state()
     k = int(round(h.t_s * IMU_HZ))
-    from controllers.navigation.ins_math import dcm_from_quat
     dR = truth.R[k] @ dcm_from_quat(h.quat_enu_from_frd).T  # Exp(dtheta) = R_true R_est^T
     dth = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
     dp = truth.pos[k] - h.pos_enu_m

@@ -92,18 +92,18 @@ from controllers.config import InsConfig
 from controllers.navigation.ins_align import InMotionAlignment
 from controllers.navigation.ins_compiled import build_predict
 from controllers.navigation.ins_models import airspeed, mag_heading, sideslip
-from controllers.navigation.ins_math import dcm_from_quat, euler_jacobian, euler_ned_from_dcm_enu_from_frd, quat_exp
-from controllers.navigation.ins_math import quat_mul
+from controllers.navigation.ins_math import (dcm_from_quat, euler_jacobian, euler_ned_from_dcm_enu_from_frd, quat_exp,
+                                             quat_mul)
 from controllers.navigation.ins_output import OutputPredictor
 from fwsim.interface.frames import quat_from_dcm, wrap_pi
-from fwsim.interface.messages import AidSourceStatus, AirspeedSample, BaroSample, GnssFix, ImuSample, MagSample
-from fwsim.interface.messages import NavEstimate
+from fwsim.interface.messages import (AidSourceStatus, AirspeedSample, BaroSample, GnssFix, ImuSample, MagSample,
+                                      NavEstimate)
 
 __all__ = ["InsConfig", "Ins", "HorizonState", "GRAVITY_M_S2", "N_STATES"]
 
 GRAVITY_M_S2 = 9.80665  # fwsim.world.airframe.G0_M_S2
 N_STATES = 18
-_ATT, _VEL, _POS, _BG, _BA, _WIND, _BARO = 0, 3, 6, 9, 12, 15, 17
+_VEL, _POS = 3, 6  # offsets in the error state (attitude 0, gyro bias 9, accel bias 12, wind 15, baro bias 17)
 _IDX_BARO = np.array([8, 17])
 _IDX_MAG = np.array([0, 1, 2])
 _IDX_TAS = np.array([3, 4, 5, 15, 16])
@@ -202,9 +202,9 @@ class Ins:
         self._x, self._P_flat, self._u, q_rate = self._predict_fn.inputs  # nominal state, P, IMU, process noise
         self._P = self._P_flat.reshape(N_STATES, N_STATES)  # (symmetric: column-major is row-major)
         self._Pdiag = self._P_flat[:: N_STATES + 1]  # a writable view of the diagonal
-        q_rate[:] = np.array([c.gyro_noise_rad_s_rt_hz ** 2] * 3 + [c.accel_noise_m_s2_rt_hz ** 2] * 3 + [0.0] * 3
-                                + [c.gyro_bias_rw_rad_s2_rt_hz ** 2] * 3 + [c.accel_bias_rw_m_s3_rt_hz ** 2] * 3
-                                + [c.wind_rw_m_s2_rt_hz ** 2] * 2 + [c.baro_bias_rw_m_s_rt_hz ** 2])
+        q_rate[:] = ([c.gyro_noise_rad_s_rt_hz ** 2] * 3 + [c.accel_noise_m_s2_rt_hz ** 2] * 3 + [0.0] * 3
+                     + [c.gyro_bias_rw_rad_s2_rt_hz ** 2] * 3 + [c.accel_bias_rw_m_s3_rt_hz ** 2] * 3
+                     + [c.wind_rw_m_s2_rt_hz ** 2] * 2 + [c.baro_bias_rw_m_s_rt_hz ** 2])
         self._dx = np.zeros(N_STATES)
         x = self._x  # views of the nominal state (updated in place); x[18] is the baro bias b_h
         x[0] = 1.0
@@ -321,8 +321,9 @@ class Ins:
                             self._ba.copy(), self._w.copy(), float(self._x[18]), self._P.copy())
 
     def estimate(self) -> NavEstimate:
-        """The estimate at the newest IMU sample (the output predictor), with the EKF's standard deviations
-        (the same object until the next :meth:`predict`: treat its arrays as read-only)."""
+        """The estimate at the newest IMU sample (the output predictor), with the EKF's standard deviations;
+        ``gnss_age_s`` is the time since the newest fused fix was valid. The same object until the next
+        :meth:`predict` (treat its arrays as read-only)."""
         if self._estimate is not None:
             return self._estimate
         imu = self._last_imu
