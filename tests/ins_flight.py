@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controllers.navigation.ins import GRAVITY_M_S2, Ins
-from controllers.navigation.ins_math import euler_ned_from_dcm_enu_from_frd
+from controllers.navigation.ins_math import dcm_from_quat, euler_ned_from_dcm_enu_from_frd
 from fwsim.interface.frames import R_ENU_FROM_NED, rot_y, wrap_pi
 from fwsim.interface.messages import AirspeedSample, BaroSample, GnssFix, ImuSample, MagSample
 
@@ -134,7 +134,7 @@ class SensorSpec:
     gnss_pos_sigma: tuple = (0.8, 1.5)  # horizontal, vertical
     gnss_vel_sigma: float = 0.15
     gnss_outage: tuple | None = None  # (t_start, t_end): no fixes valid in between
-    gnss_jump: tuple | None = None  # (t_start, (3,) offset): added to every fix from then on
+    gnss_offsets: tuple = ()  # ((t_start, t_end, (3,) offset), ...): added to the fixes valid in between
     baro_hz: float = 25.0
     baro_sigma: float = 0.3
     baro_offset_m: float = 3.0
@@ -177,20 +177,21 @@ def _interp(truth: Truth, arr: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def gnss_fixes(truth: Truth, spec: SensorSpec, rng, timing: str = "delayed") -> list[GnssFix]:
     """Fixes valid every 1 / gnss_hz s; ``timing``: "delayed" (arrive latency later, time_of_fix true),
-    "naive" (arrive latency later, stamped as valid on arrival), "none" (arrive when valid)."""
+    "naive" (arrive latency later, stamped as valid on arrival), "none" (arrive when valid), "unstamped"
+    (arrive latency later, time_of_fix NaN)."""
     t_fix = np.arange(0.5, truth.t[-1] - 0.5, 1.0 / spec.gnss_hz) + 0.013
     pos, vel = _interp(truth, truth.fine_pos, t_fix), _interp(truth, truth.fine_vel, t_fix)
     sh, sv = spec.gnss_pos_sigma
     pos = pos + rng.normal(0.0, 1.0, pos.shape) * np.array([sh, sh, sv])
     vel = vel + rng.normal(0.0, spec.gnss_vel_sigma, vel.shape)
-    if spec.gnss_jump is not None:
-        pos[t_fix >= spec.gnss_jump[0]] += np.asarray(spec.gnss_jump[1], float)
+    for t0, t1, offset in spec.gnss_offsets:
+        pos[(t_fix >= t0) & (t_fix < t1)] += np.asarray(offset, float)
     out = []
     for k, tv in enumerate(t_fix):
         if spec.gnss_outage is not None and spec.gnss_outage[0] <= tv < spec.gnss_outage[1]:
             continue
         arrive = tv if timing == "none" else tv + spec.gnss_latency_s
-        stamp = arrive if timing == "naive" else tv
+        stamp = {"naive": arrive, "unstamped": math.nan}.get(timing, tv)
         out.append(GnssFix(float(arrive), float(stamp), pos[k], vel[k], sh, sv, spec.gnss_vel_sigma))
     return out
 
@@ -204,7 +205,7 @@ def other_samples(truth: Truth, spec: SensorSpec, rng) -> list:
         h += np.maximum(tb - spec.baro_drift[0], 0.0) * spec.baro_drift[1]
     out += [BaroSample(float(t), float(x)) for t, x in zip(tb, h)]
     m_enu = earth_field_enu(spec)
-    for t in np.arange(0.005, truth.t[-1], 1.0 / spec.mag_hz):
+    for t in np.arange(0.005, truth.t[-1], 1.0 / spec.mag_hz) if spec.mag_hz > 0 else ():
         k = int(round(t * IMU_HZ))
         m = truth.R[k].T @ m_enu + rng.normal(0.0, spec.mag_sigma, 3)
         if spec.mag_interference is not None and spec.mag_interference[0] <= t < spec.mag_interference[1]:
@@ -288,7 +289,6 @@ def _record_horizon(ins: Ins, truth: Truth, bg, ba, rec) -> None:
     """NEES of the horizon state's attitude and position errors (3 dof each), and its bias errors."""
     h = ins.horizon_state()
     k = int(round(h.t_s * IMU_HZ))
-    from controllers.navigation.ins_math import dcm_from_quat
     dR = truth.R[k] @ dcm_from_quat(h.quat_enu_from_frd).T  # Exp(dtheta) = R_true R_est^T
     dth = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
     dp = truth.pos[k] - h.pos_enu_m

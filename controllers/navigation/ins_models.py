@@ -13,26 +13,23 @@ from fwsim.interface.frames import cross3
 __all__ = ["mag_heading", "airspeed", "sideslip"]
 
 
-_YAW_ONLY = np.array([0.0, 0.0, 1.0])
-_YAW_ONLY.setflags(write=False)
-
-
-def mag_heading(R_enu_from_frd: np.ndarray, field_frd) -> tuple[float, np.ndarray, np.ndarray] | None:
+def mag_heading(R_enu_from_frd: np.ndarray, field_frd, earth_field_enu) -> tuple[float, np.ndarray, np.ndarray] | None:
     """The heading (rad, clockwise from North) of the measured field turned into the world frame with the
     estimated attitude, its Jacobian over ``dtheta`` (3,), and that world-frame field; None if the field is
     (nearly) vertical.
 
     With an attitude error the field reads ``m_w = Exp(-dtheta) m_earth``, so ``dm_w = m_w x dtheta``; the heading
     ``atan2(m_E, m_N)`` then moves by ``(|m_H|^2 dtheta_U - m_U (m_E dtheta_E + m_N dtheta_N)) / |m_H|^2``: the
-    yaw error whole, and the tilt error through the vertical field. The Jacobian given is the yaw's alone
-    (``[0, 0, 1]``), as EKF2's heading fusion: a magnetometer's error (the hard iron left after calibration,
-    interference) then cannot tilt the attitude, which the accelerometers and GNSS hold."""
+    yaw error whole, and the tilt error through the vertical field. The Jacobian is taken at the predicted field
+    (the configured earth field), not the measured one: the measurement's noise in it would correlate with the
+    innovation's and walk the tilt away at high fusion rates."""
     mw = R_enu_from_frd @ np.asarray(field_frd, float)
-    e, n, u = float(mw[0]), float(mw[1]), float(mw[2])
-    mh2 = e * e + n * n
-    if not mh2 > 1e-6:
+    e, n = float(mw[0]), float(mw[1])
+    ee, en, eu = float(earth_field_enu[0]), float(earth_field_enu[1]), float(earth_field_enu[2])
+    mh2 = ee * ee + en * en
+    if not (e * e + n * n > 1e-6 and mh2 > 1e-6):
         return None
-    return math.atan2(e, n), _YAW_ONLY, mw
+    return math.atan2(e, n), np.array([-eu * ee / mh2, -eu * en / mh2, 1.0]), mw
 
 
 def airspeed(v_enu, wind_en) -> tuple[float, np.ndarray]:
