@@ -63,9 +63,10 @@ jump at each fix. A measurement older than the horizon when it arrives is fused 
 with an event. Baro, magnetometer and airspeed samples are averaged over ``sample_average_s`` (EKF2 downsamples
 its observations too) and fused at the window's mean time, so the horizon must also cover half a window.
 
-Cost (tools/bench_ins.py, one core of a shared 2-core machine): ``predict`` 25 us median per IMU sample
-(the compiled EKF prediction 9-14 us, the output predictor 8 us), GNSS fusion 65 us per fix, a scalar
-fusion 20-30 us, ``estimate`` 16 us: 55-60 us per 120 Hz tick with every sensor and an estimate each tick.
+Cost (tools/bench_ins.py, one core of a shared 2-core machine, medians): ``predict`` 25-31 us per IMU
+sample (the compiled EKF prediction 9-16 us, the output predictor 9 us), GNSS fusion 70 us per fix, the
+magnetometer's 3 axes 75 us, airspeed and sideslip 60 us, baro 20 us, ``estimate`` 17 us: some 70 us per
+120 Hz tick with every sensor (baro, mag and airspeed averaged to 10 Hz) and an estimate each tick.
 
 Initialisation (in flight): an in-motion alignment (``ins_align``) over ``init_alignment_s`` between two GNSS
 fixes gives the attitude (tilt from the accelerometers against the GNSS change of velocity, heading from the
