@@ -70,18 +70,24 @@ class InsConfig(StrictModel):
     wind_rw_m_s2_rt_hz: float = Field(0.05, gt=0, le=10, description="horizontal wind random walk, m/s^2/sqrt(Hz)")
     baro_bias_rw_m_s_rt_hz: float = Field(0.05, gt=0, le=10,
                                           description="barometer height bias random walk (drift), m/s/sqrt(Hz)")
+    mag_bias_rw_gauss_s_rt_hz: float = Field(1.0e-4, gt=0, le=1, description="magnetometer body-frame bias random "
+                                             "walk, gauss/s/sqrt(Hz)")
     # measurement noise (floors on what the sensor reports) and gates
     gnss_pos_noise_min_m: float = Field(0.5, gt=0, le=100, description="floor on the fix's h_acc / v_acc, m")
     gnss_vel_noise_min_m_s: float = Field(0.3, gt=0, le=100, description="floor on the fix's speed accuracy, m/s")
     baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
-    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise, rad (EKF2_HEAD_NOISE: "
-                                         "the compass's error is mostly a bias, which fusing does not average away)")
+    mag_fusion: Literal["field", "heading"] = Field(
+        "field", description="field: the 3 axes against the configured earth field, with body-frame (hard-iron) "
+                             "bias states; heading: the tilt-compensated heading alone (EKF2's heading mode)")
+    mag_noise_gauss: float = Field(0.01, gt=0, le=1, description="magnetometer noise per axis (field fusion), gauss")
+    mag_heading_noise_rad: float = Field(0.05, gt=0, le=3, description="magnetic heading noise (heading fusion), rad")
     airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
     sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
     gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")
     gnss_vel_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS velocity innovation gate, SD")
     baro_gate_sd: float = Field(5.0, gt=0, le=100, description="barometric height innovation gate, SD")
     mag_gate_sd: float = Field(2.6, gt=0, le=100, description="magnetic heading innovation gate, SD")
+    mag_field_gate_sd: float = Field(3.0, gt=0, le=100, description="magnetic field innovation gate, per axis, SD")
     airspeed_gate_sd: float = Field(3.0, gt=0, le=100, description="airspeed innovation gate, SD")
     sideslip_gate_sd: float = Field(5.0, gt=0, le=100, description="synthetic sideslip innovation gate, SD")
     fuse_sideslip: bool = Field(True, description="fuse zero sideslip with each airspeed sample (fixed wing: wind "
@@ -117,6 +123,8 @@ class InsConfig(StrictModel):
                                            "(no usable magnetometer), deg")
     init_gyro_bias_std_rad_s: float = Field(0.02, gt=0, le=1, description="initial gyro bias std, rad/s")
     init_accel_bias_std_m_s2: float = Field(0.2, gt=0, le=10, description="initial accelerometer bias std, m/s^2")
+    init_mag_bias_std_gauss: float = Field(0.05, gt=0, le=2, description="initial magnetometer bias std (an "
+                                           "uncalibrated hard iron), per axis, gauss")
     init_wind_std_m_s: float = Field(5.0, gt=0, le=50, description="initial wind std when no airspeed sample is there "
                                      "to initialise it from, m/s")
 

@@ -5,12 +5,14 @@ Navigation frame: flat-earth world ENU (z up), gravity ``g_enu = [0, 0, -9.80665
 body FRD; attitude ``q = q_enu_from_frd`` (Hamilton ``[w, x, y, z]``), ``R = R_enu_from_frd``.
 
 State. Nominal: ``q, v (ENU m/s), p (ENU m), b_g (FRD rad/s), b_a (FRD m/s^2), w (horizontal wind E, N, m/s),
-b_h (barometer height bias, m)``. Error state (18), the EKF's covariance ``P`` is over it::
+b_h (barometer height bias, m), b_m (magnetometer body-frame bias, gauss)``. Error state (21), the EKF's
+covariance ``P`` is over it::
 
     0-2 dtheta  attitude error, a small rotation in the world frame: q_true = Exp(dtheta) * q
     3-5 dv      velocity error            6-8  dp    position error
     9-11 db_g   gyro bias error           12-14 db_a accelerometer bias error
     15-16 dw    wind error (E, N)         17    db_h barometer bias error
+    18-20 db_m  magnetometer bias error (hard iron, body frame)
 
 The world-frame attitude error keeps tilt (``dtheta`` E, N) and heading (``dtheta`` U) apart, and its
 dynamics do not depend on the body rates.
@@ -22,8 +24,8 @@ Prediction, per IMU sample (delta angle ``da``, delta velocity ``dv_m`` over ``d
     v  <- v + R (dv' + da' x dv' / 2) + g_enu dt          (first-order rotation of the delta velocity)
     p  <- p + (v_old + v_new) dt / 2
     P  <- Phi P Phi^T + Q dt,  Phi = I + F dt:
-          dtheta' = -R db_g,  dv' = -[R dv'/dt]x dtheta - R db_a,  dp' = dv;  biases, wind, b_h random walks
-    Q  = diag(sigma_g^2 I3, sigma_a^2 I3, 0, sigma_bg^2 I3, sigma_ba^2 I3, sigma_w^2 I2, sigma_bh^2)
+          dtheta' = -R db_g,  dv' = -[R dv'/dt]x dtheta - R db_a,  dp' = dv;  the biases and wind random walks
+    Q  = diag(sigma_g^2 I3, sigma_a^2 I3, 0, sigma_bg^2 I3, sigma_ba^2 I3, sigma_w^2 I2, sigma_bh^2, sigma_bm^2 I3)
          (noise densities: the continuous white noise integrated over dt; R R^T = I keeps them diagonal)
 
 Fusion (sequential scalar updates, ``K = P h / s``, ``s = h P h^T + r``, covariance ``P <- P - u u^T`` with
@@ -36,15 +38,18 @@ source          observation model                           gate (PX4 EKF2 defau
 gnss_pos (3)    p (fix moved to the EKF's sample time)      5 SD, per axis, all or none
 gnss_vel (3)    v                                           5 SD
 baro            p_U + b_h                                   5 SD
-mag (heading)   heading of R m_body = declination           2.6 SD; field strength and inclination checks
+mag (field, 3)  R^T m_earth + b_m                           3 SD, all or none; strength, inclination checks
+mag (heading)   heading of R (m_body - b_m) = declination    2.6 SD; the same checks (mag_fusion: heading)
 airspeed        |v - w|                                     3 SD (above airspeed_min_m_s)
 sideslip        (R^T (v - w))_y / (R^T (v - w))_x = 0       5 SD (synthetic, with each airspeed sample)
 ==============  ==========================================  ==============================================
 
-The magnetic heading is fused with the earth field configured a priori (declination, inclination, strength):
-the measured field turned into the world frame with the estimated attitude should point at the declination;
-its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` (of the configured field) carries the tilt's share
-through the vertical field.
+The magnetometer is fused against the earth field configured a priori (declination, inclination, strength).
+By default its three axes are (EKF2's 3-axis fusion without the earth-field states): ``d/d dtheta = R^T [m]x``,
+and the body-frame bias states take an uncalibrated hard iron, observable as the body turns in the field. In
+heading mode the measured field turned into the world frame with the estimated attitude should point at the
+declination; its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` (of the configured field) carries the
+tilt's share through the vertical field, and nothing observes the bias states.
 
 Fusion horizon (PX4 EKF2's scheme, not rewind-and-replay). The IMU samples are buffered and the EKF runs
 ``fusion_horizon_s`` behind the newest one; a GNSS fix, valid ``time_of_fix_s`` (its arrival less the
@@ -96,7 +101,7 @@ import numpy as np
 from controllers.config import InsConfig
 from controllers.navigation.ins_align import InMotionAlignment
 from controllers.navigation.ins_compiled import build_predict
-from controllers.navigation.ins_models import airspeed, mag_heading, sideslip
+from controllers.navigation.ins_models import airspeed, mag_field, mag_heading, sideslip
 from controllers.navigation.ins_math import (dcm_from_quat, euler_jacobian, euler_ned_from_dcm_enu_from_frd, quat_exp,
                                              quat_mul)
 from controllers.navigation.ins_output import OutputPredictor
@@ -107,20 +112,18 @@ from fwsim.interface.messages import (AidSourceStatus, AirspeedSample, BaroSampl
 __all__ = ["InsConfig", "Ins", "HorizonState", "GRAVITY_M_S2", "N_STATES"]
 
 GRAVITY_M_S2 = 9.80665  # fwsim.world.airframe.G0_M_S2
-N_STATES = 18
-_VEL, _POS = 3, 6  # offsets in the error state (attitude 0, gyro bias 9, accel bias 12, wind 15, baro bias 17)
+N_STATES = 21
+_VEL, _POS = 3, 6  # offsets in the error state (attitude 0, gyro bias 9, accel bias 12, wind 15, baro bias 17,
+#                    mag bias 18)
 _IDX_BARO = np.array([8, 17])
 _IDX_MAG = np.array([0, 1, 2])
+_IDX_MAG_FIELD = np.array([0, 1, 2, 18, 19, 20])
 _IDX_TAS = np.array([3, 4, 5, 15, 16])
 _IDX_BETA = np.array([0, 1, 2, 3, 4, 5, 15, 16])
 _H_BARO = np.array([1.0, 1.0])
-_VAR_MIN = np.array([1e-12] * 3 + [1e-8] * 6 + [1e-16] * 3 + [1e-12] * 3 + [1e-8] * 3)  # floors of P's diagonal
+_VAR_MIN = np.array([1e-12] * 3 + [1e-8] * 6 + [1e-16] * 3 + [1e-12] * 3 + [1e-8] * 3 + [1e-12] * 3)  # P's floors
 _REPORT_AFTER_S = 1.0  # a source's rejections raise an event once they have lasted this long
 _ALIGN_RESTART_FACTOR = 3.0  # a window this many times init_alignment_s without a fix to close it starts again
-
-
-_YAW_ONLY = np.array([0.0, 0.0, 1.0])
-_YAW_ONLY.setflags(write=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,7 +138,8 @@ class HorizonState:
     accel_bias_frd_m_s2: np.ndarray
     wind_en_m_s: np.ndarray  # (2,) east, north
     baro_bias_m: float
-    covariance: np.ndarray  # (18, 18) over the error state of the module text
+    mag_bias_frd_gauss: np.ndarray  # (3,)
+    covariance: np.ndarray  # (21, 21) over the error state of the module text
 
 
 class _Health:
@@ -213,12 +217,15 @@ class Ins:
         self._Pdiag = self._P_flat[:: N_STATES + 1]  # a writable view of the diagonal
         q_rate[:] = ([c.gyro_noise_rad_s_rt_hz ** 2] * 3 + [c.accel_noise_m_s2_rt_hz ** 2] * 3 + [0.0] * 3
                      + [c.gyro_bias_rw_rad_s2_rt_hz ** 2] * 3 + [c.accel_bias_rw_m_s3_rt_hz ** 2] * 3
-                     + [c.wind_rw_m_s2_rt_hz ** 2] * 2 + [c.baro_bias_rw_m_s_rt_hz ** 2])
+                     + [c.wind_rw_m_s2_rt_hz ** 2] * 2 + [c.baro_bias_rw_m_s_rt_hz ** 2]
+                     + [c.mag_bias_rw_gauss_s_rt_hz ** 2] * 3)
         self._dx = np.zeros(N_STATES)
         x = self._x  # views of the nominal state (updated in place); x[18] is the baro bias b_h
         x[0] = 1.0
         self._q, self._v, self._p, self._bg, self._ba, self._w = x[0:4], x[4:7], x[7:10], x[10:13], x[13:16], x[16:18]
+        self._bm = x[19:22]
         self._earth_field_enu = _earth_field_enu(c)
+        self._tmp = np.zeros((N_STATES, N_STATES))
         self._imu_buf: deque = deque()  # (index, ImuSample) not yet processed by the EKF
         self._queues: dict[str, deque] = {k: deque() for k in ("gnss", "baro", "mag", "airspeed")}
         self._averagers = {k: _Averager(c.sample_average_s) for k in ("baro", "mag", "airspeed")}
@@ -327,7 +334,7 @@ class Ins:
     def horizon_state(self) -> HorizonState:
         """The EKF's state and covariance at its delayed time (copies)."""
         return HorizonState(self._t_delayed, self._q.copy(), self._p.copy(), self._v.copy(), self._bg.copy(),
-                            self._ba.copy(), self._w.copy(), float(self._x[18]), self._P.copy())
+                            self._ba.copy(), self._w.copy(), float(self._x[18]), self._bm.copy(), self._P.copy())
 
     def estimate(self) -> NavEstimate:
         """The estimate at the newest IMU sample (the output predictor), with the EKF's standard deviations;
@@ -399,18 +406,19 @@ class Ins:
         pht = self._P[:, idx] @ h
         return pht, float(pht[idx] @ h) + r
 
-    def _update(self, pht: np.ndarray, s: float, innov: float) -> None:
-        """Scalar update with P h^T and s from :meth:`_innovation_variance` (the error ``_dx`` is zero)."""
+    def _update(self, idx: np.ndarray, h: np.ndarray, pht: np.ndarray, s: float, innov: float) -> None:
+        """Scalar update with P h^T and s from :meth:`_innovation_variance`, into the accumulated error ``_dx``
+        (the innovation less what earlier updates of the same step already explain)."""
         rs = 1.0 / math.sqrt(s)
         u = pht * rs
-        self._dx += u * (innov * rs)
+        self._dx += u * ((innov - float(self._dx[idx] @ h)) * rs)
         self._P -= np.multiply.outer(u, u)
 
     def _inject(self) -> None:
         """Move the accumulated error into the nominal state and zero it; floor P's diagonal."""
         dx = self._dx
         self._q[:] = quat_mul(quat_exp(dx[0:3]), self._q.tolist())
-        self._x[4:19] += dx[3:18]  # v, p, b_g, b_a, w, b_h: the error state's order
+        self._x[4:22] += dx[3:21]  # v, p, b_g, b_a, w, b_h, b_m: the error state's order
         dx[:] = 0.0
         np.maximum(self._Pdiag, _VAR_MIN, out=self._Pdiag)
 
@@ -484,33 +492,58 @@ class Ins:
         z = b.height_m + float(self._v[2]) * (self._t_delayed - tv)
         r = self.cfg.baro_noise_m ** 2
         innov = z - float(self._p[2] + self._x[18])
-        pht, s = self._innovation_variance(_IDX_BARO, _H_BARO, r)
-        self._scalar("baro", tv, z, r, innov, s, pht, self.cfg.baro_gate_sd)
+        obs = (_IDX_BARO, _H_BARO, *self._innovation_variance(_IDX_BARO, _H_BARO, r))
+        self._scalar("baro", tv, z, r, innov, obs, self.cfg.baro_gate_sd)
 
     def _fuse_mag_now(self, tv: float, m: MagSample) -> None:
-        """Magnetic heading: the field turned into the world frame should point at the declination; the field's
-        strength and inclination are checked against the configured earth field first."""
+        """The magnetometer, less its estimated bias, checked for the configured earth field's strength and
+        inclination (on the estimated tilt), then fused as a field (3 axes) or a heading (``mag_fusion``)."""
         c = self.cfg
-        model = mag_heading(dcm_from_quat(self._q), m.field_frd_gauss, self._earth_field_enu)
-        if model is None:
-            return
-        z, _, mw = model
-        # the yaw alone, as EKF2's heading fusion (the model's Jacobian also carries the tilt through the vertical
-        # field): a compass's error, the hard iron a calibration leaves or interference, then cannot tilt the
-        # attitude, which the accelerometers and GNSS hold (tilt-coupled, the typical profile's roll and pitch
-        # errors were twice as large)
-        h = _YAW_ONLY
-        r = c.mag_heading_noise_rad ** 2
-        pht, s = self._innovation_variance(_IDX_MAG, h, r)
-        strength = float(np.linalg.norm(mw))
+        b = np.asarray(m.field_frd_gauss, float) - self._bm
+        R = dcm_from_quat(self._q)
+        mw = R @ b
+        strength = float(np.linalg.norm(b))
         incl = math.degrees(math.atan2(-float(mw[2]), math.hypot(float(mw[0]), float(mw[1]))))
         why = None
         if abs(strength - c.mag_strength_gauss) > c.mag_strength_tol_gauss:
             why = f"field strength {strength:.2f} gauss"
         elif abs(incl - c.mag_inclination_deg) > c.mag_inclination_tol_deg:
             why = f"inclination {incl:.0f} deg"
-        innov = wrap_pi(z - math.radians(c.mag_declination_deg))
-        self._scalar("mag", tv, z, r, innov, s, pht, c.mag_gate_sd, why)
+        if c.mag_fusion == "field":
+            self._fuse_mag_field(tv, np.asarray(m.field_frd_gauss, float), R, why)
+            return
+        model = mag_heading(R, b, self._earth_field_enu)
+        if model is not None:
+            z, h, _ = model
+            r = c.mag_heading_noise_rad ** 2
+            innov = wrap_pi(z - math.radians(c.mag_declination_deg))
+            obs = (_IDX_MAG, h, *self._innovation_variance(_IDX_MAG, h, r))
+            self._scalar("mag", tv, z, r, innov, obs, c.mag_gate_sd, why)
+
+    def _fuse_mag_field(self, tv: float, z: np.ndarray, R: np.ndarray, why: str | None) -> None:
+        """The field's 3 axes against ``R^T m_earth + b_m``, gated as a whole, fused in one vector update."""
+        c = self.cfg
+        pred, H = mag_field(R, self._earth_field_enu, self._bm)
+        innov = z - pred
+        r = c.mag_noise_gauss ** 2
+        pht = self._P[:, _IDX_MAG_FIELD] @ H.T  # (21, 3)
+        S = H @ pht[_IDX_MAG_FIELD] + r * np.eye(3)
+        s = S.diagonal().copy()
+        ratio = innov * innov / (c.mag_field_gate_sd ** 2 * s)
+        if why is None and not np.all(ratio <= 1.0):
+            why = f"test ratio {float(np.max(ratio)):.1f}"
+        ok = why is None
+        if ok:
+            K = pht @ np.linalg.inv(S)
+            self._dx += K @ innov
+            P = self._P
+            P -= K @ pht.T
+            np.add(P, P.T, out=self._tmp)  # P - K S K^T is symmetric but for rounding: make it exactly so
+            np.multiply(self._tmp, 0.5, out=P)
+            self._inject()
+        self._status("mag", tv, z, np.full(3, r), innov, s, ratio, ok)
+        health = self._health["mag"]
+        self._note(health.fused(self._t_delayed) if ok else health.rejected(self._t_delayed, why))
 
     def _fuse_airspeed_now(self, tv: float, a: AirspeedSample) -> None:
         """True airspeed = |v - w|, then the synthetic zero sideslip (fixed wing)."""
@@ -522,25 +555,27 @@ class Ins:
         if tas < c.airspeed_min_m_s:
             return
         r = c.airspeed_noise_m_s ** 2
-        pht, s = self._innovation_variance(_IDX_TAS, h, r)
-        self._scalar("airspeed", tv, a.airspeed_m_s, r, a.airspeed_m_s - tas, s, pht, c.airspeed_gate_sd)
+        obs = (_IDX_TAS, h, *self._innovation_variance(_IDX_TAS, h, r))
+        self._scalar("airspeed", tv, a.airspeed_m_s, r, a.airspeed_m_s - tas, obs, c.airspeed_gate_sd)
         if not c.fuse_sideslip:
             return
         beta, ux, h = sideslip(dcm_from_quat(self._q), self._v, self._w)
         if ux > c.airspeed_min_m_s:
             r = c.sideslip_noise_rad ** 2
-            pht, s = self._innovation_variance(_IDX_BETA, h, r)
-            self._scalar("sideslip", tv, 0.0, r, -beta, s, pht, c.sideslip_gate_sd)
+            obs = (_IDX_BETA, h, *self._innovation_variance(_IDX_BETA, h, r))
+            self._scalar("sideslip", tv, 0.0, r, -beta, obs, c.sideslip_gate_sd)
 
-    def _scalar(self, source: str, tv: float, z: float, r: float, innov: float, s: float, pht: np.ndarray,
-                gate: float, why: str | None = None) -> bool:
-        """Gate, fuse, inject and report one scalar observation (``why``: a check failed before the gate)."""
+    def _scalar(self, source: str, tv: float, z: float, r: float, innov: float, obs: tuple, gate: float,
+                why: str | None = None) -> bool:
+        """Gate, fuse, inject and report one scalar observation; ``obs`` is ``(idx, h, P h^T, s)`` and ``why``
+        a check that failed before the gate."""
+        idx, h, pht, s = obs
         ratio = innov * innov / (gate * gate * s)
         if why is None and not ratio <= 1.0:
             why = f"test ratio {ratio:.1f}"
         ok = why is None
         if ok:
-            self._update(pht, s, innov)
+            self._update(idx, h, pht, s, innov)
             self._inject()
         self._status(source, tv, np.array([z]), np.array([r]), np.array([innov]), np.array([s]), np.array([ratio]),
                      ok)
@@ -607,8 +642,10 @@ class Ins:
         self._q[:] = quat_from_dcm(R)
         self._v[:] = fix.vel_enu_m_s
         self._p[:] = np.asarray(fix.pos_enu_m, float) + self._v * (s.t_s - tv)
-        self._bg[:], self._ba[:], self._dx[:] = 0.0, 0.0, 0.0
+        self._bg[:], self._ba[:], self._bm[:], self._dx[:] = 0.0, 0.0, 0.0, 0.0
         yaw_std = math.radians(c.init_yaw_std_deg if used_mag else c.init_yaw_std_course_deg)
+        if used_mag and c.mag_fusion == "field":  # an unknown hard iron turns the field's heading too
+            yaw_std = math.hypot(yaw_std, c.init_mag_bias_std_gauss / math.hypot(*self._earth_field_enu[0:2]))
         tilt_var = math.radians(c.init_tilt_std_deg) ** 2
         sh, sv = max(fix.h_acc_m, c.gnss_pos_noise_min_m), max(fix.v_acc_m, c.gnss_pos_noise_min_m)
         ss = max(fix.s_acc_m_s, c.gnss_vel_noise_min_m_s)
@@ -620,7 +657,7 @@ class Ins:
         self._P[:, :] = 0.0
         self._Pdiag[:] = ([tilt_var, tilt_var, yaw_std ** 2] + [ss * ss] * 3 + [sh * sh, sh * sh, sv * sv]
                           + [c.init_gyro_bias_std_rad_s ** 2] * 3 + [c.init_accel_bias_std_m_s2 ** 2] * 3
-                          + [wind_var] * 2 + [baro_var])
+                          + [wind_var] * 2 + [baro_var] + [c.init_mag_bias_std_gauss ** 2] * 3)
         self._initialised, self._mode = True, "aided"
         self._last_gnss_fused_t, self._last_gnss_fix_t = s.t_s, tv
         for h in self._health.values():

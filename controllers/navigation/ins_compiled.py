@@ -1,12 +1,12 @@
 """The INS's prediction step (``controllers.navigation.ins``) as one CasADi function, and its numpy reference.
 
-One call moves the nominal state and the 18 x 18 covariance over one IMU interval (the equations of the
+One call moves the nominal state and the 21 x 21 covariance over one IMU interval (the equations of the
 ``ins`` module text): a few thousand flops in CasADi's virtual machine, evaluated on preallocated buffers
 (``controllers.compiled.Buffered``), so the 120 Hz prediction costs a few microseconds of Python instead of
 some twenty for the same numpy. :func:`predict_reference` is the same step in numpy, for the tests.
 
-Nominal state vector ``x`` (19): ``q_enu_from_frd (4), v (3), p (3), b_g (3), b_a (3), w (2), b_h (1)``;
-IMU input ``u`` (7): ``delta_angle (3), delta_velocity (3), dt``; ``q_rate`` (18): the process noise's
+Nominal state vector ``x`` (22): ``q_enu_from_frd (4), v (3), p (3), b_g (3), b_a (3), w (2), b_h (1),
+b_m (3)``; IMU input ``u`` (7): ``delta_angle (3), delta_velocity (3), dt``; ``q_rate`` (21): the process noise's
 variance per second of each error state.
 """
 from __future__ import annotations
@@ -17,8 +17,8 @@ from controllers.navigation.ins_math import strapdown
 
 __all__ = ["N_NOMINAL", "build_predict", "predict_reference"]
 
-N_NOMINAL = 19
-N_ERR = 18
+N_NOMINAL = 22
+N_ERR = 21
 _FUNCTION = None  # the CasADi Function, built once per process (each filter has its own buffers)
 
 
@@ -50,7 +50,7 @@ def _sx_dcm(q):
 
 
 def _build(gravity_m_s2: float):
-    """The CasADi Function. Only P's upper triangle is read and computed (then mirrored): 2000 instructions."""
+    """The CasADi Function. Only P's upper triangle is read and computed (then mirrored): 2400 instructions."""
     import casadi as ca
     x, P, u, qr = ca.SX.sym("x", N_NOMINAL), ca.SX.sym("P", N_ERR, N_ERR), ca.SX.sym("u", 7), ca.SX.sym("q", N_ERR)
     Ps = ca.triu(P) + ca.triu(P, False).T

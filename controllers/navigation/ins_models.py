@@ -10,7 +10,7 @@ import numpy as np
 
 from fwsim.interface.frames import cross3
 
-__all__ = ["mag_heading", "airspeed", "sideslip"]
+__all__ = ["mag_heading", "mag_field", "airspeed", "sideslip"]
 
 
 def mag_heading(R_enu_from_frd: np.ndarray, field_frd, earth_field_enu) -> tuple[float, np.ndarray, np.ndarray] | None:
@@ -30,6 +30,17 @@ def mag_heading(R_enu_from_frd: np.ndarray, field_frd, earth_field_enu) -> tuple
     if not (e * e + n * n > 1e-6 and mh2 > 1e-6):
         return None
     return math.atan2(e, n), np.array([-eu * ee / mh2, -eu * en / mh2, 1.0]), mw
+
+
+def mag_field(R_enu_from_frd: np.ndarray, earth_field_enu, bias_frd) -> tuple[np.ndarray, np.ndarray]:
+    """The field the magnetometer should read, ``R^T m_earth + b_m`` (body FRD), and its Jacobian (3, 6) over
+    ``(dtheta (3), db_m (3))``: ``R_true^T m = R^T Exp(-dtheta) m ~ R^T (m + m x dtheta)``, so ``R^T [m]x`` and I."""
+    e, n, u = float(earth_field_enu[0]), float(earth_field_enu[1]), float(earth_field_enu[2])
+    Rt = R_enu_from_frd.T
+    H = np.zeros((3, 6))
+    H[:, 0:3] = Rt @ np.array([[0.0, -u, n], [u, 0.0, -e], [-n, e, 0.0]])
+    H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+    return Rt @ np.array([e, n, u]) + np.asarray(bias_frd, float), H
 
 
 def airspeed(v_enu, wind_en) -> tuple[float, np.ndarray]:
