@@ -117,3 +117,31 @@ def test_a_barometer_drift_does_not_pull_the_height_off(tmp_path):
                                                      "rate_m_s": 0.5}])  # 15 m of drift
     i, j = np.searchsorted(nav["t_s"], 55.0), np.searchsorted(st["t_s"], 55.0)
     assert abs(nav["pos_enu_m"][i][2] - st["pos_enu_m"][j][2]) < 3.0  # GNSS holds the height
+
+
+def test_on_a_sensor_profile_the_autopilot_never_reads_the_truth(tmp_path, monkeypatch):
+    """The boundary, for the autopilot: every state its loops close on is the INS's view (built from the
+    estimate and the pitot), never the airframe's true state."""
+    from fwsim.autopilot import Autopilot
+    from fwsim.world.world import World
+    seen, truths, kept = [], set(), []  # (kept: the truths alive, so that no id is reused)
+    actuate, step = Autopilot.actuate, World.step
+
+    def spy_actuate(self, cmd, st):
+        seen.append(st)
+        return actuate(self, cmd, st)
+
+    def spy_step(self, act, gimbal_cmd):
+        truth = step(self, act, gimbal_cmd)
+        truths.add(id(truth.uav))
+        kept.append(truth.uav)
+        return truth
+
+    monkeypatch.setattr(Autopilot, "actuate", spy_actuate)
+    monkeypatch.setattr(World, "step", spy_step)
+    scenario, text = load_scenario(CHECKOUT, {"sensors.profile": "typical", "duration_s": 5})
+    run(scenario, text, tmp_path / "boundary.mcap")
+    assert len(seen) > 300  # flown from the INS's first estimate on (about 1.3 s of alignment first)
+    assert not any(id(st) in truths for st in seen)
+    truth_log = read_log(tmp_path / "boundary.mcap").table("/uav/state")
+    assert not any(np.array_equal(st.pos_enu_m, p) for st in seen[::50] for p in truth_log["pos_enu_m"])
