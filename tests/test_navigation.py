@@ -145,3 +145,11 @@ def test_on_a_sensor_profile_the_autopilot_never_reads_the_truth(tmp_path, monke
     assert not any(id(st) in truths for st in seen)
     truth_log = read_log(tmp_path / "boundary.mcap").table("/uav/state")
     assert not any(np.array_equal(st.pos_enu_m, p) for st in seen[::50] for p in truth_log["pos_enu_m"])
+
+
+def test_the_navigation_error_is_drawn_with_its_band(paper_typical, tmp_path):
+    from fwsim.analysis.plot import plot_log
+    res = plot_log(paper_typical, tmp_path, only=["navigation_error"])
+    assert [p.name for p in res.written] == ["navigation_error.png"] and not res.failed
+    skipped = plot_log(read_log(paper_typical).path, tmp_path / "x", only=["target_estimate"])
+    assert not skipped.failed

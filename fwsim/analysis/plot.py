@@ -506,3 +506,37 @@ def _target_estimate_error(log: RunLog) -> Figure:
     a2.set_ylabel("velocity error [m/s]")
     a2.set_xlabel("sim time [s]")
     return fig
+
+
+@figure("navigation_error", needs=(topics.NAV_ESTIMATE, topics.UAV_STATE),
+        title="Navigation error (the INS's estimate - truth), ±2σ")
+def _navigation_error(log: RunLog) -> Figure:
+    """The onboard INS against the truth, as fwsim.analysis.metrics scores it: attitude (roll, pitch, yaw),
+    position and velocity errors per axis, each with the filter's own ±2σ band."""
+    nav, st = log.table(topics.NAV_ESTIMATE), log.table(topics.UAV_STATE)
+    keep = nav["mode"] != "initialising"
+    if not keep.any():
+        raise SkipFigure("the INS never initialised")
+    nav = {k: v[keep] for k, v in nav.items()}
+    t = nav["t_s"]
+    euler = np.array(st["euler_ned_rad"], dtype=float)
+    euler[:, 2] = np.unwrap(euler[:, 2])
+    att = np.degrees((nav["euler_ned_rad"] - interp_at(t, st["t_s"], euler) + np.pi) % (2 * np.pi) - np.pi)
+    rows = ((att, np.degrees(nav["att_std_rad"]), ("roll", "pitch", "yaw"), "attitude error [deg]"),
+            (nav["pos_enu_m"] - interp_at(t, st["t_s"], st["pos_enu_m"]), nav["pos_std_m"], ("E", "N", "U"),
+             "position error [m]"),
+            (nav["vel_enu_m_s"] - interp_at(t, st["t_s"], st["vel_enu_m_s"]), nav["vel_std_m_s"], ("E", "N", "U"),
+             "velocity error [m/s]"))
+    fig, axes = _figure(3, 3, height=2.0)
+    for r, (err, std, names, label) in enumerate(rows):
+        for c in range(3):
+            ax = axes[r, c]
+            ax.fill_between(t, -2 * std[:, c], 2 * std[:, c], color="0.85", label="±2σ")
+            ax.plot(t, err[:, c], lw=0.8, label=names[c])
+            _clip_transient(ax, err[:, c], 2 * std[:, c])
+            ax.legend(fontsize=7, loc="upper right")
+            if c == 0:
+                ax.set_ylabel(label, fontsize=8)
+            if r == 2:
+                ax.set_xlabel("sim time [s]")
+    return fig
