@@ -76,11 +76,12 @@ class InsConfig(StrictModel):
     gnss_pos_noise_min_m: float = Field(0.5, gt=0, le=100, description="floor on the fix's h_acc / v_acc, m")
     gnss_vel_noise_min_m_s: float = Field(0.3, gt=0, le=100, description="floor on the fix's speed accuracy, m/s")
     baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
-    mag_fusion: Literal["field", "heading"] = Field(
-        "field", description="field: the 3 axes against the configured earth field, with body-frame (hard-iron) "
-                             "bias states; heading: the tilt-compensated heading alone (EKF2's heading mode)")
+    mag_fusion: Literal["heading", "field"] = Field(
+        "heading", description="heading: the tilt-compensated heading as the yaw alone (EKF2's heading fusion); "
+                               "field: the 3 axes against the configured earth field, with hard-iron bias states")
+    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise, rad (EKF2_HEAD_NOISE: "
+                                         "the compass's error is mostly a bias, which fusing does not average away)")
     mag_noise_gauss: float = Field(0.01, gt=0, le=1, description="magnetometer noise per axis (field fusion), gauss")
-    mag_heading_noise_rad: float = Field(0.05, gt=0, le=3, description="magnetic heading noise (heading fusion), rad")
     airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
     sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
     gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")
@@ -1005,6 +1006,8 @@ class Controllers(StrictModel):
     kind: Literal["script", "mission"] = Field("mission", description="scripted commands or the mission")
     navigation: NavigationConfig = Field(default_factory=NavigationConfig,
         description="how GNSS fixes become the flight software's position")
+    ins: InsConfig = Field(default_factory=InsConfig,
+        description="the onboard INS/GNSS filter (with sensors.profile typical or degraded)")
     script: list[ScriptStep] = Field(default_factory=list,
         description="kind script: the timed commands flown in order")
     initial_path: InitialPath = Field(default_factory=InitialPath,

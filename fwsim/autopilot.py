@@ -90,6 +90,8 @@ class AutopilotParams(StrictModel):
     min_load_factor: Gain
     stall_alpha_rad: Gain
     stall_pitch_rate_gain: Gain
+    underspeed_margin_m_s: Gain
+    underspeed_accel_gain: Gain
 
     def v(self, name: str) -> float:
         return getattr(self, name).value
@@ -180,6 +182,9 @@ class Autopilot:
         self.rudder_from_sideslip = _PI(v("sideslip_kp"), v("sideslip_ki"), -1.0, 1.0)
         self._normal_accel_integ = 0.0
         self._p_sp = 0.0
+        #: underspeed protection engaged at the last tick (acceleration mode: the airspeed more than
+        #: underspeed_margin_m_s below its set-point; the commanded path is bent down until it recovers)
+        self.underspeed = False
         self._last = None  # (command, state, set-points) of the last actuate, for status()
         gains = {name: v(name) for name in type(params).model_fields}  # looked up once, not per tick
         self._gain = gains.__getitem__
@@ -211,17 +216,21 @@ class Autopilot:
         vhat = vel / speed
         R = dcm_enu_from_frd(st.euler_ned_rad)
         x_b, y_b, z_b = R[:, 0], R[:, 1], R[:, 2]
-        a = np.asarray(cmd.accel_enu_m_s2, dtype=float)
-        a_perp = a - (a @ vhat) * vhat
-        g_vec = _GRAVITY_ENU
-        g_perp = g_vec - (g_vec @ vhat) * vhat
-        f_req = a_perp - g_perp  # specific force the wing must make
         # zero-bank lift direction ("up" perpendicular to the velocity) and right
         up = _UP_ENU
         l0 = up - (up @ vhat) * vhat
         n_l0 = math.sqrt(float(l0.dot(l0)))  # np.linalg.norm(l0)
         l0 = l0 / n_l0 if n_l0 > 1e-3 else -z_b
         r0 = cross3(vhat, l0)
+        a = np.asarray(cmd.accel_enu_m_s2, dtype=float)
+        a_perp = a - (a @ vhat) * vhat
+        deficit = cmd.airspeed_m_s - st.airspeed_m_s - pv("underspeed_margin_m_s")
+        self.underspeed = deficit > 0.0
+        if self.underspeed:  # the path cannot be held at this airspeed: bend it down until the airspeed comes back
+            a_perp = a_perp - (pv("underspeed_accel_gain") * deficit) * l0
+        g_vec = _GRAVITY_ENU
+        g_perp = g_vec - (g_vec @ vhat) * vhat
+        f_req = a_perp - g_perp  # specific force the wing must make
         fl, fr = float(f_req @ l0), float(f_req @ r0)
         max_bank = pv("max_bank_rad")
         lift_dir = -z_b
@@ -266,6 +275,7 @@ class Autopilot:
         if isinstance(cmd, RateCommand):
             p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_rate_command(cmd, st, V)
             self._normal_accel_integ = 0.0
+            self.underspeed = False
         else:
             p_sp, q_sp, r_sp, bank_sp, a_sp, a_ach = self._rates_from_accel_command(cmd, st, V)
         p_sp = _clip(p_sp, -max_p, max_p)

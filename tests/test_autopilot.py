@@ -181,6 +181,28 @@ def test_stall_protection_holds_alpha_below_the_stall(protected):
         assert alpha.max() > 11.0  # past CLmax: the case the protection is for
 
 
+@pytest.mark.parametrize("protected", [True, False])
+def test_underspeed_protection_gives_the_airspeed_priority_over_a_held_climb(protected):
+    """A climb held in acceleration mode (no acceleration asked: the path stays as it is) steeper than the
+    engine can hold at 22 m/s: without the protection the airspeed bleeds toward the stall; with it the path
+    bends down and the airspeed stays within the margin of its set-point (PX4's TECS: airspeed first)."""
+    f = Flight()
+    overrides = {} if protected else {"underspeed_accel_gain": 0.0}
+    f.autopilot = Autopilot(load_autopilot_params("fwuav", overrides=overrides), f.airframe.dt_s,
+                            f.airframe.trim.throttle_norm)
+    f.fly(20.0, _accel(0.0, 0.6))  # pull up into a 30-deg climb
+    tr = f.fly(120.0, _accel(0.0, 0.0))  # and hold it
+    w = tr.window(40.0, 120.0)
+    airspeed, alpha = tr.arr("airspeed_m_s")[w], np.degrees(tr.arr("alpha_rad")[w])
+    margin = f.autopilot.p.v("underspeed_margin_m_s")
+    if protected:
+        assert airspeed.min() > 22.0 - margin - 1.0, airspeed.min()
+        assert alpha.max() < math.degrees(f.autopilot.p.v("stall_alpha_rad")), alpha.max()
+        assert f.autopilot.underspeed  # still climbing at full throttle, held at the margin
+    else:
+        assert airspeed.min() < 15.0, airspeed.min()
+
+
 def test_status_is_the_last_actuate_s_and_step_gives_both():
     """The loop asks for the autopilot's status only at the log rate: status() describes the last actuate(),
     and step() is actuate() then status()."""

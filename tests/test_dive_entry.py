@@ -31,12 +31,13 @@ def test_entry_altitude_puts_the_ship_at_the_impact_angle_less_the_margin():
     assert entry_altitude_m(None, sw, -30.0) is None
 
 
-def _fly(state, t0, t1, height_m, ring, sw, entry):
-    """next_phase ticks at 10 Hz on the ring (radius R, the given height), the bearing in the window."""
+def _fly(state, t0, t1, height_m, ring, sw, entry, approach_deg=0.0):
+    """next_phase ticks at 10 Hz on the ring (radius R, the given height), south of the ship: the bearing to it
+    0 deg (in the window of ``approach_deg`` 0)."""
     events = []
     for t in np.round(np.arange(t0, t1, 0.1), 6):
         state, ev = next_phase(state, t, np.array([0.0, -ring.radius_m, height_m]), np.array([22.0, 0.0, 0.0]),
-                               height_m, SHIP, True, ring, sw, 0.0, "nmpc", entry)
+                               height_m, SHIP, True, ring, sw, approach_deg, "nmpc", entry)
         events += ev
         if state.phase == 3:
             break
@@ -58,6 +59,21 @@ def test_the_first_switch_starts_the_descent_and_the_switch_is_armed_at_the_entr
     state, _ = _fly(PhaseState(), 0.0, 20.0, 500.0, ring, sw.model_copy(update={"entry_depression_margin_deg": None}),
                     None)
     assert state.phase == 3 and state.phase3_t_s == pytest.approx(5.0)
+
+
+def test_the_descent_does_not_wait_for_the_approach_window():
+    """Settled on the ring at H, the loiter descends at once, the bearing wherever it is; the dive then waits at
+    the entry ring for the window (waiting for a window at H first cost a wide ring a whole orbit)."""
+    sw = SwitchConfig(dwell_s=5, min_loiter_s=5, approach_window_deg=5.0, entry_depression_margin_deg=5.0)
+    ring = Ring(500.0, 500.0)
+    entry = entry_altitude_m(ring, sw, -30.0)
+    state, events = _fly(PhaseState(), 0.0, 20.0, 500.0, ring, sw, entry, approach_deg=90.0)  # 90 deg off
+    assert state.phase == 2 and state.descent_t_s == pytest.approx(5.0)
+    state, events = _fly(state, 20.0, 40.0, entry, ring, sw, entry, approach_deg=90.0)
+    assert state.phase == 2 and not any(e.startswith("phase 2 -> 3") for e in events)  # settled, out of the window
+    state, events = _fly(state, 40.0, 41.0, entry, ring, sw, entry, approach_deg=0.0)
+    assert state.phase == 3 and state.phase3_t_s == pytest.approx(40.0)  # the first window once there
+    assert any("bearing to target 0.0 deg" in e for e in events)
 
 
 def test_a_go_around_keeps_the_entry_ring():

@@ -38,18 +38,20 @@ source          observation model                           gate (PX4 EKF2 defau
 gnss_pos (3)    p (fix moved to the EKF's sample time)      5 SD, per axis, all or none
 gnss_vel (3)    v                                           5 SD
 baro            p_U + b_h                                   5 SD
-mag (field, 3)  R^T m_earth + b_m                           3 SD, all or none; strength, inclination checks
-mag (heading)   heading of R (m_body - b_m) = declination    2.6 SD; the same checks (mag_fusion: heading)
+mag (heading)   heading of R m_body = declination (yaw)     2.6 SD; field strength and inclination checks
+mag (field, 3)  R^T m_earth + b_m (mag_fusion: field)       3 SD, all or none; the same checks
 airspeed        |v - w|                                     3 SD (above airspeed_min_m_s)
 sideslip        (R^T (v - w))_y / (R^T (v - w))_x = 0       5 SD (synthetic, with each airspeed sample)
 ==============  ==========================================  ==============================================
 
 The magnetometer is fused against the earth field configured a priori (declination, inclination, strength).
-By default its three axes are (EKF2's 3-axis fusion without the earth-field states): ``d/d dtheta = R^T [m]x``,
-and the body-frame bias states take an uncalibrated hard iron, observable as the body turns in the field. In
-heading mode the measured field turned into the world frame with the estimated attitude should point at the
-declination; its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` (of the configured field) carries the
-tilt's share through the vertical field, and nothing observes the bias states.
+By default as a heading (EKF2's heading fusion, at its heading noise of 0.3 rad): the measured field turned
+into the world frame with the estimated attitude should point at the declination, and it is fused as an
+observation of the yaw alone (``h = [0, 0, 1]``), so that a compass error cannot tilt the attitude (the exact
+Jacobian, ``ins_models.mag_heading``, also carries the tilt through the vertical field); nothing observes
+the magnetometer bias states then. With ``mag_fusion: field`` its three axes are fused instead (EKF2's 3-axis
+fusion without the earth-field states): ``d/d dtheta = R^T [m]x``, and the body-frame bias states take an
+uncalibrated hard iron, observable as the body turns in the field.
 
 Fusion horizon (PX4 EKF2's scheme, not rewind-and-replay). The IMU samples are buffered and the EKF runs
 ``fusion_horizon_s`` behind the newest one; a GNSS fix, valid ``time_of_fix_s`` (its arrival less the
@@ -125,6 +127,10 @@ _H_BARO = np.array([1.0, 1.0])
 _VAR_MIN = np.array([1e-12] * 3 + [1e-8] * 6 + [1e-16] * 3 + [1e-12] * 3 + [1e-8] * 3 + [1e-12] * 3)  # P's floors
 _REPORT_AFTER_S = 1.0  # a source's rejections raise an event once they have lasted this long
 _ALIGN_RESTART_FACTOR = 3.0  # a window this many times init_alignment_s without a fix to close it starts again
+
+
+_YAW_ONLY = np.array([0.0, 0.0, 1.0])
+_YAW_ONLY.setflags(write=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -440,6 +446,10 @@ class Ins:
         ss = max(fix.s_acc_m_s, c.gnss_vel_noise_min_m_s)
         fused_p = self._fuse_direct("gnss_pos", tv, zp, np.array([sh * sh, sh * sh, sv * sv]), _POS,
                                     c.gnss_pos_gate_sd)
+        if fused_p:  # a receiver's error drifts slowly: its fixes do not average it away
+            floor = np.array([fix.h_acc_m, fix.h_acc_m, fix.v_acc_m], dtype=float) ** 2
+            d = self._Pdiag[_POS:_POS + 3]
+            d += np.maximum(floor - d, 0.0)
         fused_v = self._fuse_direct("gnss_vel", tv, np.asarray(fix.vel_enu_m_s, float), np.full(3, ss * ss), _VEL,
                                     c.gnss_vel_gate_sd)
         if fused_p or fused_v:
@@ -494,7 +504,7 @@ class Ins:
 
     def _fuse_mag_now(self, tv: float, m: MagSample) -> None:
         """The magnetometer, less its estimated bias, checked for the configured earth field's strength and
-        inclination (on the estimated tilt), then fused as a field (3 axes) or a heading (``mag_fusion``)."""
+        inclination (on the estimated tilt), then fused as a heading or a field (``mag_fusion``)."""
         c = self.cfg
         b = np.asarray(m.field_frd_gauss, float) - self._bm
         R = dcm_from_quat(self._q)
@@ -510,12 +520,17 @@ class Ins:
             self._fuse_mag_field(tv, np.asarray(m.field_frd_gauss, float), R, why)
             return
         model = mag_heading(R, b, self._earth_field_enu)
-        if model is not None:
-            z, h, _ = model
-            r = c.mag_heading_noise_rad ** 2
-            innov = wrap_pi(z - math.radians(c.mag_declination_deg))
-            obs = (_IDX_MAG, h, *self._innovation_variance(_IDX_MAG, h, r))
-            self._scalar("mag", tv, z, r, innov, obs, c.mag_gate_sd, why)
+        if model is None:
+            return
+        z = model[0]
+        # the yaw alone, as EKF2's heading fusion (the model's Jacobian also carries the tilt through the vertical
+        # field): a compass's error, the hard iron a calibration leaves or interference, then cannot tilt the
+        # attitude, which the accelerometers and GNSS hold (tilt-coupled, the typical profile's roll and pitch
+        # errors were twice as large)
+        r = c.mag_heading_noise_rad ** 2
+        innov = wrap_pi(z - math.radians(c.mag_declination_deg))
+        obs = (_IDX_MAG, _YAW_ONLY, *self._innovation_variance(_IDX_MAG, _YAW_ONLY, r))
+        self._scalar("mag", tv, z, r, innov, obs, c.mag_gate_sd, why)
 
     def _fuse_mag_field(self, tv: float, z: np.ndarray, R: np.ndarray, why: str | None) -> None:
         """The field's 3 axes against ``R^T m_earth + b_m``, gated as a whole, fused in one vector update."""

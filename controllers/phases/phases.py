@@ -22,10 +22,12 @@
    the switch is armed again, its dwell and minimum loiter counted afresh.
    With ``switch.entry_depression_margin_deg`` (5° by default; the paper
    mission's file sets it to null, the paper's dive from H) the first
-   time the switch condition holds the loiter instead descends on its ring
-   to the dive's entry ring (:func:`entry_altitude_m`: the ship
-   ``|theta_f|`` less the margin below the horizon), and the switch is armed
-   there, its dwell counted afresh; a go-around keeps the entry ring.
+   time the loiter has settled on its ring at H (the switch condition but
+   the window: :func:`settled_on_ring`) it descends on its ring to the
+   dive's entry ring (:func:`entry_altitude_m`: the ship ``|theta_f|`` less
+   the margin below the horizon), and the switch is armed there, its dwell
+   counted afresh, to dive at the first approach window once settled there;
+   a go-around keeps the entry ring.
 
 :func:`next_phase` takes the previous :class:`PhaseState` and this tick's
 inputs and returns the next state and why it changed; it keeps nothing of its
@@ -41,8 +43,8 @@ import numpy as np
 from controllers.config import BpngConfig, SwitchConfig
 from controllers.messages import TargetState
 
-__all__ = ["PhaseState", "Ring", "approach_bearing_deg", "entry_altitude_m", "next_phase", "radial_error_m",
-           "switch_reason", "window_bearing_deg"]
+__all__ = ["PhaseState", "Ring", "approach_bearing_deg", "entry_altitude_m", "in_approach_window", "next_phase",
+           "radial_error_m", "settled_on_ring", "window_bearing_deg"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,7 +134,7 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
     ``ring``: the loiter's (None: no Phase 2); ``approach_deg``: the approach window's centre before the lead
     (:func:`approach_bearing_deg`, or the mission's impact heading), clockwise from North.
     ``entry_altitude_m``: the dive's entry ring's altitude (:func:`entry_altitude_m`; None: the dive starts
-    at H): the first time the switch condition holds the loiter starts its descent there instead (an event
+    at H): the first time the loiter has settled on its ring at H it starts its descent there (an event
     says so), and from then on the switch is armed at that altitude.
     """
     events = []
@@ -141,17 +143,19 @@ def next_phase(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: 
         events.append(f"phase 1 -> 2 at t = {t_s:.2f} s: target locked, loiter ({loiter_name})")
     if state.phase == 2:
         armed = ring if entry_altitude_m is None or not state.descending else Ring(ring.radius_m, entry_altitude_m)
-        state, why = switch_reason(state, t_s, pos_enu_m, vel_enu_m_s, height_m, target, armed, switch,
-                                   approach_deg)
-        if why and entry_altitude_m is not None and not state.descending:
+        state, held = settled_on_ring(state, t_s, pos_enu_m, height_m, target, armed, switch)
+        if held and entry_altitude_m is not None and not state.descending:
+            # on the ring at H: descend to the entry ring now, whatever the bearing, so that the dive can take
+            # the first approach window once there (waiting for a window at H first cost an orbit)
             state = replace(state, descent_t_s=t_s, in_tol_since_s=math.nan)
-            events.append(f"phase 2 at t = {t_s:.2f} s: the switch condition holds; the loiter descends from "
+            events.append(f"phase 2 at t = {t_s:.2f} s: on the ring ({held}); the loiter descends from "
                           f"{ring.altitude_m:.0f} m to the dive's entry ring at {entry_altitude_m:.0f} m "
                           f"(switch.entry_depression_margin_deg) and the switch is armed there")
-            why = ""
-        if why:
-            state = replace(state, phase=3, closest_m=math.nan, phase3_t_s=t_s, switch_m=math.nan)
-            events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {why}")
+        elif held:
+            why = in_approach_window(pos_enu_m, vel_enu_m_s, target, switch, approach_deg)
+            if why:
+                state = replace(state, phase=3, closest_m=math.nan, phase3_t_s=t_s, switch_m=math.nan)
+                events.append(f"phase 2 -> 3 at t = {t_s:.2f} s: {held}; {why}")
     elif state.phase == 3 and (switch.go_around_m is not None or switch.go_around_stall_s is not None) \
             and target.known:
         d = np.asarray(target.pos_enu_m, float) - np.asarray(pos_enu_m, float)
@@ -185,9 +189,12 @@ def entry_altitude_m(ring: Ring | None, switch: SwitchConfig, impact_fpa_deg: fl
     return h if ring.altitude_m - h > switch.altitude_tol_m else None
 
 
-def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_m: float, target: TargetState,
-                  ring: Ring, sw: SwitchConfig, approach_deg: float) -> tuple[PhaseState, str]:
-    """(state with the dwell's start updated, why Phase 3 starts now or "" while the condition does not hold)."""
+def settled_on_ring(state: PhaseState, t_s: float, pos_enu_m, height_m: float, target: TargetState, ring: Ring,
+                    sw: SwitchConfig) -> tuple[PhaseState, str]:
+    """(state with the dwell's start updated, what holds or "" while it does not): the radius and the altitude
+    within their tolerances for ``dwell_s``, and ``min_loiter_s`` since Phase 2 started (the two side by side:
+    the dwell may start before the minimum loiter is up). The switch itself also waits for the approach window
+    (:func:`in_approach_window`)."""
     if not sw.enabled:
         return state, ""
     radial = radial_error_m(pos_enu_m, target, ring.radius_m)
@@ -198,9 +205,16 @@ def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_
         return replace(state, in_tol_since_s=math.nan), ""
     if math.isnan(state.in_tol_since_s):
         state = replace(state, in_tol_since_s=t_s)
-    # the dwell and the minimum loiter run side by side (the dwell may start before min_loiter_s is up)
     if t_s - state.in_tol_since_s < sw.dwell_s or t_s - state.phase2_t_s < sw.min_loiter_s:
         return state, ""
+    return state, (f"radius error {radial:+.1f} m (tol {sw.radius_tol_m:g}), altitude error {alt_err:+.1f} m "
+                   f"(tol {sw.altitude_tol_m:g}) for {t_s - state.in_tol_since_s:.1f} s")
+
+
+def in_approach_window(pos_enu_m, vel_enu_m_s, target: TargetState, sw: SwitchConfig, approach_deg: float) -> str:
+    """Why the bearing from the UAV to the target lies in the switch's approach window (within
+    ``approach_window_deg`` of ``approach_deg`` plus the lead, the lead taken in the direction the UAV goes round
+    the target), or "" when it does not."""
     rel = target.pos_enu_m[:2] - pos_enu_m[:2]
     bearing = math.degrees(math.atan2(rel[0], rel[1]))  # clockwise from North
     off = (bearing - approach_deg + 180.0) % 360.0 - 180.0
@@ -208,8 +222,7 @@ def switch_reason(state: PhaseState, t_s: float, pos_enu_m, vel_enu_m_s, height_
     clockwise = float(rel[0] * rel_vel[1] - rel[1] * rel_vel[0]) > 0.0  # the bearing grows
     lead = sw.approach_lead_deg if clockwise else -sw.approach_lead_deg
     if sw.approach_window_deg is not None and abs(off - lead) > sw.approach_window_deg:
-        return state, ""
-    return state, (f"radius error {radial:+.1f} m (tol {sw.radius_tol_m:g}), altitude error {alt_err:+.1f} m "
-                   f"(tol {sw.altitude_tol_m:g}) for {t_s - state.in_tol_since_s:.1f} s; bearing to target "
-                   f"{bearing % 360:.1f} deg, {off:+.1f} deg from the approach bearing {approach_deg % 360:.1f} deg "
-                   f"({'clockwise' if clockwise else 'counter-clockwise'} round the target, lead {lead:+g} deg)")
+        return ""
+    return (f"bearing to target {bearing % 360:.1f} deg, {off:+.1f} deg from the approach bearing "
+            f"{approach_deg % 360:.1f} deg ({'clockwise' if clockwise else 'counter-clockwise'} round the target, "
+            f"lead {lead:+g} deg)")

@@ -184,6 +184,10 @@ METRICS: tuple[MetricSpec, ...] = (
             *((f"fusion_{r}", "count", better, f"detections {text}") for r, better, text in _FUSION_REASONS)),
     *_specs("loiter",
             ("loiter_settle_s", "s", "neither", "the loiter errors are scored from Phase 2's start plus this"),
+            ("dive_after_lock_s", "s", "lower", "time from the lock to the start of the dive that ended the run"),
+            ("dive_wait_orbits", "orbits", "lower", "time from the loiter settling on the ring it dived from (the "
+                                                    "switch's tolerances, dwell and minimum loiter met) to the dive, "
+                                                    "in orbits of that ring"),
             ("loiter_radius_rmse_m", "m", "lower", "RMS horizontal distance to the true ship minus the ring's radius"),
             ("loiter_alt_rmse_m", "m", "lower", "RMS altitude minus the ring's altitude"),
             ("occluded_frames_phase2", "count", "lower", "frames in Phase 2 with the ship in view but hidden by the "
@@ -194,6 +198,14 @@ METRICS: tuple[MetricSpec, ...] = (
             ("nmpc_fallbacks", "count", "lower", "NMPC solves that failed and fell back"),
             ("nmpc_cbf_active_fraction", "fraction", "neither", "share of the NMPC solves with the visibility "
                                                                 "barrier (CBF) active")),
+    *_specs("navigation",
+            ("nav_roll_pitch_err_rms_deg", "deg", "lower", "RMS of the navigation filter's roll and pitch errors "
+                                                           "(both axes together), against the truth"),
+            ("nav_heading_err_rms_deg", "deg", "lower", "RMS of the navigation filter's heading (yaw) error"),
+            ("nav_pos_err_rms_m", "m", "lower", "RMS of the navigation filter's 3-D position error"),
+            ("nav_vel_err_rms_m_s", "m/s", "lower", "RMS of the navigation filter's 3-D velocity error"),
+            ("nav_nees_within_fraction", "fraction", "higher", "share of estimates whose attitude and position errors, "
+             "normalised by their own stds, lie inside the 95 % chi-square bound (honest: about 0.95)")),
     *_specs("gimbal",
             ("tilt_positive_s", "s", "lower", "time with the gimbal tilted upwards (above the body's x-y plane)")),
     *_specs("autopilot",
@@ -387,7 +399,85 @@ def compute_metrics(log: RunLog | str | Path) -> dict[str, Any]:
     _fusion_metrics(log, m)
     _loiter_metrics(log, m)
     _impact_metrics(log, m)
+    _navigation_metrics(log, m)
+    if m.get("lock_time_s") is not None and m.get("switch_time_s") is not None:
+        m["dive_after_lock_s"] = m["switch_time_s"] - m["lock_time_s"]
+        m["dive_wait_orbits"] = _dive_wait_orbits(log, m["switch_time_s"])
     return ordered(m)
+
+
+def _dive_wait_orbits(log: RunLog, switch_t_s: float) -> float | None:
+    """How long the loiter waited for its dive while settled, in orbits: the time in the last Phase 2 before the
+    switch during which the switch's condition but the approach window held (the radius and altitude, the truth
+    against the ring the flight software flew, its status's radius and altitude, within the tolerances for the
+    dwell, and the minimum loiter up); the descent to an entry ring is not settled and does not count. An orbit
+    is the ring's circumference over the UAV's mean ground speed while settled."""
+    if not log.topics.get(topics.FSW_STATUS):
+        return None
+    try:
+        sw = (log.scenario if log.scenario is not None else _scenario_of(log)).controllers.switch
+    except Exception:  # noqa: BLE001 - a log this version cannot read: no tolerances to score against
+        return None
+    fs, st = log.table(topics.FSW_STATUS), log.table(topics.UAV_STATE)
+    t, phase = fs["t_s"], fs["phase"]
+    before = np.flatnonzero((phase != 2) & (t < switch_t_s))
+    first = before[-1] + 1 if before.size else 0  # the last Phase 2's first tick
+    t, fs_r = t[first:], {k: fs[k][first:] for k in ("radial_err_m", "loiter_altitude_m", "loiter_radius_m")}
+    keep = t < switch_t_s
+    if not keep.any():
+        return None
+    t = t[keep]
+    height = interp_at(t, st["t_s"], st["pos_enu_m"][:, 2])
+    ok = (np.abs(fs_r["radial_err_m"][keep]) <= sw.radius_tol_m) & \
+        (np.abs(height - fs_r["loiter_altitude_m"][keep]) <= sw.altitude_tol_m)
+    since = np.full(t.size, np.nan)  # the start of each tick's stretch within tolerance
+    for k in np.flatnonzero(ok):
+        since[k] = since[k - 1] if k and ok[k - 1] else t[k]
+    settled = ok & (t - since >= sw.dwell_s) & (t - t[0] >= sw.min_loiter_s)
+    if not settled.any():
+        return 0.0
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    speed = interp_at(t[settled], st["t_s"], np.hypot(st["vel_enu_m_s"][:, 0], st["vel_enu_m_s"][:, 1]))
+    radius = float(fs_r["loiter_radius_m"][keep][-1])
+    period = 2.0 * math.pi * radius / float(np.mean(speed))
+    return float(np.count_nonzero(settled)) * dt / period if period > 0.0 else None
+
+
+def _scenario_of(log: RunLog):
+    from fwsim.scenario.model import parse_scenario
+    return parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+
+
+#: the 95 % point of the chi-square distribution with 6 degrees of freedom (attitude and position, 3 each)
+_CHI2_95_6DOF = 12.591587243743977
+
+
+def _navigation_metrics(log: RunLog, m: dict) -> None:
+    """The navigation filter's errors against the truth (``/nav/estimate`` once initialised, against ``/uav/state``,
+    the truth interpolated to the estimate's times, its yaw unwrapped first), and its consistency: the normalised
+    error squared of attitude (roll, pitch, yaw) and position with the filter's own stds, per axis."""
+    if not log.topics.get(topics.NAV_ESTIMATE):
+        return
+    nav, st = log.table(topics.NAV_ESTIMATE), log.table(topics.UAV_STATE)
+    keep = nav["mode"] != "initialising"
+    if not keep.any():
+        return
+    nav = {k: v[keep] for k, v in nav.items()}
+    t = nav["t_s"]
+    euler_true = np.array(st["euler_ned_rad"], dtype=float)
+    euler_true[:, 2] = np.unwrap(euler_true[:, 2])
+    att_err = np.asarray(nav["euler_ned_rad"], float) - interp_at(t, st["t_s"], euler_true)
+    att_err = (att_err + math.pi) % (2.0 * math.pi) - math.pi
+    pos_err = np.asarray(nav["pos_enu_m"], float) - interp_at(t, st["t_s"], st["pos_enu_m"])
+    vel_err = np.asarray(nav["vel_enu_m_s"], float) - interp_at(t, st["t_s"], st["vel_enu_m_s"])
+    m["nav_roll_pitch_err_rms_deg"] = math.degrees(_rms(att_err[:, :2].ravel()))
+    m["nav_heading_err_rms_deg"] = math.degrees(_rms(att_err[:, 2]))
+    m["nav_pos_err_rms_m"] = _rms(np.linalg.norm(pos_err, axis=1))
+    m["nav_vel_err_rms_m_s"] = _rms(np.linalg.norm(vel_err, axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nees = np.sum((att_err / nav["att_std_rad"]) ** 2, axis=1) + np.sum((pos_err / nav["pos_std_m"]) ** 2, axis=1)
+    ok = np.isfinite(nees)
+    m["nav_nees_within_fraction"] = float(np.mean(nees[ok] <= _CHI2_95_6DOF)) if ok.any() else None
 
 
 def terminal_metrics(log: RunLog | str | Path) -> dict[str, Any]:
@@ -501,7 +591,8 @@ def _impact_metrics(log: RunLog, m: dict) -> None:
     note = _phases(log, m)
     ended = not note
     try:
-        scenario = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
+        scenario = log.scenario if log.scenario is not None else \
+            parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)
     except Exception as exc:  # a log written by another version: no geometry to score against, and the user told
         why = short(exc, 160) or type(exc).__name__
         m["impact_metrics"] = f"left out: the log's scenario does not read with this fwsim version ({why})"
@@ -585,7 +676,8 @@ def _loiter_metrics(log: RunLog, m: dict) -> None:
     else:  # a log from before the ring was logged: from its scenario
         from fwsim.scenario.model import parse_scenario
         try:
-            sc = parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False).controllers
+            sc = (log.scenario if log.scenario is not None else
+                  parse_scenario(log.effective_scenario_text or log.scenario_text, check_plugins=False)).controllers
         except Exception:
             return
         loiter = sc.nmpc if sc.after_lock.use == "nmpc" else sc.orbit

@@ -26,6 +26,8 @@ EVENTS = "/events"  # foxglove.Log: phase switches, lock, warnings, the end of t
 WORLD_AIR = "/world/air"  # fwsim.interface.messages.AirState: the air's velocity (wind, gusts, turbulence), when not still
 
 # -- the flight software (controllers/)
+NAV_ESTIMATE = "/nav/estimate"  # fwsim.interface.messages.NavEstimate: the onboard navigation filter's estimate
+NAV_AID_PREFIX = "/nav/aid/"  # + source: fwsim.interface.messages.AidSourceStatus, one per fusion attempt
 FSW_STATUS = "/fsw/status"  # FlightSoftwareStatus, every tick
 FSW_GIMBAL_COMMAND = "/fsw/gimbal_command"  # GimbalCommand
 FSW_ESTIMATE = "/fsw/estimate"  # controllers.messages.TargetEstimate

@@ -53,6 +53,10 @@ class RunLog:
         self.reason = ""
         self.scenario_text = ""
         self.effective_scenario_text = ""  # the scenario actually flown (overrides applied); "" if absent
+        #: the flown scenario itself (a fwsim.scenario.Scenario) when the log was kept in memory by the run
+        #: that flew it (fwsim.sim.loop.RunResult.result_log); None for a file read, whose metrics parse
+        #: effective_scenario_text
+        self.scenario = None
         self.topics: dict[str, int] = {}
         self.epoch_ns = 0  # log times and Foxglove stamps = epoch + sim time (metadata fwsim.log_time_epoch_ns)
         # topic -> list of (sim time ns, data, channel_id)

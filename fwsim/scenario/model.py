@@ -160,7 +160,8 @@ class Scenario(StrictModel):
     camera: CameraConfig = Field(default_factory=CameraConfig,
         description="the gimbal camera, its detector and the rendered image")
     sensors: SensorsConfig = Field(default_factory=SensorsConfig,
-        description="the GNSS, IMU, air data and altimeter models")
+        description="the onboard sensors: a profile of error models (IMU, GNSS, baro, mag, pitot, encoders, "
+                    "camera mount) or ideal")
     controllers: Controllers = Field(default_factory=Controllers,
         description="the flight software: which blocks fly the mission and their settings")
     events: list[Event] = Field(default_factory=list, description="timed faults and disturbances (fwsim.world.events)")
@@ -204,6 +205,17 @@ class Scenario(StrictModel):
             raise ValueError(f"initial.pos_enu_m: {r / 1000:.0f} km from the world origin, beyond the flat-earth "
                              f"mapping's {MAX_RANGE_FROM_ORIGIN_M / 1000:.0f} km; move world.origin_lat_deg / "
                              "origin_lon_deg near the start instead")
+        return self
+
+    @model_validator(mode="after")
+    def _nav_faults_need_error_models(self):
+        """A navigation fault acts on the sensors' error models, which the ideal profile does not have."""
+        from fwsim.world.events import NAV_FAULT_KINDS
+        if self.sensors.profile == "ideal":
+            for i, ev in enumerate(self.events):
+                if ev.kind in NAV_FAULT_KINDS:
+                    raise ValueError(f"events[{i}].kind: {ev.kind} acts on the sensors' error models; it needs "
+                                     "sensors.profile typical or degraded")
         return self
 
     @model_validator(mode="after")

@@ -247,9 +247,13 @@ def _summarise(t_s, u, v, d_ship, d_uav, stride, rays) -> FrameGeometry:
 class Camera:
     """Ray-cast detection of the ship, and full-frame renders for the log."""
 
-    def __init__(self, cfg: CameraConfig, uav_mesh, ship_mesh):
+    def __init__(self, cfg: CameraConfig, uav_mesh, ship_mesh, focal_scale: float = 1.0):
+        """``focal_scale``: the focal length as built over the one ``cfg`` gives (the flight software's)."""
         self.cfg = cfg
         self.K = Intrinsics.from_fov(cfg.width_px, cfg.height_px, cfg.hfov_deg)
+        if focal_scale != 1.0:
+            k = self.K
+            self.K = Intrinsics(k.width_px, k.height_px, k.fx * focal_scale, k.fy * focal_scale, k.cx, k.cy)
         self.caster = RayCaster(uav_mesh, ship_mesh)
         self._ray_table = self._table(self.K)  # unit ray of every pixel, camera frame (H, W, 3)
         rc = cfg.render

@@ -11,9 +11,10 @@ with its own latency.
 from __future__ import annotations
 
 import zlib
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from fwsim.interface.configbase import StrictModel
 from fwsim.interface.messages import AirframeState, Measurements
@@ -22,7 +23,15 @@ _NAN3 = np.full(3, np.nan)  # copied for each message's wind_enu_m_s (Measuremen
 
 
 class SensorsConfig(StrictModel):
-    """Noise standard deviations (zero: ideal)."""
+    """The onboard sensors: a profile of error models feeding the navigation filter (``typical``, ``degraded``),
+    or ``ideal``: the truth with the white noise of the fields below, the autopilot on the truth."""
+
+    profile: Literal["ideal", "typical", "degraded"] = Field(
+        "ideal", description="ideal: truth plus the white noise below, autopilot on truth; typical: a PX4-class "
+                             "small UAV through the onboard INS; degraded: consumer MEMS, a poor GNSS")
+    errors: dict[str, Any] = Field(
+        default_factory=dict, description="overrides of the profile's error terms, e.g. {gnss: {latency_s: 0.15}} "
+                                          "(fields: docs/guide/sensors.md); not with ideal")
 
     position_noise_m: float = Field(0.5, ge=0, le=100, description="GNSS/INS position, per axis")
     velocity_noise_m_s: float = Field(0.05, ge=0, le=10, description="GNSS/INS velocity, per axis")
@@ -35,6 +44,15 @@ class SensorsConfig(StrictModel):
     ahrs_rate_hz: float = Field(100.0, gt=0, le=1000, description="attitude and gyro updates")
     air_data_rate_hz: float = Field(20.0, gt=0, le=1000, description="airspeed and height updates")
     encoder_rate_hz: float = Field(100.0, gt=0, le=1000, description="gimbal encoder updates")
+
+    @model_validator(mode="after")
+    def _errors_resolve(self) -> "SensorsConfig":
+        if self.errors:
+            if self.profile == "ideal":
+                raise ValueError("errors: the ideal profile has no error models to override (profile: typical)")
+            from fwsim.sensors.error_config import resolve
+            resolve(self.profile, self.errors)  # an unknown key or a value out of bounds: said here
+        return self
 
 
 def rng_for(seed: int, name: str) -> np.random.Generator:

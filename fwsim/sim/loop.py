@@ -17,14 +17,12 @@ PX4's own estimator would give it; the flight software only sees
 """
 from __future__ import annotations
 
-import gc
 import math
 import platform
 import signal
 import threading
 import time
-from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -43,7 +41,7 @@ from fwsim.world.events import EventRunner
 from fwsim.interface.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
-from fwsim.interface.messages import GimbalCommand
+from fwsim.interface.messages import ActuatorCommand, GimbalCommand
 from fwsim.sim.profiling import BlockTimer, time_flight_software, time_harness
 from fwsim.scenario.model import Scenario, start_epoch_ns
 from fwsim.sensors.onboard import Sensors, rng_for
@@ -234,8 +232,7 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
             # while the harness is built
             fsw = flight_software(scenario.controllers, scenario.initial, scenario.camera)
             flight = _Flight(scenario, log, fsw, profile)
-            with _fewer_collections():
-                status, reason = flight.fly(sigint, progress)
+            status, reason = flight.fly(sigint, progress)
         except RunStopped as exc:
             status, reason = "failed", str(exc)
         except Exception as exc:  # any other error: the log says why, the caller sees it too
@@ -250,23 +247,9 @@ def run(scenario: Scenario, scenario_text: str, log_path: Path,
         progress(sim_t, scenario.duration_s)
     wall = time.perf_counter() - wall0
     blocks = profile.report(wall, sim_t) if profile is not None else None
-    return RunResult(log_path, status, reason, sim_t, wall, blocks, log.kept_log())
-
-
-@contextmanager
-def _fewer_collections():
-    """Python's cyclic garbage collector run less often while flying (its thresholds raised, then put back):
-    a tick makes thousands of small objects and few cycles, and the default thresholds had it run every
-    few hundred allocations."""
-    was = gc.get_threshold()
-    gc.set_threshold(*_FLIGHT_GC_THRESHOLD)
-    try:
-        yield
-    finally:
-        gc.set_threshold(*was)
-
-
-_FLIGHT_GC_THRESHOLD = (50_000, 50, 50)
+    kept = log.kept_log()
+    kept.scenario = scenario  # (what its effective_scenario_text parses back to)
+    return RunResult(log_path, status, reason, sim_t, wall, blocks, kept)
 
 
 def failure_text(exc: BaseException) -> str:
@@ -288,7 +271,12 @@ class _Flight:
         render_hz = scenario.camera.render.rate_hz
         self.render_every = round(rates.sim_hz / render_hz) if render_hz > 0 else 0
         self.sim_t = 0.0
-        self.world = world = World(scenario)
+        # sensors.profile typical / degraded: error models and the onboard INS (ideal: the truth, white noise)
+        self.nav = None
+        if scenario.sensors.profile != "ideal":
+            from fwsim.sim.navigation import OnboardNavigation  # (the INS's modules: only where it flies)
+            self.nav = OnboardNavigation(scenario)
+        self.world = world = World(scenario, mount_error=self.nav.models.camera_mount if self.nav else None)
         self.origin = world.airframe.origin
         self.truth = world.reset()
         trim = world.airframe.trim
@@ -319,6 +307,9 @@ class _Flight:
         self.last_det = None
         self.frame = None
         self.out = None
+        # what the actuators hold until the autopilot has a command and (with a sensor profile) the INS an estimate
+        self.act = ActuatorCommand(0.0, 0.0, 0.0, 0.0, trim.throttle_norm)
+        self.flown = False  # the autopilot has run (its status can be logged)
 
     def fly(self, sigint: _StopOnSigint, progress) -> tuple[str, str]:
         """Tick to ``duration_s`` or an end (the ship hit, sea contact); (status, reason). RunStopped when the
@@ -347,36 +338,83 @@ class _Flight:
         """One tick: events, the flight software (at its rate), the autopilot, the world, camera and log."""
         events, log = self.events, self.log
         t_now = self.truth.uav.t_s
+        nav = self.nav
         if events is not None:
             events.step(t_now, self.phase, log.write_event, self.world.airframe.cosine_gust,
-                        self.world.manoeuvre_ship)
+                        self.world.manoeuvre_ship, nav.fault if nav is not None else None)
         if tick % self.fsw_every == 0:
             self._flight_software(t_now)
         out = self.out
-        act = self.autopilot.actuate(out.command, self.truth.uav)
-        gimbal_cmd = out.gimbal
+        act = self._actuate(t_now)
+        gimbal_cmd = out.gimbal if out is not None else GimbalCommand(t_now, 0.0, 0.0)
         if events is not None and events.gimbal_stuck:
             gimbal_cmd = GimbalCommand(t_now, 0.0, 0.0)
         self.truth = truth = self.world.step(act, gimbal_cmd)
         self.sim_t = truth.uav.t_s
+        if nav is not None:
+            self._navigate(tick, truth)
         if (tick + 1) % self.cam_every == 0:
             self._look()
         if (tick + 1) % self.log_every == 0:
             _log_truth(log, truth, self.origin, self.trails)
-            log.write(topics.AUTOPILOT_STATUS, self.autopilot.status())
+            if self.flown:
+                log.write(topics.AUTOPILOT_STATUS, self.autopilot.status())
             log.write(topics.ACTUATORS, act)
             if self.disturbed:
                 log.write(topics.WORLD_AIR, self.world.air())
         if self.render_every and (tick + 1) % self.render_every == 0:
             _log_render(log, self.world, self.sim_t, self.frame, self.last_det)
 
+    def _actuate(self, t_now: float) -> ActuatorCommand:
+        """The autopilot's loops closed on what it knows of the aircraft (the truth with the ideal profile, else
+        the INS's estimate and the pitot); the actuators held while it has no command or no estimate yet."""
+        out, ap = self.out, self.autopilot
+        view = self.truth.uav if self.nav is None else self.nav.autopilot_view(self.act)
+        if out is None or view is None:
+            self.act = replace(self.act, t_s=t_now)
+            return self.act
+        underspeed = ap.underspeed
+        self.act = act = ap.actuate(out.command, view)
+        self.flown = True
+        if ap.underspeed != underspeed:
+            self._underspeed_event(t_now, ap.underspeed)
+        return act
+
+    def _navigate(self, tick: int, truth) -> None:
+        """The sensors sampled into the INS at this tick; its events, aid sources and (at the log rate) its
+        estimate logged."""
+        nav, log = self.nav, self.log
+        est = nav.step(truth.uav, truth.gimbal)
+        t = truth.uav.t_s
+        for text in nav.ins.drain_events():
+            log.write_event(t, f"navigation: {text}")
+        for status in nav.ins.drain_aid_status():
+            log.write(topics.NAV_AID_PREFIX + status.source, status)
+        if est is not None and (tick + 1) % self.log_every == 0:
+            log.write(topics.NAV_ESTIMATE, est)
+
+    def _underspeed_event(self, t_s: float, engaged: bool) -> None:
+        """An event where the autopilot's underspeed protection engages or lets go (fwsim.autopilot)."""
+        uav = self.truth.uav
+        if engaged:
+            self.log.write_event(t_s, f"autopilot: underspeed at {uav.airspeed_m_s:.1f} m/s: the commanded path "
+                                      "gives way to the airspeed (bent down until it recovers)", "WARNING")
+        else:
+            self.log.write_event(t_s, f"autopilot: airspeed back at {uav.airspeed_m_s:.1f} m/s: the commanded "
+                                      "path is held again")
+
     def _flight_software(self, t_now: float) -> None:
         """The sensors sampled and the flight software stepped; its commands, status and topics logged."""
         log, truth, events = self.log, self.truth, self.events
         new_det = self.detector.arrived(t_now)
         self.last_det = new_det or self.last_det
-        meas = self.sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, self.last_det,
-                                   gnss_held=events is not None and events.gnss_held)
+        if self.nav is None:
+            meas = self.sensors.sample(truth.uav, truth.gimbal, truth.cam_pos_enu_m, new_det, self.last_det,
+                                       gnss_held=events is not None and events.gnss_held)
+        else:
+            meas = self.nav.measurements(t_now, truth.gimbal, new_det, self.last_det)
+            if meas is None:  # the INS still aligns: the flight software waits for it
+                return
         self.out = out = self.fsw.step(meas)
         self.phase = out.status.phase
         log.write(topics.AUTOPILOT_COMMAND, out.command)

@@ -8,6 +8,10 @@ its new course and speed are reached)::
       - {kind: detector_blackout, t_s: 60, duration_s: 3}        # no detections
       - {kind: false_detections, t_s: 70, duration_s: 5, rate_hz: 10}   # clutter boxes
       - {kind: gnss_outage, after_phase: 2, delay_s: 5, duration_s: 10} # no new GNSS fix
+      - {kind: gnss_jump, t_s: 80, duration_s: 15, offset_enu_m: [50, 0, 0]}  # the fixes step off
+      - {kind: mag_interference, t_s: 85, duration_s: 10, offset_frd_gauss: [0.3, 0, 0]}
+      - {kind: imu_bias_step, t_s: 95, gyro_frd_rad_s: [0, 0, 0.01]}        # and stays
+      - {kind: baro_drift, t_s: 100, duration_s: 30, rate_m_s: 0.5}         # and stays
       - {kind: gimbal_stuck, t_s: 90, duration_s: 2}              # the joints do not move
       - {kind: wind_gust, after_phase: 3, delay_s: 2, duration_s: 3, velocity_enu_m_s: [0, 6, 0]}
       - {kind: target_manoeuvre, after_phase: 3, course_deg: 90, speed_m_s: 8}   # 1.5 deg/s, 0.5 m/s^2
@@ -26,7 +30,7 @@ from pydantic import Field, model_validator
 
 from fwsim.interface.configbase import StrictModel
 
-__all__ = ["Event", "EventRunner", "EVENT_KINDS"]
+__all__ = ["Event", "EventRunner", "EVENT_KINDS", "NAV_FAULT_KINDS"]
 
 _Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
@@ -77,6 +81,38 @@ class GnssOutage(_Timed):
     kind: Literal["gnss_outage"] = Field(description="gnss_outage: no GNSS fix for a while")
 
 
+class GnssJump(_Timed):
+    """The receiver's position steps by ``offset_enu_m`` (a multipath or spoofed fix) for a while; the
+    navigation filter's gate should turn it away, then reset to it if it lasts (needs a sensor profile)."""
+
+    kind: Literal["gnss_jump"] = Field(description="gnss_jump: the GNSS position steps off for a while")
+    offset_enu_m: _Vec3 = Field(description="the step added to every fix, world ENU (m)")
+
+
+class MagInterference(_Timed):
+    """A field added to the magnetometer's (a motor current, a payload) for a while (needs a sensor profile)."""
+
+    kind: Literal["mag_interference"] = Field(description="mag_interference: a field added to the magnetometer's")
+    offset_frd_gauss: _Vec3 = Field(description="the field added, body FRD (gauss)")
+
+
+class ImuBiasStep(_Start):
+    """The IMU's biases step and stay (a knock, a temperature jump); the filter's bias states should take it
+    up (needs a sensor profile)."""
+
+    kind: Literal["imu_bias_step"] = Field(description="imu_bias_step: the gyro and accelerometer biases step")
+    gyro_frd_rad_s: _Vec3 = Field([0.0, 0.0, 0.0], description="the gyro bias step, body FRD (rad/s)")
+    accel_frd_m_s2: _Vec3 = Field([0.0, 0.0, 0.0], description="the accelerometer bias step, body FRD (m/s^2)")
+
+
+class BaroDrift(_Timed):
+    """The barometer's height drifts at ``rate_m_s`` for a while (weather, a blocked port), and the drift
+    stays (needs a sensor profile)."""
+
+    kind: Literal["baro_drift"] = Field(description="baro_drift: the barometric height drifts for a while")
+    rate_m_s: float = Field(ge=-20.0, le=20.0, description="the drift's rate (m/s)")
+
+
 class GimbalStuck(_Timed):
     """The gimbal's joints stay where they are, whatever is commanded."""
 
@@ -115,10 +151,13 @@ class TargetManoeuvre(_Start):
         return self
 
 
-Event = Annotated[Union[DetectorBlackout, FalseDetections, GnssOutage, GimbalStuck, WindGust, TargetManoeuvre],
+Event = Annotated[Union[DetectorBlackout, FalseDetections, GnssOutage, GnssJump, MagInterference, ImuBiasStep,
+                        BaroDrift, GimbalStuck, WindGust, TargetManoeuvre],
                   Field(discriminator="kind")]
-EVENT_KINDS = ("detector_blackout", "false_detections", "gnss_outage", "gimbal_stuck", "wind_gust",
-               "target_manoeuvre")
+EVENT_KINDS = ("detector_blackout", "false_detections", "gnss_outage", "gnss_jump", "mag_interference",
+               "imu_bias_step", "baro_drift", "gimbal_stuck", "wind_gust", "target_manoeuvre")
+#: the kinds that act on the sensors' error models (a sensor profile other than ideal)
+NAV_FAULT_KINDS = ("gnss_jump", "mag_interference", "imu_bias_step", "baro_drift")
 
 
 def _describe(ev, duration_s: float) -> str:
@@ -151,10 +190,11 @@ class EventRunner:
         self.gimbal_stuck = False
         self._clutter_box_px = None  # box size range of the first false_detections event on
 
-    def step(self, t_s: float, phase: int | None, log_event, gust=None, manoeuvre=None) -> None:
+    def step(self, t_s: float, phase: int | None, log_event, gust=None, manoeuvre=None, nav=None) -> None:
         """Advance to ``t_s`` (the flight software's phase now, if known): start and end events,
         ``log_event(t, text)`` for each, ``gust(velocity_enu_m_s, duration_s)`` at a gust's start,
-        ``manoeuvre(t, event) -> duration_s`` at a ship manoeuvre's start."""
+        ``manoeuvre(t, event) -> duration_s`` at a ship manoeuvre's start, ``nav(event, on)`` at a
+        navigation fault's start and end (:data:`NAV_FAULT_KINDS`; gnss_outage too)."""
         if phase is not None and phase not in self._phase_seen:
             self._phase_seen[phase] = t_s
         changed = False
@@ -171,9 +211,13 @@ class EventRunner:
                 log_event(t_s, f"event started: {_describe(ev, self._duration[i])}")
                 if ev.kind == "wind_gust":
                     gust(ev.velocity_enu_m_s, ev.duration_s)
+                if nav is not None and (ev.kind in NAV_FAULT_KINDS or ev.kind == "gnss_outage"):
+                    nav(ev, True)
             if self._state[i] == "on" and t_s >= start + self._duration[i] - 1e-9:
                 self._state[i], changed = "over", True
                 log_event(t_s, f"event ended: {ev.kind}")
+                if nav is not None and (ev.kind in NAV_FAULT_KINDS or ev.kind == "gnss_outage"):
+                    nav(ev, False)
         if changed:
             self._flags()
 

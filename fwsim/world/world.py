@@ -36,12 +36,17 @@ class Truth:
     target: TargetState
     gimbal: GimbalState
     mount_offset_frd_m: np.ndarray
+    #: the camera as built against the nominal one (R_nominal_from_actual: a boresight misalignment); None: none
+    R_nominal_from_actual: np.ndarray | None = None
     _cam: tuple | None = None
 
     def _camera(self) -> tuple:
         if self._cam is None:
-            self._cam = camera_pose_world(self.uav.pos_enu_m, self.uav.euler_ned_rad, self.mount_offset_frd_m,
-                                          self.gimbal.pan_rad, self.gimbal.tilt_rad)
+            pos, R = camera_pose_world(self.uav.pos_enu_m, self.uav.euler_ned_rad, self.mount_offset_frd_m,
+                                       self.gimbal.pan_rad, self.gimbal.tilt_rad)
+            if self.R_nominal_from_actual is not None:
+                R = R @ self.R_nominal_from_actual
+            self._cam = (pos, R)
         return self._cam
 
     @property
@@ -54,7 +59,9 @@ class Truth:
 
 
 class World:
-    def __init__(self, scenario: Scenario):
+    def __init__(self, scenario: Scenario, mount_error=None):
+        """``mount_error``: the camera's boresight and focal length as built
+        (:class:`fwsim.sensors.errors.CameraMountError`; None: as designed)."""
         self.scenario = scenario
         dt = 1.0 / scenario.rates.sim_hz
         self.dt_s = dt
@@ -63,13 +70,15 @@ class World:
                                  wind_enu_m_s=w.wind_enu_m_s)
         self.ship = Ship(scenario.target)
         self.gimbal = Gimbal(scenario.camera.gimbal, dt)
-        self.camera = Camera(scenario.camera, uav_mesh(scenario.aircraft.name), self.ship.mesh)
+        self.camera = Camera(scenario.camera, uav_mesh(scenario.aircraft.name), self.ship.mesh,
+                             focal_scale=1.0 if mount_error is None else mount_error.focal_scale)
+        self._R_mount = None if mount_error is None else mount_error.dcm_nominal_from_actual()
         self._mount = np.asarray(scenario.camera.gimbal.mount_offset_frd_m, dtype=float)
         self._hull = HullVolume(scenario.target)
         self.truth: Truth | None = None
 
     def _compose(self, uav: AirframeState, g: GimbalState) -> Truth:
-        self.truth = Truth(uav, self.ship.state(uav.t_s), g, self._mount)
+        self.truth = Truth(uav, self.ship.state(uav.t_s), g, self._mount, self._R_mount)
         return self.truth
 
     def reset(self) -> Truth:
