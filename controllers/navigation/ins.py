@@ -67,8 +67,9 @@ its observations too) and fused at the window's mean time, so the horizon must a
 
 Cost (tools/bench_ins.py, one core of a shared 2-core machine, medians): ``predict`` 25-31 us per IMU
 sample (the compiled EKF prediction 9-16 us, the output predictor 9 us), GNSS fusion 70 us per fix, the
-magnetometer's 3 axes 75 us, airspeed and sideslip 60 us, baro 20 us, ``estimate`` 17 us: some 70 us per
-120 Hz tick with every sensor (baro, mag and airspeed averaged to 10 Hz) and an estimate each tick.
+magnetometer 25-30 us as a heading (50-75 us as a field), airspeed and sideslip 50-60 us, baro 20 us,
+``estimate`` 16 us: some 60 us per 120 Hz tick with every sensor (baro, mag and airspeed averaged to 10 Hz)
+and an estimate each tick.
 
 Initialisation (in flight): an in-motion alignment (``ins_align``) over ``init_alignment_s`` between two GNSS
 fixes gives the attitude (tilt from the accelerometers against the GNSS change of velocity, heading from the
