@@ -76,12 +76,14 @@ class InsConfig(StrictModel):
     gnss_pos_noise_min_m: float = Field(0.5, gt=0, le=100, description="floor on the fix's h_acc / v_acc, m")
     gnss_vel_noise_min_m_s: float = Field(0.3, gt=0, le=100, description="floor on the fix's speed accuracy, m/s")
     baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
-    mag_fusion: Literal["heading", "field"] = Field(
-        "heading", description="heading: the tilt-compensated heading as the yaw alone (EKF2's heading fusion); "
-                               "field: the 3 axes against the configured earth field, with hard-iron bias states")
-    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise, rad (EKF2_HEAD_NOISE: "
-                                         "the compass's error is mostly a bias, which fusing does not average away)")
+    mag_fusion: Literal["field", "heading"] = Field(
+        "field", description="field: the 3 axes against the configured earth field, with body-frame (hard-iron) "
+                             "bias states; heading: the tilt-compensated heading as the yaw alone (EKF2's heading "
+                             "fusion)")
     mag_noise_gauss: float = Field(0.01, gt=0, le=1, description="magnetometer noise per axis (field fusion), gauss")
+    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise (heading fusion), rad "
+                                         "(EKF2_HEAD_NOISE: a compass's error is mostly a bias, which fusing does not "
+                                         "average away)")
     airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
     sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
     gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")

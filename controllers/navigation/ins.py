@@ -38,20 +38,20 @@ source          observation model                           gate (PX4 EKF2 defau
 gnss_pos (3)    p (fix moved to the EKF's sample time)      5 SD, per axis, all or none
 gnss_vel (3)    v                                           5 SD
 baro            p_U + b_h                                   5 SD
-mag (heading)   heading of R m_body = declination (yaw)     2.6 SD; field strength and inclination checks
-mag (field, 3)  R^T m_earth + b_m (mag_fusion: field)       3 SD, all or none; the same checks
+mag (field, 3)  R^T m_earth + b_m                           3 SD, all or none; strength, inclination checks
+mag (heading)   heading of R m_body = declination (yaw)     2.6 SD; the same checks (mag_fusion: heading)
 airspeed        |v - w|                                     3 SD (above airspeed_min_m_s)
 sideslip        (R^T (v - w))_y / (R^T (v - w))_x = 0       5 SD (synthetic, with each airspeed sample)
 ==============  ==========================================  ==============================================
 
 The magnetometer is fused against the earth field configured a priori (declination, inclination, strength).
-By default as a heading (EKF2's heading fusion, at its heading noise of 0.3 rad): the measured field turned
-into the world frame with the estimated attitude should point at the declination, and it is fused as an
-observation of the yaw alone (``h = [0, 0, 1]``), so that a compass error cannot tilt the attitude (the exact
-Jacobian, ``ins_models.mag_heading``, also carries the tilt through the vertical field); nothing observes
-the magnetometer bias states then. With ``mag_fusion: field`` its three axes are fused instead (EKF2's 3-axis
-fusion without the earth-field states): ``d/d dtheta = R^T [m]x``, and the body-frame bias states take an
-uncalibrated hard iron, observable as the body turns in the field.
+By default its three axes are (EKF2's 3-axis fusion without the earth-field states): ``d/d dtheta = R^T [m]x``,
+and the body-frame bias states take an uncalibrated hard iron, observable as the body turns in the field.
+With ``mag_fusion: heading`` it is fused as a heading (EKF2's heading fusion, at its heading noise of 0.3 rad):
+the measured field turned into the world frame with the estimated attitude should point at the declination,
+fused as an observation of the yaw alone (``h = [0, 0, 1]``), so that a compass error cannot tilt the attitude
+(the exact Jacobian, ``ins_models.mag_heading``, also carries the tilt through the vertical field); nothing
+observes the magnetometer bias states then.
 
 Fusion horizon (PX4 EKF2's scheme, not rewind-and-replay). The IMU samples are buffered and the EKF runs
 ``fusion_horizon_s`` behind the newest one; a GNSS fix, valid ``time_of_fix_s`` (its arrival less the
@@ -130,7 +130,7 @@ _REPORT_AFTER_S = 1.0  # a source's rejections raise an event once they have las
 _ALIGN_RESTART_FACTOR = 3.0  # a window this many times init_alignment_s without a fix to close it starts again
 
 
-_YAW_ONLY = np.array([0.0, 0.0, 1.0])
+_YAW_ONLY = np.array([0.0, 0.0, 1.0])  # the heading fusion's observation row over dtheta
 _YAW_ONLY.setflags(write=False)
 
 
