@@ -78,9 +78,12 @@ class InsConfig(StrictModel):
     baro_noise_m: float = Field(1.0, gt=0, le=100, description="barometric height noise, m")
     mag_fusion: Literal["field", "heading"] = Field(
         "field", description="field: the 3 axes against the configured earth field, with body-frame (hard-iron) "
-                             "bias states; heading: the tilt-compensated heading alone (EKF2's heading mode)")
+                             "bias states; heading: the tilt-compensated heading as the yaw alone (EKF2's heading "
+                             "fusion)")
     mag_noise_gauss: float = Field(0.01, gt=0, le=1, description="magnetometer noise per axis (field fusion), gauss")
-    mag_heading_noise_rad: float = Field(0.05, gt=0, le=3, description="magnetic heading noise (heading fusion), rad")
+    mag_heading_noise_rad: float = Field(0.3, gt=0, le=3, description="magnetic heading noise (heading fusion), rad "
+                                         "(EKF2_HEAD_NOISE: a compass's error is mostly a bias, which fusing does not "
+                                         "average away)")
     airspeed_noise_m_s: float = Field(1.4, gt=0, le=50, description="true-airspeed noise, m/s")
     sideslip_noise_rad: float = Field(0.3, gt=0, le=3, description="synthetic zero-sideslip noise, rad")
     gnss_pos_gate_sd: float = Field(5.0, gt=0, le=100, description="GNSS position innovation gate, SD")

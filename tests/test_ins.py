@@ -70,7 +70,7 @@ def test_the_config_has_the_px4_class_defaults_units_and_short_descriptions():
     assert (c.gyro_bias_rw_rad_s2_rt_hz, c.accel_bias_rw_m_s3_rt_hz) == (3.9e-5, 6.0e-3)
     assert (c.gnss_pos_gate_sd, c.gnss_vel_gate_sd, c.gnss_delay_s) == (5.0, 5.0, 0.12)
     units = ("_s", "_m", "_m_s", "_m_s2", "_rad", "_deg", "_gauss", "_sd", "_rt_hz")
-    assert c.mag_fusion == "field" and InsConfig(mag_fusion="heading").mag_fusion == "heading"
+    assert c.mag_fusion == "field" and c.mag_heading_noise_rad == 0.3
     for name, f in InsConfig.model_fields.items():
         assert f.description and len(f.description) <= 200, name
         if f.annotation in (float, int):
@@ -142,8 +142,9 @@ def test_initialising_until_the_in_motion_alignment_then_aided(main_run):
 
 def test_the_in_motion_alignment_initialises_in_a_climbing_turn():
     """Started in a 25 deg bank, 3 deg climbing turn (13 deg/s): the accelerometers' change of velocity against
-    the GNSS's gives the tilt whatever the manoeuvre (measured at the start: roll 1.5, pitch 1.6, yaw 4.0 deg
-    off, inside the initial std of 3 / 3 / 10 deg), and the errors settle within 10 s."""
+    the GNSS's gives the tilt whatever the manoeuvre (measured at the start: roll 0.1, pitch 0.2, yaw 0.5 deg
+    off, inside the initial std of 3 / 3 / 10 deg), and the errors settle within 10 s (RMS after: 0.16 / 0.14
+    / 0.10 deg)."""
     r = run(fly([Segment(25, 25, 3, ramp_s=0.05)]), SPEC, cfg())
     first = np.abs(r.att_err_deg[0])
     assert first[0] < 3.0 and first[1] < 3.0 and first[2] < 10.0, first
@@ -152,9 +153,9 @@ def test_the_in_motion_alignment_initialises_in_a_climbing_turn():
 
 def test_the_estimate_follows_the_scripted_flight(main_run):
     """From 10 s after the initialisation: roll/pitch RMS < 0.5 deg, heading < 1.5 deg, position < 2.5 m
-    (measured 0.23 / 0.21 / 0.49 deg, 0.17 m per axis, velocity 0.05 m/s). The largest errors are the straight
-    start's, until the first turn: an accelerometer bias looks like a tilt (roll/pitch 1.1 deg), a magnetometer
-    bias like a heading error (3 deg)."""
+    (measured 0.24 / 0.20 / 0.49 deg, 0.37 m per horizontal axis, 0.18 m vertical, velocity 0.05 m/s). The
+    largest errors are the straight start's, until the first turn: an accelerometer bias looks like a tilt
+    (roll/pitch 1.2 deg), a magnetometer bias like a heading error (2.6 deg)."""
     att = main_run.rms(main_run.att_err_deg, after_s=12.0)
     assert att[0] < 0.5 and att[1] < 0.5 and att[2] < 1.5, att
     assert np.all(main_run.rms(main_run.pos_err, after_s=12.0) < 2.5)
@@ -166,7 +167,7 @@ def test_the_estimate_follows_the_scripted_flight(main_run):
 def test_the_errors_are_consistent_with_the_covariance(main_run):
     """NEES of the horizon state's attitude and position (3 dof each) within the 95 % chi-square bound for at
     least 85 % of the samples, and not so far below it that the covariance means nothing (mean of 3 expected;
-    measured 1.4 and 1.7: the defaults are cautious against these sensors)."""
+    measured 1.2 and 0.7: the defaults are cautious against these sensors)."""
     for nees in (main_run.nees_att, main_run.nees_pos):
         assert np.mean(nees < CHI2_3DOF_95) >= 0.85
         assert 0.6 < np.mean(nees) < 6.0
@@ -180,7 +181,7 @@ def test_the_covariance_stays_symmetric_positive_definite(main_run):
 
 def test_the_biases_are_estimated_after_a_few_minutes_of_turns(main_run):
     """Over the last 20 s (of 240 s), each gyro and accelerometer bias is within 25 % of its turn-on value
-    (measured: within 4 % each), the wind within 0.3 m/s and the baro offset within 0.5 m."""
+    (measured: within 4 % and 3 %), the wind within 0.3 m/s and the baro offset within 0.5 m."""
     late = main_run.bias_t > main_run.bias_t[-1] - 20.0
     gyro = np.abs(main_run.gyro_bias_err[late].mean(axis=0))
     accel = np.abs(main_run.accel_bias_err[late].mean(axis=0))
@@ -206,8 +207,8 @@ def test_the_aid_statuses_say_what_was_fused_and_why(main_run):
 def test_delayed_gnss_fusion_matches_a_no_delay_reference_and_beats_fusing_it_as_current(fault_truth):
     """The same fixes (0.15 s latency) three ways: fused at their time of validity on the delayed horizon; a
     no-delay reference fed them as they were valid (no horizon, every sample fused as it comes); and fused as
-    if valid on arrival. Measured horizontal position RMS: 0.25, 0.23 and 3.1 m; attitude within 0.07 deg of the
-    reference's, but for the naive filter's heading (0.64 deg against 0.28)."""
+    if valid on arrival. Measured horizontal position RMS: 0.54, 0.54 and 3.1 m; roll and pitch within 0.04 deg
+    of the reference's, heading 0.52 against 0.31 deg (the naive filter's 0.84)."""
     delayed = run(fault_truth, SPEC, cfg())
     reference = run(fault_truth, SPEC, cfg(fusion_horizon_s=0.0, sample_average_s=0.0), timing="none")
     naive = run(fault_truth, SPEC, cfg(), timing="naive")
@@ -243,7 +244,8 @@ def test_a_fix_without_its_time_of_validity_is_taken_as_gnss_delay_s_old():
 
 def test_a_gnss_outage_dead_reckons_with_a_bounded_drift_and_recovers(fault_truth):
     """No fixes valid in 50-70 s (in the turn): dead reckoning on IMU, airspeed, sideslip, baro and mag.
-    Measured: 2.4 m of horizontal drift at the end (its std 4.4 m); back under 1 m 10 s after."""
+    Measured: 2.1 m of horizontal drift at the end (its std 4.7 m); back under 1.5 m 10 s after (1.2 m: the
+    fixes are taken in gradually, their variance held at the reported accuracy)."""
     r = fault_run(fault_truth, gnss_outage=(50.0, 70.0))
     mode = np.array(r.mode)
     assert np.all(mode[(r.t > 51.5) & (r.t < 70.0)] == "dead_reckoning")
@@ -279,7 +281,7 @@ def test_a_gnss_glitch_is_rejected_and_a_lasting_jump_reset_to_after_the_timeout
 
 def test_magnetometer_interference_is_rejected_and_the_heading_held(fault_truth):
     """A hard-iron offset of (0.15, -0.10, 0.05) gauss in 50-80 s (some 30 deg of heading): rejected by the
-    gate (every sample); the heading stays within 1 deg (measured 0.4 deg: the gyros, and the GNSS velocity in
+    gate (every sample); the heading stays within 1 deg (measured 0.6 deg: the gyros, and the GNSS velocity in
     the turn), and the bias states do not take the interference."""
     r = fault_run(fault_truth, mag_interference=(50.0, 80.0, (0.15, -0.10, 0.05)))
     mag = [s for s in r.statuses if s.source == "mag" and 50.0 <= s.time_of_observation_s < 80.0]
@@ -288,6 +290,16 @@ def test_magnetometer_interference_is_rejected_and_the_heading_held(fault_truth)
     assert np.all(np.abs(r.ins.horizon_state().mag_bias_frd_gauss) < 0.02)
     assert any(e.startswith("ins: mag rejected since t = 5") for e in r.events)
     assert any(e.startswith("ins: mag fused again at t = 80.") for e in r.events)
+
+
+def test_the_heading_fusion_rejects_an_interference_outside_its_gate(fault_truth):
+    """mag_fusion: heading (the yaw alone, EKF2's 0.3 rad). Its gate of 2.6 SD takes offsets of some 45 deg of
+    heading, as EKF2's would: (0.30, -0.20, 0.10) gauss in 50-80 s is rejected and the heading held."""
+    r = run(fault_truth, dataclasses.replace(SPEC, mag_interference=(50.0, 80.0, (0.30, -0.20, 0.10))),
+            cfg(mag_fusion="heading"))
+    mag = [s for s in r.statuses if s.source == "mag" and 50.0 <= s.time_of_observation_s < 80.0]
+    assert mag[0].observation.shape == (1,) and np.mean([s.rejected for s in mag]) > 0.8
+    assert np.max(np.abs(r.att_err_deg[r.t > 12.0, 2])) < 1.5
 
 
 def test_an_imu_bias_step_is_absorbed_by_the_bias_states(fault_truth):
@@ -300,12 +312,12 @@ def test_an_imu_bias_step_is_absorbed_by_the_bias_states(fault_truth):
     assert np.all(np.abs(r.gyro_bias_err[late, 2]) < 0.25 * 0.003)
     assert np.all(np.abs(r.accel_bias_err[late, 0]) < 0.25 * 0.2)
     assert np.max(np.abs(r.att_err_deg[r.t > 100.0])) < 1.0
-    assert np.max(np.abs(r.att_err_deg[r.t > 12.0])) < 3.0  # the transient (measured 1.4 deg of heading)
+    assert np.max(np.abs(r.att_err_deg[r.t > 12.0])) < 3.0  # the transient (measured 1.7 deg of heading)
 
 
 def test_a_barometer_drift_is_taken_by_its_bias_not_by_the_height(fault_truth):
     """The baro drifts by 0.1 m/s from 30 s (9 m by the end): the bias state follows it against the GNSS height;
-    the height error stays under 2 m (measured 1.2 m), the bias 1.5 m behind the drift."""
+    the height error stays under 2 m (measured 1.7 m), the bias 1.6 m behind the drift."""
     r = fault_run(fault_truth, baro_drift=(30.0, 0.1))
     assert np.max(np.abs(r.pos_err[:, 2])) < 2.0
     drift_now = SPEC.baro_offset_m + 0.1 * (r.bias_t[-1] - 30.0)
@@ -316,7 +328,7 @@ def test_a_barometer_drift_is_taken_by_its_bias_not_by_the_height(fault_truth):
 def test_an_uncalibrated_hard_iron_is_estimated_by_the_field_fusion(fault_truth):
     """A body-fixed (0.05, -0.05, 0.03) gauss offset from power-on (10 deg of heading, the size of the sensor
     models' "typical" hard iron): the bias states learn it in the first turn and the heading holds (measured
-    0.13 deg RMS after 40 s, the bias within 0.001 gauss); heading-only fusion cannot (1.2 deg, rejections)."""
+    0.14 deg RMS after 40 s, the bias within 0.001 gauss); the heading fusion cannot (1.9 deg)."""
     hard = (0.05, -0.05, 0.03)
     spec = dataclasses.replace(SPEC, mag_interference=(0.0, 1e9, hard))
     r = run(fault_truth, spec, cfg())

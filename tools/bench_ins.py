@@ -23,7 +23,7 @@ from controllers.navigation.ins import GRAVITY_M_S2, Ins
 from fwsim.interface.messages import AirspeedSample, BaroSample, GnssFix, ImuSample, MagSample
 
 STAGES = {"ekf predict (nominal + 21x21 covariance)": "_predict_ekf", "gnss fusion (pos + vel, 6 scalars)":
-          "_fuse_gnss_now", "baro fusion": "_fuse_baro_now", "mag fusion (field: 3 axes)": "_fuse_mag_now",
+          "_fuse_gnss_now", "baro fusion": "_fuse_baro_now", "mag fusion (field, the default: 3 axes)": "_fuse_mag_now",
           "airspeed + sideslip fusion": "_fuse_airspeed_now"}
 
 

@@ -39,17 +39,19 @@ gnss_pos (3)    p (fix moved to the EKF's sample time)      5 SD, per axis, all 
 gnss_vel (3)    v                                           5 SD
 baro            p_U + b_h                                   5 SD
 mag (field, 3)  R^T m_earth + b_m                           3 SD, all or none; strength, inclination checks
-mag (heading)   heading of R (m_body - b_m) = declination    2.6 SD; the same checks (mag_fusion: heading)
+mag (heading)   heading of R m_body = declination (yaw)     2.6 SD; the same checks (mag_fusion: heading)
 airspeed        |v - w|                                     3 SD (above airspeed_min_m_s)
 sideslip        (R^T (v - w))_y / (R^T (v - w))_x = 0       5 SD (synthetic, with each airspeed sample)
 ==============  ==========================================  ==============================================
 
 The magnetometer is fused against the earth field configured a priori (declination, inclination, strength).
 By default its three axes are (EKF2's 3-axis fusion without the earth-field states): ``d/d dtheta = R^T [m]x``,
-and the body-frame bias states take an uncalibrated hard iron, observable as the body turns in the field. In
-heading mode the measured field turned into the world frame with the estimated attitude should point at the
-declination; its Jacobian ``[-m_U m_E, -m_U m_N, |m_H|^2] / |m_H|^2`` (of the configured field) carries the
-tilt's share through the vertical field, and nothing observes the bias states.
+and the body-frame bias states take an uncalibrated hard iron, observable as the body turns in the field.
+With ``mag_fusion: heading`` it is fused as a heading (EKF2's heading fusion, at its heading noise of 0.3 rad):
+the measured field turned into the world frame with the estimated attitude should point at the declination,
+fused as an observation of the yaw alone (``h = [0, 0, 1]``), so that a compass error cannot tilt the attitude
+(the exact Jacobian, ``ins_models.mag_heading``, also carries the tilt through the vertical field); nothing
+observes the magnetometer bias states then.
 
 Fusion horizon (PX4 EKF2's scheme, not rewind-and-replay). The IMU samples are buffered and the EKF runs
 ``fusion_horizon_s`` behind the newest one; a GNSS fix, valid ``time_of_fix_s`` (its arrival less the
@@ -63,9 +65,11 @@ jump at each fix. A measurement older than the horizon when it arrives is fused 
 with an event. Baro, magnetometer and airspeed samples are averaged over ``sample_average_s`` (EKF2 downsamples
 its observations too) and fused at the window's mean time, so the horizon must also cover half a window.
 
-Cost (tools/bench_ins.py, one core of a shared 2-core machine): ``predict`` 25 us median per IMU sample
-(the compiled EKF prediction 9-14 us, the output predictor 8 us), GNSS fusion 65 us per fix, a scalar
-fusion 20-30 us, ``estimate`` 16 us: 55-60 us per 120 Hz tick with every sensor and an estimate each tick.
+Cost (tools/bench_ins.py, one core of a shared 2-core machine, medians): ``predict`` 25-31 us per IMU
+sample (the compiled EKF prediction 9-16 us, the output predictor 9 us), GNSS fusion 70 us per fix, the
+magnetometer 25-30 us as a heading (50-75 us as a field), airspeed and sideslip 50-60 us, baro 20 us,
+``estimate`` 16 us: some 60 us per 120 Hz tick with every sensor (baro, mag and airspeed averaged to 10 Hz)
+and an estimate each tick.
 
 Initialisation (in flight): an in-motion alignment (``ins_align``) over ``init_alignment_s`` between two GNSS
 fixes gives the attitude (tilt from the accelerometers against the GNSS change of velocity, heading from the
@@ -124,6 +128,10 @@ _H_BARO = np.array([1.0, 1.0])
 _VAR_MIN = np.array([1e-12] * 3 + [1e-8] * 6 + [1e-16] * 3 + [1e-12] * 3 + [1e-8] * 3 + [1e-12] * 3)  # P's floors
 _REPORT_AFTER_S = 1.0  # a source's rejections raise an event once they have lasted this long
 _ALIGN_RESTART_FACTOR = 3.0  # a window this many times init_alignment_s without a fix to close it starts again
+
+
+_YAW_ONLY = np.array([0.0, 0.0, 1.0])  # the heading fusion's observation row over dtheta
+_YAW_ONLY.setflags(write=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -497,7 +505,7 @@ class Ins:
 
     def _fuse_mag_now(self, tv: float, m: MagSample) -> None:
         """The magnetometer, less its estimated bias, checked for the configured earth field's strength and
-        inclination (on the estimated tilt), then fused as a field (3 axes) or a heading (``mag_fusion``)."""
+        inclination (on the estimated tilt), then fused as a heading or a field (``mag_fusion``)."""
         c = self.cfg
         b = np.asarray(m.field_frd_gauss, float) - self._bm
         R = dcm_from_quat(self._q)
@@ -513,12 +521,17 @@ class Ins:
             self._fuse_mag_field(tv, np.asarray(m.field_frd_gauss, float), R, why)
             return
         model = mag_heading(R, b, self._earth_field_enu)
-        if model is not None:
-            z, h, _ = model
-            r = c.mag_heading_noise_rad ** 2
-            innov = wrap_pi(z - math.radians(c.mag_declination_deg))
-            obs = (_IDX_MAG, h, *self._innovation_variance(_IDX_MAG, h, r))
-            self._scalar("mag", tv, z, r, innov, obs, c.mag_gate_sd, why)
+        if model is None:
+            return
+        z = model[0]
+        # the yaw alone, as EKF2's heading fusion (the model's Jacobian also carries the tilt through the vertical
+        # field): a compass's error, the hard iron a calibration leaves or interference, then cannot tilt the
+        # attitude, which the accelerometers and GNSS hold (tilt-coupled, the typical profile's roll and pitch
+        # errors were twice as large)
+        r = c.mag_heading_noise_rad ** 2
+        innov = wrap_pi(z - math.radians(c.mag_declination_deg))
+        obs = (_IDX_MAG, _YAW_ONLY, *self._innovation_variance(_IDX_MAG, _YAW_ONLY, r))
+        self._scalar("mag", tv, z, r, innov, obs, c.mag_gate_sd, why)
 
     def _fuse_mag_field(self, tv: float, z: np.ndarray, R: np.ndarray, why: str | None) -> None:
         """The field's 3 axes against ``R^T m_earth + b_m``, gated as a whole, fused in one vector update."""
