@@ -49,7 +49,7 @@ def test_a_navigation_fault_on_the_ideal_profile_is_a_one_line_error():
     assert "\n" not in str(exc.value) and "events[0].kind: gnss_jump acts on the sensors' error models" in str(exc.value)
     with pytest.raises(ScenarioError) as exc:
         load_scenario(CHECKOUT, {"sensors.profile": "typical", "sensors.errors": {"gnss": {"latncy_s": 0.1}}})
-    assert "latncy_s" in str(exc.value) and "\n" not in str(exc.value)
+    assert "sensors.errors.gnss.latncy_s: unknown key" in str(exc.value) and "\n" not in str(exc.value)
 
 
 def _fly_checkout(tmp_path, name, events, duration_s=60.0):

@@ -254,6 +254,8 @@ def _format_errors(source: str, exc: ValidationError) -> str:
             got = "" if f"got {shown}" in msg else f" (got {shown})"  # (a validator's own message may say it)
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
+        if loc and msg.startswith(loc + "."):  # a validator naming a deeper field itself
+            loc = ""
         lines.append(f"{source}: {loc}: {msg}{got}" if loc else f"{source}: {msg}{got}")
     if len(errors) > MAX_PROBLEMS:
         lines.append(f"{source}: ... and {len(errors) - MAX_PROBLEMS} more problems")

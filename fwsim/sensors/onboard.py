@@ -50,8 +50,18 @@ class SensorsConfig(StrictModel):
         if self.errors:
             if self.profile == "ideal":
                 raise ValueError("errors: the ideal profile has no error models to override (profile: typical)")
+            from pydantic import ValidationError
+
             from fwsim.sensors.error_config import resolve
-            resolve(self.profile, self.errors)  # an unknown key or a value out of bounds: said here
+            try:
+                resolve(self.profile, self.errors)  # an unknown key or a value out of bounds: said here
+            except ValidationError as exc:
+                e = exc.errors()[0]
+                where = ".".join(str(x) for x in e["loc"])
+                why = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+                raise ValueError(f"sensors.errors.{where}: {why}") from None
+            except ValueError as exc:
+                raise ValueError(f"sensors.errors: {exc}") from None
         return self
 
 
