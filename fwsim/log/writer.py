@@ -266,14 +266,7 @@ class LogWriter:
         keep: Iterable[str] = (),
     ):
         self.path = Path(path)
-        # topics also kept in memory, with the metadata and attachments: kept_log() reads them back without
-        # reading the file (what a run's one-line result needs)
-        self._keep = frozenset(keep)
-        self._kept: dict[str, list[tuple[int, bytes, int]]] = {t: [] for t in self._keep}
-        self._kept_channels: dict[int, Any] = {}
-        self._kept_schemas: dict[int, Any] = {}
-        self._kept_metadata: dict[str, dict[str, str]] = {}
-        self._kept_attachments: dict[str, bytes] = {}
+        self._init_kept(keep)
         self._t0 = int(epoch_ns)  # log times and stamps = epoch + sim time (Foxglove shows a real date)
         metadata = {**metadata, EPOCH_KEY: str(self._t0), "log_time_epoch_utc": _utc_text(self._t0)}
         self._listeners: list[Listener] = list(listeners)
@@ -316,6 +309,16 @@ class LogWriter:
         self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
         self._fix = None  # the LocationFix reused by write_location
         self._log = Log()
+
+    def _init_kept(self, keep: Iterable[str]) -> None:
+        """Topics also kept in memory, with the metadata and attachments: :meth:`kept_log` reads them back
+        without reading the file (what a run's one-line result needs)."""
+        self._keep = frozenset(keep)
+        self._kept: dict[str, list[tuple[int, bytes, int]]] = {t: [] for t in self._keep}
+        self._kept_channels: dict[int, Any] = {}
+        self._kept_schemas: dict[int, Any] = {}
+        self._kept_metadata: dict[str, dict[str, str]] = {}
+        self._kept_attachments: dict[str, bytes] = {}
 
     # -- registration -----------------------------------------------------
     def _json_channel(self, topic: str, cls: type, first: Any) -> list:
