@@ -436,6 +436,17 @@ class UkfConfig(StrictModel):
         True,
         description="add the shape correction's spread over the headings the ship may have to the reported position "
                     "std (an error common to the detections until the heading is known); not fused")
+    pointing_bias_std_rad: float = Field(
+        0.005, ge=0, le=0.1,
+        description="camera mount calibration 1-sigma (boresight, encoders), per image axis, rad: with the "
+                    "navigation's attitude std, the prior of the estimated pointing bias (estimator ukf); 0: none")
+    pointing_bias_walk_rad_rt_s: float = Field(
+        2e-4, gt=0, le=0.1,
+        description="random walk of the pointing bias (the navigation's attitude error wanders), rad/sqrt(s)")
+    pointing_rate_error_frac: float = Field(
+        0.01, ge=0, le=1,
+        description="with the pointing bias estimated: the camera's angular-rate error (gyro and encoder scale "
+                    "factor, misalignment) as a fraction of its rate, added to the features' random walk")
     innovation_gate: float = Field(
         13.8, ge=0, le=1000,
         description="reject a detection whose pixel innovation has a normalised square (chi-square, 2 dof) "

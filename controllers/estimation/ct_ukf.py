@@ -178,6 +178,7 @@ class CtUkfTargetEstimator(UkfTargetEstimator):
     name = "ct_ukf"
     label = "CT-UKF"  # its name in the flight software's events
     dim_x = 10
+    estimates_pointing_bias = False  # its states 8 and 9 are the turn rate and the acceleration
 
     def __init__(self, camera: PinholeCamera, ukf_config: UkfConfig | None = None,
                  config: CtUkfConfig | None = None):

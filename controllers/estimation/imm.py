@@ -121,6 +121,8 @@ class ImmTargetEstimator:
     def __init__(self, camera: PinholeCamera, ukf_config: UkfConfig | None = None,
                  ct_config: CtUkfConfig | None = None, config: ImmConfig | None = None):
         self.cfg = config if config is not None else ImmConfig()
+        if ukf_config is not None and ukf_config.pointing_bias_std_rad > 0.0:  # the models mix 8 and 10 states
+            ukf_config = ukf_config.model_copy(update={"pointing_bias_std_rad": 0.0})
         self.cv = UkfTargetEstimator(camera, ukf_config)
         self.ct = CtUkfTargetEstimator(camera, ukf_config, ct_config)
         self.models = (self.cv, self.ct)

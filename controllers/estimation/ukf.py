@@ -26,6 +26,18 @@ Measurement (paper eq. 9), on every new valid detection:
   r_c rows carry GNSS noise plus the attitude and altimeter errors projected
   over the range.
 
+Pointing bias: the camera's pointing error (its boresight and encoder offsets as built, and the
+navigation's attitude error) is slowly varying, not white: fused as white noise it would average away in
+the filter while the error stays. While the navigation reports its attitude std
+(``CameraMotion.att_var_rad2``, an INS does), two more states ``b = (b1, b2)`` after the target's hold it:
+where the believed boresight appears in the image (normalised units, :func:`through_pointing_bias`), so the
+pixel rows are ``f (x + b) / (1 - b . x) + c`` to first order in ``b``. Its prior is the mount's calibration
+(``pointing_bias_std_rad``) with the navigation's attitude variance; it random-walks, takes on each new low
+of the navigation's attitude variance as the navigation corrects itself, and a turning camera's rate error
+(``pointing_rate_error_frac``) is added to the features' random walk. It is observable as the view turns
+round the ship (an orbit) and as the range closes (the dive). Without that report (the ideal sensors) the
+filter is the 8-state one.
+
 Reported uncertainty: the box centre, corrected for the ship class's shape,
 is still off by what the class cannot know of the real ship (its size, its
 layout). That error is systematic, not noise: fused as noise it averages
@@ -80,7 +92,7 @@ from controllers.messages import DetectionFix, EstimatorStatus, FusionReason, Fu
 from fwsim.interface.messages import Measurements
 
 __all__ = ["UkfConfig", "CameraMotion", "TargetEstimate", "UnscentedCore", "UkfTargetEstimator",
-           "fix_from_measurements", "height_consider_cov"]
+           "fix_from_measurements", "height_consider_cov", "through_pointing_bias"]
 
 MIN_DEPTH_M = 1.0  # process model: camera-frame depth of a sigma point is floored here
 _MIN_RAY_DOWN = 1e-3  # measurement model: -d_w,z of a sigma point's ray is floored here (|d_w| >= 1)
@@ -383,6 +395,21 @@ class _CompiledProcess:
         return out.reshape(self.dim_x, self.m).T.copy()  # (the buffer is the next call's output)
 
 
+class _PointingBiasProcess(_CompiledProcess):
+    """:class:`_CompiledProcess` with the camera's pointing bias as two more states, constant over the
+    interval (their random walk is in Q)."""
+
+    dim_x = 10
+    function_name = "ukf_pointing_bias_rk4_step"
+    _cache: dict[tuple, "_CompiledProcess"] = {}
+
+    @staticmethod
+    def _target_rates(Xs, m: int):
+        """``[V_q, 0, 0]``: the constant-velocity target, then the bias (SX (m, 8))."""
+        import casadi as ca
+        return ca.horzcat(Xs[:, 5:8], ca.SX.zeros(m, 5))
+
+
 def _sx_exp_so3(w, tau):
     """:func:`_exp_so3` in CasADi SX (``w`` a 3-vector symbol, ``tau`` a scalar expression)."""
     import casadi as ca
@@ -421,13 +448,13 @@ class _CompiledUpdate:
     _cache: dict[tuple, "_CompiledUpdate"] = {}
 
     @classmethod
-    def for_core(cls, core: "UnscentedCore") -> "_CompiledUpdate":
-        key = (core.n, tuple(core.Wm), tuple(core.Wc))
+    def for_core(cls, core: "UnscentedCore", bias_col: int | None = None) -> "_CompiledUpdate":
+        key = (core.n, tuple(core.Wm), tuple(core.Wc), bias_col)
         if key not in cls._cache:
-            cls._cache[key] = cls(core)
+            cls._cache[key] = cls(core, bias_col)
         return cls._cache[key]
 
-    def __init__(self, core: "UnscentedCore"):
+    def __init__(self, core: "UnscentedCore", bias_col: int | None = None):
         import casadi as ca
 
         from controllers.compiled import Buffered
@@ -440,7 +467,10 @@ class _CompiledUpdate:
         d = (ca.repmat(R[:, 0].T, m, 1) * ca.repmat(x1, 1, 3) + ca.repmat(R[:, 1].T, m, 1) * ca.repmat(x2, 1, 3)
              + ca.repmat(R[:, 2].T, m, 1))  # rays (m, 3), as _hx_batch
         Z = (hc[0] - hc[1]) / ca.fmax(-d[:, 2], _MIN_RAY_DOWN)
-        H = ca.horzcat(k[0] * x1 + k[2], k[1] * x2 + k[3], X[:, 2:5] - d * ca.repmat(Z, 1, 3))
+        # the pixel rows: the features, with bias_col seen through the camera's pointing bias (states bias_col,
+        # bias_col + 1: :func:`through_pointing_bias`)
+        p1, p2 = (x1, x2) if bias_col is None else through_pointing_bias(x1, x2, X[:, bias_col], X[:, bias_col + 1])
+        H = ca.horzcat(k[0] * p1 + k[2], k[1] * p2 + k[3], X[:, 2:5] - d * ca.repmat(Z, 1, 3))
         Wm, Wc = ca.DM(core.Wm).T, ca.DM(core.Wc)
         zp = ca.mtimes(Wm, H)
         dz = H - ca.repmat(zp, m, 1)
@@ -482,6 +512,11 @@ def _fx_compiled(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: fl
     return _CompiledProcess.for_points(len(S))(S, dt, r_c0, R_ec0, V_c, omega, max_step)
 
 
+def _fx_pointing_bias_compiled(S: np.ndarray, dt: float, r_c0, R_ec0, V_c, omega, max_step: float) -> np.ndarray:
+    """:func:`_fx_batch` on the 10-state sigma points (the pointing bias last), compiled."""
+    return _PointingBiasProcess.for_points(len(S))(S, dt, r_c0, R_ec0, V_c, omega, max_step)
+
+
 def _hx_batch(X: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_ec: np.ndarray, cam_h: float,
               plane_z: float) -> np.ndarray:
     """[u, v, r_c] predicted from each state (rows of X): pinhole + flat-sea depth along the ray through
@@ -494,6 +529,31 @@ def _hx_batch(X: np.ndarray, f_u: float, f_v: float, c_u: float, c_v: float, R_e
     out[:, 1:2] = f_v * x2 + c_v
     out[:, 2:5] = X[:, 2:5] - d * Z
     return out
+
+
+def through_pointing_bias(x1, x2, b1, b2):
+    """The normalised image point where a camera turned by its pointing bias sees the feature ``(x1, x2)`` of
+    the camera as believed (elementwise; floats, arrays or CasADi expressions). The bias ``(b1, b2)`` is where
+    the believed boresight appears: to first order in the bias, the camera frame turned about its x and y axes
+    so that ``[x1, x2, 1]`` is seen along ``[x1 + b1, x2 + b2, 1 - b1 x1 - b2 x2]`` (a point off the centre
+    moves slightly more than the centre)."""
+    den = 1.0 - b1 * x1 - b2 * x2
+    return (x1 + b1) / den, (x2 + b2) / den
+
+
+def _with_pointing_bias(x: np.ndarray, P: np.ndarray, std_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-state start with the pointing bias appended: zero, ``std_rad`` per axis. The detection gives the
+    features plus the bias, so each feature starts anti-correlated with its bias (``Cov = -std^2``) and
+    that much less certain."""
+    n = len(x)
+    Pb = np.zeros((n + 2, n + 2))
+    Pb[:n, :n] = P
+    v = std_rad * std_rad
+    for i in (0, 1):
+        Pb[i, i] += v
+        Pb[n + i, n + i] = v
+        Pb[i, n + i] = Pb[n + i, i] = -v
+    return np.concatenate([x, [0.0, 0.0]]), Pb
 
 
 def height_consider_cov(x1: float, x2: float, R_enu_from_cam, height_std_m: float) -> np.ndarray:
@@ -588,12 +648,16 @@ class UkfTargetEstimator:
     label = "UKF"  # its name in the flight software's events
     dim_x = 8  # [x1, x2, r_q, V_q]; a subclass with more target states (controllers.estimation.ct_ukf) appends them
 
+    estimates_pointing_bias = True  # False: a subclass's target model does not take the two bias states
+
     def __init__(self, camera: PinholeCamera, config: UkfConfig | None = None):
         self.cfg = config if config is not None else UkfConfig()
         self.camera = camera
-        c = self.cfg
-        self._core = UnscentedCore(self.dim_x, 5, c.sigma_alpha, c.sigma_beta, c.sigma_kappa)
-        self._update = _CompiledUpdate.for_core(self._core)
+        self._target_dim = self.dim_x
+        self._bias_col: int | None = None  # the pointing bias's first state while it is estimated (_set_bias_states)
+        self._q_bias: tuple[float, np.ndarray] | None = None
+        self._att_var = math.nan  # the navigation's lowest attitude variance since the start (rad^2)
+        self._set_bias_states(False)
         self._initialised = False
         self._t = math.nan
         self._motion: CameraMotion | None = None
@@ -672,9 +736,63 @@ class UkfTargetEstimator:
     # ------------------------------------------------------------ the target model (a subclass's hooks)
     _fx = staticmethod(_fx_compiled)  # fx_batch of UnscentedCore.predict: the sigma points over dt
 
+    def _set_bias_states(self, on: bool) -> None:
+        """The filter with (``on``) or without the pointing bias's two states after the target's."""
+        c = self.cfg
+        self._bias_col = self._target_dim if on else None
+        self.dim_x = self._target_dim + (2 if on else 0)
+        if on:
+            self._fx = _fx_pointing_bias_compiled
+        else:
+            self.__dict__.pop("_fx", None)  # the class's (the target model's)
+        self._q_bias = None
+        self._core = UnscentedCore(self.dim_x, 5, c.sigma_alpha, c.sigma_beta, c.sigma_kappa)
+        self._update = _CompiledUpdate.for_core(self._core, self._bias_col)
+
+    def _wants_bias_states(self, motion: CameraMotion) -> bool:
+        """The pointing bias is estimated when it is configured and the navigation reports its attitude
+        uncertainty (an INS does; a navigation that reports none is taken as exact, as the estimator always
+        took it before)."""
+        return (self.estimates_pointing_bias and self.cfg.pointing_bias_std_rad > 0.0
+                and math.isfinite(motion.att_var_rad2))
+
     def _process_noise(self, dt: float) -> np.ndarray:
         """Q over dt (:func:`_process_noise`)."""
         return _process_noise(dt, self.cfg)
+
+    def _bias_process_noise(self, dt: float, omega, motion: CameraMotion) -> np.ndarray:
+        """Q over dt with the pointing bias estimated. The bias random-walks (``pointing_bias_walk_rad_rt_s``)
+        and moves with the navigation's corrections to its attitude while that converges: a Kalman filter's
+        correction has the covariance its update removes, so each fall of the navigation's attitude variance
+        below its lowest since the start is added (over the image's two axes; its rises and falls about a
+        steady level are the wander the random walk stands for). The features' random walk grows with the camera's
+        rate error (``pointing_rate_error_frac`` of its angular rate ``omega``): a turning camera's feature
+        rates are only that good, so a slew teaches the filter no more of the bias than that allows."""
+        key = dt
+        if self._q_bias is None or self._q_bias[0] != key:
+            Qb = np.zeros((self.dim_x, self.dim_x))
+            n = self._target_dim
+            Qb[:n, :n] = self._process_noise(dt)
+            Qb[n, n] = Qb[n + 1, n + 1] = self.cfg.pointing_bias_walk_rad_rt_s ** 2 * dt
+            self._q_bias = (key, Qb)
+        Q = self._q_bias[1].copy()
+        w = float(np.linalg.norm(omega)) * self.cfg.pointing_rate_error_frac
+        Q[0, 0] += w * w * dt
+        Q[1, 1] += w * w * dt
+        var = motion.att_var_rad2
+        if math.isfinite(var) and var < self._att_var:  # a new low: the navigation has converged further
+            n = self._bias_col
+            Q[n, n] += 0.5 * (self._att_var - var)
+            Q[n + 1, n + 1] += 0.5 * (self._att_var - var)
+            self._att_var = var
+        return Q
+
+    @property
+    def pointing_bias_rad(self) -> np.ndarray:
+        """The estimated pointing bias (the image's x and y, normalised units ~ rad; zeros when not estimated)."""
+        if self._bias_col is None or not self._initialised:
+            return np.zeros(2)
+        return self._core.x[self._bias_col:self._bias_col + 2]
 
     @staticmethod
     def _initial_state(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -712,7 +830,15 @@ class UkfTargetEstimator:
         sv = c.init_vel_std_m_s
         P = np.diag([(c.pixel_noise_px / cam.fx) ** 2, (c.pixel_noise_px / cam.fy) ** 2, sp * sp, sp * sp,
                      _INIT_VERTICAL_POS_STD_M ** 2, sv * sv, sv * sv, _INIT_VERTICAL_VEL_STD_M_S ** 2])
-        self._core.set_state(*self._initial_state(np.concatenate([[x1, x2], r_q, np.zeros(3)]), P))
+        x0 = np.concatenate([[x1, x2], r_q, np.zeros(3)])
+        bias = self._wants_bias_states(motion)
+        if bias != (self._bias_col is not None):
+            self._set_bias_states(bias)
+        x0, P = self._initial_state(x0, P)
+        if bias:  # the mount's calibration and the navigation's attitude, over the image's two axes
+            self._att_var = motion.att_var_rad2
+            x0, P = _with_pointing_bias(x0, P, math.sqrt(c.pointing_bias_std_rad ** 2 + 0.5 * self._att_var))
+        self._core.set_state(x0, P)
         self.initialisations += 1
         self._t = float(fix.t_s)
         self._motion = motion
@@ -738,7 +864,8 @@ class UkfTargetEstimator:
             # a target leaving the camera's front half-space makes x1, x2 = X/Z, Y/Z blow up: the
             # resulting non-finite state is caught below, so numpy's overflow warnings are noise here
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                self._core.predict(dt, self._fx, self._process_noise(dt), r_c0=m0.pos_enu_m,
+                Q = self._process_noise(dt) if self._bias_col is None else self._bias_process_noise(dt, omega, motion)
+                self._core.predict(dt, self._fx, Q, r_c0=m0.pos_enu_m,
                                    R_ec0=m0.R_enu_from_cam, V_c=V_c, omega=omega, max_step=self.cfg.max_substep_s)
         except FloatingPointError:
             self.divergence_resets += 1

@@ -207,6 +207,7 @@ class CameraMotion:
     R_enu_from_cam: np.ndarray  # (3, 3)
     omega_cam_rad_s: np.ndarray  # (3,) camera angular velocity relative to the world, camera frame
     height_m: float  # camera height above the sea (altimeter + lever arm), for the depth model
+    att_var_rad2: float = math.nan  # the navigation's attitude variance, roll + pitch + yaw (NaN: not reported)
 
     @classmethod
     def from_measurements(cls, meas: Measurements, mount_offset_frd_m) -> "CameraMotion":
@@ -235,7 +236,9 @@ class CameraMotion:
         omega = camera_angular_velocity(pan, tilt, pan_rate, tilt_rate, meas.body_rates_frd_rad_s)
         h = float(meas.height_above_sea_m)
         height = h + float(R_ef[2] @ m) if math.isfinite(h) else float(cam_pos[2])
-        return cls(float(meas.t_s), cam_pos, vel, R, omega, height)
+        s = meas.att_std_rad
+        att_var = float(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])  # (NaN when not reported)
+        return cls(float(meas.t_s), cam_pos, vel, R, omega, height, att_var)
 
 
 def camera_motion(meas: Measurements, mount_offset_frd_m) -> CameraMotion | None:

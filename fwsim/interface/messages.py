@@ -143,6 +143,7 @@ class Measurements:
     det_v_px: float = math.nan
     det_bbox_px: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))  # u_min, v_min, u_max, v_max
     wind_enu_m_s: np.ndarray = field(default_factory=_NAN3)  # (3,) the navigation's wind estimate (not a sensor's)
+    att_std_rad: np.ndarray = field(default_factory=_NAN3)  # (3,) the navigation's attitude std (NaN: not reported)
 
 
 @dataclass(frozen=True, slots=True)

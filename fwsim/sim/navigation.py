@@ -139,4 +139,4 @@ class OnboardNavigation:
         return Measurements(t_s=t_s, pos_enu_m=est.pos_enu_m, vel_enu_m_s=est.vel_enu_m_s,
                             euler_ned_rad=est.euler_ned_rad, body_rates_frd_rad_s=est.body_rates_frd_rad_s,
                             airspeed_m_s=self.airspeed_m_s, height_above_sea_m=float(est.pos_enu_m[2]),
-                            nav_t_s=t_s, wind_enu_m_s=est.wind_enu_m_s, **kw)
+                            nav_t_s=t_s, wind_enu_m_s=est.wind_enu_m_s, att_std_rad=est.att_std_rad, **kw)
