@@ -153,3 +153,17 @@ def test_the_navigation_error_is_drawn_with_its_band(paper_typical, tmp_path):
     assert [p.name for p in res.written] == ["navigation_error.png"] and not res.failed
     skipped = plot_log(read_log(paper_typical).path, tmp_path / "x", only=["target_estimate"])
     assert not skipped.failed
+
+
+def test_the_block_breakdown_times_the_onboard_navigation(tmp_path):
+    """``fwsim run --profile`` / ``fwsim bench`` on a profile with the INS: its cost has a row of its own."""
+    from fwsim import SCENARIO_DIR
+    from fwsim.scenario.model import load_scenario
+    from fwsim.sim.loop import run
+    from fwsim.sim.profiling import BlockTimer
+    scenario, text = load_scenario(SCENARIO_DIR / "paper_mission.yaml", {"sensors.profile": "typical",
+                                                                         "duration_s": 3.0})
+    result = run(scenario, text, tmp_path / "p.mcap", profile=BlockTimer())
+    rows = {b.name: b for b in result.blocks}
+    assert rows["navigation (INS)"].calls > 300 and rows["navigation (INS)"].seconds > 0.0
+    assert rows["sensor errors"].calls > 300

@@ -42,7 +42,7 @@ from fwsim.interface.frames import quat_from_dcm
 from fwsim.log import LogWriter
 from fwsim.log.writer import Listener
 from fwsim.interface.messages import ActuatorCommand, GimbalCommand
-from fwsim.sim.profiling import BlockTimer, time_flight_software, time_harness
+from fwsim.sim.profiling import BlockTimer, time_flight_software, time_harness, time_onboard_navigation
 from fwsim.scenario.model import Scenario, start_epoch_ns
 from fwsim.sensors.onboard import Sensors, rng_for
 from fwsim.world.world import World
@@ -292,6 +292,8 @@ class _Flight:
             time_harness(profile, sensors=self.sensors, detector=self.detector, autopilot=self.autopilot,
                          world=world, log=log)
             time_flight_software(profile, fsw)
+            if self.nav is not None:
+                time_onboard_navigation(profile, self.nav)
         log.write_calibration(topics.CAMERA_CALIBRATION, 0.0, topics.CAMERA_FRAME_ID, cam.width_px, cam.height_px,
                               world.camera.K.K)
         log.write_scene_models(topics.SCENE, 0.0, [

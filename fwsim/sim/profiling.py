@@ -85,6 +85,16 @@ def time_flight_software(timer: BlockTimer, fsw) -> None:
             timer.wrap(block, "step", f"fsw:guidance:{phase}:{type(block).__name__}")
 
 
+def time_onboard_navigation(timer: BlockTimer, nav) -> None:
+    """Time the onboard navigation (``sensors.profile`` other than ideal): its sensors' error models and the
+    INS."""
+    m = nav.models
+    for model in (m.imu, m.gnss, m.baro, m.mag, m.pitot, m.encoders):
+        timer.wrap(model, "step", "sensor errors")
+    for name in ("predict", "fuse_gnss", "fuse_baro", "fuse_mag", "fuse_airspeed", "estimate"):
+        timer.wrap(nav.ins, name, "navigation (INS)")  # (the delayed fusions run inside predict)
+
+
 def time_harness(timer: BlockTimer, *, sensors, detector, autopilot, world, log) -> None:
     """Time the harness's blocks: sensors, autopilot, JSBSim, the rest of the world step, camera, renders,
     logging."""
