@@ -73,6 +73,32 @@ def test_foxglove_types_are_there(paper_log):
                      "/tf": "foxglove.FrameTransform"}
 
 
+def test_the_navigation_estimate_is_posed_beside_the_truth(paper_typical, paper_log):
+    """On a sensor profile the INS's estimate is a second pose for the 3D panel: /tf frame uav_estimate (beside
+    uav, in world) and /nav/pose, one per /nav/estimate once initialised, within a few metres of the truth at
+    the same time stamp. The ideal profile has neither."""
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+    from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+    log = read_log(paper_typical)
+    assert log.schema_name("/nav/pose") == "foxglove.PoseInFrame"
+    tfs = [FrameTransform.FromString(d) for _, d in log.raw("/tf")]
+    truth = {(tf.timestamp.seconds, tf.timestamp.nanos): tf for tf in tfs if tf.child_frame_id == "uav"}
+    est = [tf for tf in tfs if tf.child_frame_id == "uav_estimate"]
+    nav = log.table("/nav/estimate")
+    assert len(est) == log.topics["/nav/pose"] == int(np.sum(nav["mode"] != "initialising")) > 1000
+    assert {tf.parent_frame_id for tf in est} == {"world"}
+    err_m = [np.linalg.norm([a.translation.x - b.translation.x, a.translation.y - b.translation.y,
+                             a.translation.z - b.translation.z])
+             for a in est for b in [truth[(a.timestamp.seconds, a.timestamp.nanos)]]]
+    assert max(err_m) < 5.0 and np.median(err_m) < 2.0, (max(err_m), np.median(err_m))
+    poses = [PoseInFrame.FromString(d) for _, d in log.raw("/nav/pose")]
+    assert [(p.pose.position.x, p.pose.position.y, p.pose.position.z) for p in poses] == \
+        [(tf.translation.x, tf.translation.y, tf.translation.z) for tf in est]
+    ideal = read_log(paper_log)
+    assert "/nav/pose" not in ideal.topics
+    assert not any(FrameTransform.FromString(d).child_frame_id == "uav_estimate" for _, d in ideal.raw("/tf"))
+
+
 @pytest.mark.parametrize("value, words", [("yesterday", "not an ISO 8601"), ("1850-01-01T00:00:00", "1970-2200")])
 def test_a_bad_start_time_is_one_line(value, words):
     with pytest.raises(ScenarioError, match=words):

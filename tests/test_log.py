@@ -14,7 +14,7 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from fwsim.log import LogWriter, RunLog, read_log
 from fwsim.log.schema import describe_field, json_schema
-from fwsim.interface.messages import AccelCommand, AirframeState, AutopilotStatus, RateCommand
+from fwsim.interface.messages import AccelCommand, AirframeState, AutopilotStatus, NavEstimate, RateCommand
 
 META = {"fwsim_version": "0.1.0", "jsbsim_version": "1.2.1", "seed": "42",
         "aircraft_hash": "abc123", "scenario": "unit-test"}
@@ -198,6 +198,41 @@ def test_foxglove_topics_decode(tmp_path):
     assert ev[0] == (pytest.approx(0.1), "INFO", "phase: cruise")
     assert ev[1][1:] == ("WARNING", "something odd")
     assert ev[-1][1:] == ("INFO", "run completed")
+
+
+def nav_estimate_of(s: AirframeState, initialised: bool = True) -> NavEstimate:
+    """A navigation estimate equal to the truth ``s`` (NaN while initialising, as the INS gives it)."""
+    if not initialised:
+        nan3 = np.full(3, np.nan)
+        return NavEstimate(s.t_s, *[nan3] * 11, "initialising", np.inf)
+    z = np.zeros(3)
+    return NavEstimate(s.t_s, s.pos_enu_m, s.vel_enu_m_s, s.euler_ned_rad, s.body_rates_frd_rad_s, z, z, z,
+                       np.full(3, np.nan), np.ones(3), np.ones(3), np.ones(3), "aided", 0.0)
+
+
+def test_a_perfect_navigation_estimate_is_posed_where_the_truth_is(tmp_path):
+    """write_nav_estimate: /nav/estimate as before, and its pose on /tf (frame uav_estimate) and /nav/pose in the
+    truth's own conventions, so that a perfect estimate coincides with the truth; none while initialising."""
+    path = tmp_path / "nav.mcap"
+    states = [make_state(i) for i in range(6)]
+    with LogWriter(path, metadata=META, scenario_text=SCENARIO) as log:
+        for i, s in enumerate(states):
+            log.write_state(s)
+            log.write_nav_estimate(nav_estimate_of(s, initialised=i > 0))
+    run = read_log(path)
+    assert run.topics["/nav/estimate"] == 6 and run.topics["/nav/pose"] == 5
+    assert run.schema_name("/nav/pose") == "foxglove.PoseInFrame"
+    tfs = [FrameTransform.FromString(d) for _, d in run.raw("/tf")]
+    truth = {tf.timestamp.nanos: tf for tf in tfs if tf.child_frame_id == "uav"}
+    est = [tf for tf in tfs if tf.child_frame_id == "uav_estimate"]
+    assert len(est) == 5 and {tf.parent_frame_id for tf in est} == {"world"}
+    for tf in est:
+        assert tf.translation == truth[tf.timestamp.nanos].translation
+        assert tf.rotation == truth[tf.timestamp.nanos].rotation
+    poses = [PoseInFrame.FromString(d) for _, d in run.raw("/nav/pose")]
+    truth_poses = [PoseInFrame.FromString(d) for _, d in run.raw("/uav/pose")][1:]
+    assert [p.pose for p in poses] == [p.pose for p in truth_poses] and {p.frame_id for p in poses} == {"world"}
+    assert [p.timestamp for p in poses] == [p.timestamp for p in truth_poses]
 
 
 def test_metadata_and_attachment_round_trip(tmp_path):

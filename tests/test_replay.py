@@ -9,7 +9,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from fwsim import SCENARIO_DIR
-from fwsim.log import LogWriter
+from fwsim.log import LogWriter, read_log
 from fwsim.log.rerun_export import LAYERS, TIMELINE, export_rrd
 from fwsim.sim.loop import run
 from fwsim.interface.messages import AirframeState
@@ -85,6 +85,26 @@ def test_replay_skips_layers_without_their_topics(tmp_path):
     paths = entities(rrd)
     assert "/world/uav" in paths and not any(p.startswith("/plots/rates") or p.startswith("/world/camera")
                                              for p in paths)
+
+
+def test_the_navigation_estimate_is_drawn_beside_the_truth(paper_typical, mission_log, tmp_path):
+    """The nav_estimate layer: the INS's position as a second point and path beside the UAV's, and its error
+    per axis against the truth; a log without /nav/estimate (the ideal profile) skips it."""
+    res = export_rrd(paper_typical, tmp_path / "typical.rrd")
+    assert "nav_estimate" in res.layers and "uav" in res.layers
+    summary = RrdReader(tmp_path / "typical.rrd").store().summary().splitlines()
+    n_nav = read_log(paper_typical).topics["/nav/pose"]  # the initialised estimates
+    for entity, column in (("/world/uav_estimate", "Points3D:positions"),
+                           ("/world/uav_estimate_path", "LineStrips3D:strips"),
+                           ("/plots/nav/position_error/east", "Scalars:scalars"),
+                           ("/plots/nav/position_error/up", "Scalars:scalars")):
+        assert any(ln.split()[0] == entity and column in ln for ln in summary), entity
+    points = next(ln for ln in summary if ln.split()[0] == "/world/uav_estimate" and "Points3D:labels" in ln)
+    assert f"rows={n_nav}" in points and f"timelines=['{TIMELINE}']" in points
+
+    ideal = export_rrd(mission_log, tmp_path / "ideal.rrd")
+    assert dict(ideal.skipped)["nav_estimate"] == "no /nav/estimate in this log"
+    assert not any("uav_estimate" in p or p.startswith("/plots/nav") for p in entities(tmp_path / "ideal.rrd"))
 
 
 def test_cli_replay(mission_log, tmp_path, capsys):

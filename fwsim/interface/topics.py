@@ -7,7 +7,7 @@ from __future__ import annotations
 
 # -- the harness: the truth, and what the sensors and the camera saw
 UAV_STATE = "/uav/state"  # fwsim.interface.messages.AirframeState (JSON)
-TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames in the world
+TF = "/tf"  # foxglove.FrameTransform: uav, camera and ship frames (and uav_estimate) in the world
 UAV_POSE = "/uav/pose"  # foxglove.PoseInFrame
 SCENE = "/scene"  # foxglove.SceneUpdate: the UAV and ship models, frame-locked (Foxglove's 3D panel)
 SCENE_PATHS = "/scene/paths"  # foxglove.SceneUpdate: the flown paths of the UAV and the ship, a segment a second
@@ -27,6 +27,7 @@ WORLD_AIR = "/world/air"  # fwsim.interface.messages.AirState: the air's velocit
 
 # -- the flight software (controllers/)
 NAV_ESTIMATE = "/nav/estimate"  # fwsim.interface.messages.NavEstimate: the onboard navigation filter's estimate
+NAV_POSE = "/nav/pose"  # foxglove.PoseInFrame: that estimate's pose (on /tf: uav_estimate), once initialised
 NAV_AID_PREFIX = "/nav/aid/"  # + source: fwsim.interface.messages.AidSourceStatus, one per fusion attempt
 FSW_STATUS = "/fsw/status"  # FlightSoftwareStatus, every tick
 FSW_GIMBAL_COMMAND = "/fsw/gimbal_command"  # GimbalCommand
@@ -42,5 +43,6 @@ FSW_BPNG = "/fsw/bpng"  # controllers.guidance.bpng.BpngStatus
 # -- frames of the transforms
 WORLD_FRAME = "world"
 UAV_FRAME = "uav"
+UAV_ESTIMATE_FRAME = "uav_estimate"  # the navigation filter's estimate of the uav frame
 CAMERA_FRAME_ID = "camera"
 SHIP_FRAME_ID = "ship"

@@ -10,9 +10,12 @@ run). Entities (world frame ENU, metres; ``world`` is Z-up):
     world/target, .../hull    Transform3D + Boxes3D of the ship; world/target_path
     world/camera              Transform3D + Pinhole (frustum) of the gimbal camera
     world/target_estimate     Points3D: the flight software's target estimate (/fsw/estimate)
+    world/uav_estimate        Points3D: the navigation filter's UAV position (/nav/estimate), beside world/uav;
+                              world/uav_estimate_path its path
     camera/image              EncodedImage: rendered camera frames (with camera/detection boxes)
     plots/...                 Scalars: airspeed, altitude, roll/pitch, inner-loop set-points vs actual,
-                              distance to the target, gimbal angles, target estimate error
+                              distance to the target, gimbal angles, target estimate error, the navigation
+                              filter's position error per axis (estimate - truth)
     events                    TextLog: the run's /events
     scenario                  TextDocument: the scenario file the run flew
 
@@ -48,6 +51,7 @@ SHIP_SIZE_M = (55.0, 25.0, 25.0)
 PHASE_COLOURS = [(150, 150, 150), (31, 119, 180), (255, 127, 14), (214, 39, 40), (44, 160, 44), (148, 103, 189)]
 TARGET_COLOUR = (23, 190, 207)
 ESTIMATE_COLOUR = (255, 0, 255)
+NAV_ESTIMATE_COLOUR = (255, 200, 0)
 DETECTION_COLOUR = (255, 60, 60)
 #: /events levels (foxglove.Log names) -> rr.TextLog levels
 TEXTLOG_LEVELS = {"DEBUG": "DEBUG", "INFO": "INFO", "WARNING": "WARN", "ERROR": "ERROR", "FATAL": "CRITICAL"}
@@ -63,6 +67,8 @@ HULL_ENTITY = "world/target/hull"
 TARGET_PATH_ENTITY = "world/target_path"
 CAMERA_ENTITY = "world/camera"
 ESTIMATE_ENTITY = "world/target_estimate"
+NAV_ESTIMATE_ENTITY = "world/uav_estimate"
+NAV_ESTIMATE_PATH_ENTITY = "world/uav_estimate_path"
 IMAGE_ENTITY = "camera/image"
 DETECTION_ENTITY = "camera/detection"
 EVENTS_ENTITY = "events"
@@ -92,6 +98,11 @@ DISTANCE = Series("plots/target/distance", "distance [m]")
 PAN = Series("plots/gimbal/pan", "pan [deg]", (148, 103, 189))
 TILT = Series("plots/gimbal/tilt", "tilt [deg]", (140, 86, 75))
 ESTIMATE_ERROR = Series("plots/estimate/position_error", "|estimate - truth| [m]", ESTIMATE_COLOUR)
+#: The navigation filter's position error per axis (the replay's nav_estimate layer; not in SIGNALS: it is
+#: against the UAV's truth, per axis, and the live view does not draw it).
+NAV_ERRORS = (Series("plots/nav/position_error/east", "east [m]", (214, 39, 40)),
+              Series("plots/nav/position_error/north", "north [m]", (44, 160, 44)),
+              Series("plots/nav/position_error/up", "up [m]", (31, 119, 180)))
 
 #: The blueprint views each layer adds (when it has its data).
 VIEWS: dict[str, Callable[[], list]] = {
@@ -99,6 +110,7 @@ VIEWS: dict[str, Callable[[], list]] = {
     "target": lambda: [],
     "camera": lambda: [rrb.Spatial2DView(origin="camera", name="camera")],
     "estimate": lambda: [rrb.TimeSeriesView(origin="plots/estimate", name="target estimate error [m]")],
+    "nav_estimate": lambda: [rrb.TimeSeriesView(origin="plots/nav", name="navigation error (estimate - truth) [m]")],
     "flight_plots": lambda: [rrb.TimeSeriesView(origin="plots/airspeed", name="airspeed [m/s]"),
                              rrb.TimeSeriesView(origin="plots/altitude", name="height [m]"),
                              rrb.TimeSeriesView(origin="plots/attitude", name="roll, pitch [deg]")],
@@ -430,6 +442,32 @@ def _plot_layer(name: str) -> None:
 
 for _name in ("flight_plots", "inner_loops", "target_plots", "gimbal_plots"):
     _plot_layer(_name)
+
+
+@layer("nav_estimate", needs=(topics.NAV_ESTIMATE,))
+def _nav_estimate(log: RunLog, rec: rr.RecordingStream, opt: ReplayOptions) -> list:
+    """The navigation filter's UAV position beside the truth's (a point that moves, its path), and its position
+    error per axis against the truth interpolated to the estimate's times."""
+    nav = log.table(topics.NAV_ESTIMATE)
+    if "pos_enu_m" not in nav:
+        raise SkipLayer(f"{topics.NAV_ESTIMATE} has no pos_enu_m")
+    t, pos = nav["t_s"], nav["pos_enu_m"]
+    ok = np.all(np.isfinite(pos), axis=1)
+    if not ok.any():
+        raise SkipLayer(f"{topics.NAV_ESTIMATE} has no position (the filter never initialised)")
+    t, pos = t[ok], pos[ok]
+    n = len(t)
+    log_path(rec, NAV_ESTIMATE_PATH_ENTITY, [pos], [NAV_ESTIMATE_COLOUR], ["estimate"])
+    rec.send_columns(NAV_ESTIMATE_ENTITY, indexes=_time(t),
+                     columns=rr.Points3D.columns(positions=pos, radii=np.full(n, 3.0),
+                                                 colors=np.tile(NAV_ESTIMATE_COLOUR, (n, 1)),
+                                                 labels=["estimate"] * n))
+    if not log.topics.get(topics.UAV_STATE):
+        return []
+    err = pos - truth_at(log, t, "pos_enu_m", topics.UAV_STATE)
+    for k, series in enumerate(NAV_ERRORS):
+        _scalars(rec, series, t, err[:, k])
+    return VIEWS["nav_estimate"]()
 
 
 @layer("events", needs=(topics.EVENTS,))

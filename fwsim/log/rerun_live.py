@@ -145,9 +145,14 @@ def _viewer_executable() -> str | None:
     return str(exe) if exe.is_file() else None
 
 
+#: Replay layers the live view does not draw (their views would stay empty): the navigation estimate beside the
+#: truth is the replay's only.
+_REPLAY_ONLY = ("nav_estimate",)
+
+
 def live_layers(scenario=None) -> list[str]:
-    """The replay layers a run of ``scenario`` fills (all of them without a scenario)."""
-    names = list(LAYERS)
+    """The replay layers a run of ``scenario`` fills (all those the live view draws without a scenario)."""
+    names = [name for name in LAYERS if name not in _REPLAY_ONLY]
     if scenario is not None and getattr(scenario.controllers, "kind", "mission") != "mission":
         names.remove("estimate")  # only the mission's flight software estimates the target
     return names

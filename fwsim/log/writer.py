@@ -236,6 +236,7 @@ class LogWriter:
 
     >>> with LogWriter(path, metadata={...}, scenario_text=text) as log:
     ...     log.write_state(state)            # /uav/state, /tf, /uav/pose
+    ...     log.write_nav_estimate(est)       # /nav/estimate, and /tf (uav_estimate), /nav/pose once it has a pose
     ...     log.write(topics.AUTOPILOT_STATUS, status_msg)
     ...     log.write_event(t, "phase: terminal")
 
@@ -246,7 +247,8 @@ class LogWriter:
     Listeners (``listeners=[fn]`` or ``add_listener(fn)``) see every record
     after it is written, as ``fn(topic, t_s, msg)``: ``msg`` is the dataclass
     given to ``write`` (``write_state`` gives the state on /uav/state, then
-    the ``foxglove`` protobuf messages on /tf and /uav/pose), or the protobuf
+    the ``foxglove`` protobuf messages on /tf and /uav/pose; ``write_nav_estimate``
+    likewise on /nav/estimate, /tf and /nav/pose), or the protobuf
     message of ``write_transform``, ``write_image``, ``write_calibration`` and
     ``write_event`` (the end-of-run line included). Protobuf messages may be
     reused by the writer: read them during the call, do not keep them. A
@@ -307,6 +309,7 @@ class LogWriter:
         self._tf = FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_FRAME)
         self._transforms: dict[tuple[str, str], FrameTransform] = {}  # write_transform's, by (parent, child)
         self._pose = PoseInFrame(frame_id=topics.WORLD_FRAME)
+        self._nav_msgs = None  # the (FrameTransform, PoseInFrame) write_nav_estimate reuses, made on first use
         self._fix = None  # the LocationFix reused by write_location
         self._log = Log()
 
@@ -410,17 +413,35 @@ class LogWriter:
     def write_state(self, state) -> None:
         """Write an AirframeState on /uav/state (JSON), /tf and /uav/pose (Foxglove)."""
         self.write(topics.UAV_STATE, state)
+        self._write_pose(state.t_s, state.pos_enu_m, state.euler_ned_rad, self._tf, topics.UAV_POSE, self._pose)
+
+    def write_nav_estimate(self, est) -> None:
+        """Write a NavEstimate on /nav/estimate (JSON) and, once it has a pose, that pose as the truth's is
+        written (/tf frame uav_estimate, /nav/pose), so that Foxglove draws the estimate beside the truth."""
+        self.write(topics.NAV_ESTIMATE, est)
+        pos, euler = est.pos_enu_m, est.euler_ned_rad
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(euler))):
+            return  # initialising: no pose yet
+        msgs = self._nav_msgs
+        if msgs is None:
+            msgs = self._nav_msgs = (
+                FrameTransform(parent_frame_id=topics.WORLD_FRAME, child_frame_id=topics.UAV_ESTIMATE_FRAME),
+                PoseInFrame(frame_id=topics.WORLD_FRAME))
+        self._write_pose(est.t_s, pos, euler, msgs[0], topics.NAV_POSE, msgs[1])
+
+    def _write_pose(self, t_s: float, pos_enu_m, euler_ned_rad, tf, pose_topic: str, pose) -> None:
+        """A body pose (position ENU, NED Euler angles of the FRD body) on /tf as ``tf`` and on ``pose_topic``
+        as ``pose`` (reused messages: every field that changes is set here)."""
         quat = self._quat
         if quat is None:
             from fwsim.interface.frames import quat_enu_from_frd
 
             quat = self._quat = quat_enu_from_frd
-        w, x, y, z = quat(state.euler_ned_rad).tolist()
-        px, py, pz = _floats(state.pos_enu_m)
-        ns = self._t0 + _ns(state.t_s)
+        w, x, y, z = quat(euler_ned_rad).tolist()
+        px, py, pz = _floats(pos_enu_m)
+        ns = self._t0 + _ns(t_s)
         sec, nanos = divmod(ns, 1_000_000_000)
 
-        tf = self._tf
         tf.timestamp.seconds = sec
         tf.timestamp.nanos = nanos
         tr, rot = tf.translation, tf.rotation
@@ -428,13 +449,12 @@ class LogWriter:
         rot.w, rot.x, rot.y, rot.z = w, x, y, z
         self._write_proto(topics.TF, tf, ns)
 
-        pose = self._pose
         pose.timestamp.seconds = sec
         pose.timestamp.nanos = nanos
         pos, ori = pose.pose.position, pose.pose.orientation
         pos.x, pos.y, pos.z = px, py, pz
         ori.w, ori.x, ori.y, ori.z = w, x, y, z
-        self._write_proto(topics.UAV_POSE, pose, ns)
+        self._write_proto(pose_topic, pose, ns)
 
     def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream") -> None:
         """Attach a file (e.g. the effective scenario) to the log."""

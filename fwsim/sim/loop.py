@@ -393,7 +393,7 @@ class _Flight:
         for status in nav.ins.drain_aid_status():
             log.write(topics.NAV_AID_PREFIX + status.source, status)
         if est is not None and (tick + 1) % self.log_every == 0:
-            log.write(topics.NAV_ESTIMATE, est)
+            log.write_nav_estimate(est)
 
     def _underspeed_event(self, t_s: float, engaged: bool) -> None:
         """An event where the autopilot's underspeed protection engages or lets go (fwsim.autopilot)."""

@@ -108,6 +108,6 @@ def time_harness(timer: BlockTimer, *, sensors, detector, autopilot, world, log)
     timer.wrap(detector, "observe", "camera")
     timer.wrap(world, "render", "renders")
     timer.wrap(world.camera, "encode_jpeg", "renders")
-    for m in ("write", "write_state", "write_transform", "write_image", "write_event", "write_calibration",
-              "write_location", "write_image_annotations"):
+    for m in ("write", "write_state", "write_nav_estimate", "write_transform", "write_image", "write_event",
+              "write_calibration", "write_location", "write_image_annotations"):
         timer.wrap(log, m, "logging")
