@@ -57,7 +57,7 @@ def test_the_per_tick_messages_keep_the_field_order_their_positional_builders_us
         "t_s", "pos_enu_m", "vel_enu_m_s", "euler_ned_rad", "body_rates_frd_rad_s", "airspeed_m_s",
         "height_above_sea_m", "nav_t_s", "pan_rad", "tilt_rad", "pan_rate_rad_s", "tilt_rate_rad_s",
         "cam_pos_enu_m", "det_new", "det_valid", "det_exposure_t_s", "det_u_px", "det_v_px", "det_bbox_px",
-        "wind_enu_m_s")
+        "wind_enu_m_s", "att_std_rad")
     assert names(AirframeState) == (
         "t_s", "pos_enu_m", "vel_enu_m_s", "euler_ned_rad", "body_rates_frd_rad_s", "airspeed_m_s", "alpha_rad",
         "beta_rad", "specific_force_frd_m_s2", "throttle_norm", "surfaces_rad", "height_above_sea_m")
